@@ -1,0 +1,127 @@
+import numpy as np
+import pytest
+
+from scipctl.core.camera import CameraModel, CameraModelError
+from scipctl.core.transforms import RigidTransform, rotvec_to_matrix
+from tests.models import all_models, pixel_grid
+
+MODELS = all_models()
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+@pytest.mark.parametrize("range_m", [0.3, 1.0, 4.0, 50.0])
+def test_unproject_project_round_trip(name, range_m):
+    m = MODELS[name]
+    uv = pixel_grid(41)
+    o, d = m.unproject(uv)
+    assert np.allclose(np.linalg.norm(d, axis=-1), 1.0)
+    uv2 = m.project(o + range_m * d)
+    err = np.abs(uv2 - uv).max()
+    assert err < 1e-6, f"{name}: round trip error {err:.3g} px"
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_project_unproject_round_trip(name):
+    m = MODELS[name]
+    rng = np.random.default_rng(1)
+    uv = pixel_grid(25)
+    o, d = m.unproject(uv)
+    r = rng.uniform(0.5, 20.0, size=len(uv))
+    P = o + r[:, None] * d
+    uv2 = m.project(P)
+    o2, d2 = m.unproject(uv2)
+    # the recovered ray passes through P
+    off = P - o2
+    perp = off - np.sum(off * d2, axis=-1)[:, None] * d2
+    assert np.linalg.norm(perp, axis=-1).max() < 1e-9 * r.max()
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_jacobian_matches_finite_differences(name):
+    m = MODELS[name]
+    uv = pixel_grid(9, margin=5)
+    o, d = m.unproject(uv)
+    P = o + 2.0 * d
+    _, J = m.project(P, jacobian=True)
+    h = 1e-6
+    Jfd = np.zeros_like(J)
+    for k in range(3):
+        dp = np.zeros(3)
+        dp[k] = h
+        Jfd[..., k] = (m.project(P + dp) - m.project(P - dp)) / (2 * h)
+    rel = np.abs(J - Jfd).max() / np.abs(Jfd).max()
+    assert rel < 1e-6, f"{name}: Jacobian relative error {rel:.3g}"
+
+
+def test_jacobian_on_optical_axis():
+    m = MODELS["CAHVORE3"]
+    P = m.C + 1.5 * m.O
+    uv, J = m.project(P[None], jacobian=True)
+    h = 1e-6
+    Jfd = np.stack([(m.project(P + e * h) - m.project(P - e * h)) / (2 * h) for e in np.eye(3)], axis=-1)
+    assert np.abs(J[0] - Jfd).max() < 1e-4 * np.abs(Jfd).max()
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_rigid_motion_invariance(name):
+    m = MODELS[name]
+    T = RigidTransform(rotvec_to_matrix([0.3, -0.2, 1.1]), [1.0, -2.0, 0.5])
+    m2 = m.transformed(T)
+    uv = pixel_grid(11)
+    o, d = m.unproject(uv)
+    P = o + 3.0 * d
+    assert np.abs(m2.project(T.apply(P)) - uv).max() < 1e-6
+    # T then T^-1 gives the model back
+    assert m2.transformed(T.inverse()).almost_equal(m, tol=1e-12)
+
+
+def test_behind_camera_is_nan():
+    m = MODELS["CAHVOR"]
+    P = m.C - 2.0 * m.A
+    assert np.all(np.isnan(m.project(P[None])))
+
+
+def test_cahvore_is_non_central_and_types_imply_linearity():
+    m = MODELS["CAHVORE3"]
+    axis_uv = m.project(m.C + m.O)
+    o, _ = m.unproject(np.array([[0.0, 0.0], axis_uv]))
+    assert np.linalg.norm(o[0] - m.C) > 1e-5  # edge ray starts off C
+    assert np.linalg.norm(o[1] - m.C) < 1e-12  # the ray along O starts at C
+    assert MODELS["CAHVORE1"].linearity == 1.0
+    assert MODELS["CAHVORE2"].linearity == 0.0
+
+
+def test_derived_quantities():
+    m = MODELS["CAHV"]
+    assert m.hs == pytest.approx(1220.0)
+    assert m.vs == pytest.approx(1220.0 * 1.003)
+    assert m.hc == pytest.approx(511.3)
+    assert m.vc == pytest.approx(514.8)
+    assert m.theta_rad == pytest.approx(-np.pi / 2)
+    h, v = m.field_of_view_rad(1024, 1024)
+    assert h == pytest.approx(2 * np.arctan(512 / 1220.0), rel=2e-3)
+
+
+@pytest.mark.parametrize(
+    "field,mutate",
+    [
+        ("A", lambda d: d.update(A=[0.0, 0.0, 2.0])),
+        ("C", lambda d: d.update(C=[float("nan"), 0.0, 0.0])),
+        ("V", lambda d: d.update(V=d["H"])),
+        ("H", lambda d: d.update(H=d["A"])),
+        ("R", lambda d: d.pop("R")),
+        ("type", lambda d: d.update(type="PINHOLE")),
+    ],
+)
+def test_degenerate_models_name_the_field(field, mutate):
+    d = MODELS["CAHVOR"].to_dict()
+    mutate(d)
+    with pytest.raises(CameraModelError) as ei:
+        CameraModel.from_dict(d)
+    assert ei.value.field == field
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_dict_round_trip(name):
+    m = MODELS[name]
+    assert CameraModel.from_dict(m.to_dict()).almost_equal(m, tol=0)
