@@ -1,0 +1,220 @@
+"""The ``scipctl`` command line (thin layer: parse, call, print).
+
+Exit codes: 0 ok; 1 the answer is "no" (failure detected, rule broken, no
+reliable match); 2 bad input or usage. Heavy modules (cv2, open3d) are
+imported inside the commands so that ``scipctl --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from . import __version__
+
+app = typer.Typer(
+    name="scipctl",
+    help="Single Cycle Instrument Placement ground tool: ingest downlinks, designate targets, "
+    "simulate pancam->navcam->hazcam handoffs, emit uplink sequences and reports.\n\n"
+    "Exit codes: 0 ok, 1 the answer is no (failure detected), 2 bad input or usage.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    rich_markup_mode=None,
+)
+
+EXIT_OK, EXIT_NO, EXIT_BAD_INPUT = 0, 1, 2
+
+
+class CommandFailed(Exception):
+    """The command ran, and the answer is "no" (exit code 1)."""
+
+    def __init__(self, message: str, payload: Optional[dict] = None):
+        super().__init__(message)
+        self.payload = payload
+
+
+def _err(msg: str) -> None:
+    sys.stderr.write(f"scipctl: error: {msg}\n")
+
+
+def guarded(fn):
+    """Map exceptions to one-line errors and exit codes; never a traceback."""
+
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        from .model import InputError
+
+        try:
+            return fn(*a, **kw)
+        except typer.Exit:
+            raise
+        except InputError as e:
+            _err(str(e))
+            raise typer.Exit(EXIT_BAD_INPUT)
+        except CommandFailed as e:
+            if e.payload is not None and kw.get("json_out"):
+                sys.stdout.write(json.dumps(e.payload, indent=2, sort_keys=True, default=_json_default) + "\n")
+            _err(str(e))
+            raise typer.Exit(EXIT_NO)
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as e:
+            _err(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}")
+            raise typer.Exit(EXIT_BAD_INPUT)
+        except KeyboardInterrupt:
+            _err("interrupted")
+            raise typer.Exit(130)
+        except Exception as e:  # a bug: still one line, but say it is ours
+            _err(f"internal error ({type(e).__name__}): {e}. Please report it with the command line.")
+            raise typer.Exit(3)
+
+    return wrapper
+
+
+def _json_default(o):
+    import numpy as np
+
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.floating, np.integer, np.bool_)):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def emit_json(doc) -> None:
+    sys.stdout.write(json.dumps(doc, indent=2, sort_keys=True, default=_json_default) + "\n")
+
+
+def _version_cb(value: bool):
+    if value:
+        sys.stdout.write(f"scipctl {__version__}\n")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _main(
+    version: bool = typer.Option(False, "--version", callback=_version_cb, is_eager=True, help="Print the version and exit."),
+):
+    pass
+
+
+@app.command()
+@guarded
+def ingest(
+    src: Path = typer.Argument(..., help="Downlink: an .mcap file or a directory with downlink.yaml."),
+    out: Path = typer.Option(..., "-o", "--out", help="Workspace directory to write (replaced atomically)."),
+    json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
+):
+    """Read and validate a downlink into a workspace, and summarise it."""
+    from .commands.ingest import run
+
+    run(src, out, json_out)
+
+
+@app.command()
+@guarded
+def info(
+    src: Path = typer.Argument(..., help="Downlink (.mcap or directory) or workspace."),
+    json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
+):
+    """Validate and summarise a downlink or workspace without writing anything."""
+    from .commands.ingest import run_info
+
+    run_info(src, json_out)
+
+
+@app.command()
+@guarded
+def synth(
+    scenario: str = typer.Option("paper", "--scenario", help="paper | traverse"),
+    seed: int = typer.Option(0, "--seed", help="Random seed (same seed, same bytes)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Output directory (one downlink per run inside)."),
+    container: str = typer.Option("mcap", "--container", help="mcap | dir"),
+    runs: Optional[str] = typer.Option(None, "--runs", help="Comma-separated run names to make (default: all)."),
+    no_errors: bool = typer.Option(False, "--no-errors", help="Inject no calibration/pose/vibration/gain errors."),
+    json_out: bool = typer.Option(False, "--json", help="Machine-readable list of what was written."),
+):
+    """Render synthetic downlinks with exact truth."""
+    from .commands.synth import run
+
+    run(scenario, seed, out, container, runs, no_errors, json_out)
+
+
+@app.command()
+@guarded
+def designate(
+    src: Path = typer.Argument(..., help="Workspace or downlink."),
+    product: Optional[str] = typer.Option(None, "--product", help="Left-eye product id."),
+    camera: Optional[str] = typer.Option(None, "--camera", help="Use this camera's left image at the latest position."),
+    pixel: str = typer.Option(..., "--pixel", help="U,V (column,row; sub-pixel allowed)."),
+    target_id: Optional[str] = typer.Option(None, "--id", help="Target name (default: t<N>)."),
+    band_px: Optional[float] = typer.Option(None, "--band-px", help="Half-width of the epipolar search band."),
+    json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
+):
+    """Designate a 3-D target from a pixel in a left stereo image."""
+    from .commands.designate import run
+
+    run(src, product, camera, pixel, target_id, band_px, json_out)
+
+
+@app.command("simulate-handoff")
+@guarded
+def simulate_handoff(
+    srcs: List[Path] = typer.Argument(..., help="Downlinks or workspaces."),
+    target: Optional[str] = typer.Option(None, "--target", help="Only this target id."),
+    from_product: Optional[str] = typer.Option(None, "--from", help="Source navcam/pancam product id (with --pixel)."),
+    pixel: Optional[str] = typer.Option(None, "--pixel", help="U,V in the --from product."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated method names (default: all)."),
+    success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
+    near: Optional[str] = typer.Option(None, "--near", help="Left near-navcam product id."),
+    far: Optional[str] = typer.Option(None, "--far", help="Left far-navcam product id."),
+    hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
+    chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation."),
+    json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
+):
+    """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline."""
+    from .commands.handoff import run
+
+    run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out)
+
+
+@app.command()
+@guarded
+def sequence(
+    src: Path = typer.Argument(..., help="Workspace or downlink."),
+    target: str = typer.Option(..., "--target", help="Target id."),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="Output file (default: stdout)."),
+    fmt: str = typer.Option("seqn", "--format", help="seqn | json | text"),
+    json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
+):
+    """Emit the uplink command sequence for the single-cycle approach."""
+    from .commands.sequence import run
+
+    run(src, target, out, fmt, json_out)
+
+
+@app.command()
+@guarded
+def report(
+    src: Path = typer.Argument(..., help="Workspace or downlink."),
+    out: Path = typer.Option(Path("report.html"), "-o", "--out", help="HTML report to write."),
+    json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
+):
+    """Write a self-contained HTML diagnostic report."""
+    from .commands.report import run
+
+    run(src, out, json_out)
+
+
+def main() -> None:
+    app()
+
+
+if __name__ == "__main__":
+    main()

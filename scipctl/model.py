@@ -1,0 +1,177 @@
+"""In-memory form of a downlink (format version 1, see docs/downlink-format.md).
+
+Plain data shared by the readers/writers (``scipctl.io``), the simulator and
+the commands. No file access here: images are kept as the PNG bytes that
+arrived (so MCAP -> directory -> MCAP is lossless) and decoded on demand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .core.camera import CameraModel
+from .core.kinematics import RoverConfig, RoverPose
+
+FORMAT_VERSION = "1"
+
+
+class InputError(Exception):
+    """Bad input: one line naming the product (or file) and the field. CLI exit code 2."""
+
+    def __init__(self, product: str, field: str, message: str):
+        self.product = product
+        self.field = field
+        self.message = message
+        super().__init__(f"{product}: {field}: {message}")
+
+
+@dataclass(frozen=True)
+class MastAngles:
+    pan_rad: float
+    tilt_rad: float
+
+
+@dataclass
+class ImageProduct:
+    product_id: str
+    camera: str
+    eye: str  # "left" | "right"
+    time_s: float
+    site: int
+    drive: int
+    pose: RoverPose  # estimated T_site_rover at acquisition
+    camera_model: CameraModel  # rover frame at acquisition
+    width: int
+    height: int
+    png: bytes  # the image as PNG bytes (8- or 16-bit, single channel)
+    mast: Optional[MastAngles] = None
+    exposure_ms: Optional[float] = None
+    gain: Optional[float] = None
+    _pixels: Optional[np.ndarray] = field(default=None, repr=False, compare=False)
+
+    @property
+    def position(self) -> tuple[int, int]:
+        return (self.site, self.drive)
+
+    @property
+    def pixels(self) -> np.ndarray:
+        """Decoded image ``(height, width)`` uint8 or uint16 (cached). Raises :class:`InputError` if corrupt."""
+        if self._pixels is None:
+            from .io.images import decode_png
+
+            self._pixels = decode_png(self.png, self.product_id)
+        return self._pixels
+
+    def pixels_float(self) -> np.ndarray:
+        """Image as float32 in [0, 1] (16-bit images scaled by 65535)."""
+        px = self.pixels
+        scale = 65535.0 if px.dtype == np.uint16 else 255.0
+        return px.astype(np.float32) / scale
+
+
+@dataclass(frozen=True)
+class Mark:
+    product_id: str
+    u: float
+    v: float
+    sigma_px: float = 0.0
+
+
+@dataclass
+class TargetMarks:
+    id: str
+    kind: str = ""
+    description: str = ""
+    marks: list = field(default_factory=list)  # list[Mark]
+
+    def mark_in(self, product_id: str) -> Optional[Mark]:
+        for m in self.marks:
+            if m.product_id == product_id:
+                return m
+        return None
+
+
+@dataclass
+class ImageTruth:
+    product_id: str
+    pose: RoverPose  # true T_site_rover
+    camera_model: CameraModel  # true model in the true rover frame
+
+
+@dataclass
+class TargetTruth:
+    id: str
+    xyz_site_m: np.ndarray  # (3,)
+
+
+@dataclass
+class Downlink:
+    mission: str
+    sol: int
+    rover_config: RoverConfig
+    images: list = field(default_factory=list)  # list[ImageProduct]
+    targets: list = field(default_factory=list)  # list[TargetMarks]
+    truth_images: list = field(default_factory=list)  # list[ImageTruth]
+    truth_targets: list = field(default_factory=list)  # list[TargetTruth]
+    format_version: str = FORMAT_VERSION
+    source: str = ""  # where it was read from (path), for provenance
+    source_sha256: str = ""
+
+    # ------------------------------------------------------------ look-ups
+    def product(self, product_id: str) -> ImageProduct:
+        for im in self.images:
+            if im.product_id == product_id:
+                return im
+        raise InputError(product_id, "product_id", "no such image product in the downlink")
+
+    def positions(self) -> list[tuple[int, int]]:
+        """Rover positions (site, drive) in time order."""
+        seen: dict = {}
+        for im in sorted(self.images, key=lambda i: i.time_s):
+            seen.setdefault(im.position, im.time_s)
+        return list(seen)
+
+    def images_at(self, position: tuple[int, int], camera: Optional[str] = None, eye: Optional[str] = None) -> list:
+        return [
+            im
+            for im in self.images
+            if im.position == tuple(position) and (camera is None or im.camera == camera) and (eye is None or im.eye == eye)
+        ]
+
+    def stereo_pair(self, left: ImageProduct) -> Optional[ImageProduct]:
+        """The right-eye product taken with ``left`` (same camera, position and mast angles; nearest in time)."""
+        cands = [
+            im
+            for im in self.images
+            if im.camera == left.camera and im.eye == "right" and im.position == left.position
+            and (left.mast is None or im.mast is None
+                 or (abs(im.mast.pan_rad - left.mast.pan_rad) < 1e-6 and abs(im.mast.tilt_rad - left.mast.tilt_rad) < 1e-6))
+        ]
+        if not cands:
+            return None
+        return min(cands, key=lambda im: abs(im.time_s - left.time_s))
+
+    def target(self, target_id: str) -> TargetMarks:
+        for t in self.targets:
+            if t.id == target_id:
+                return t
+        raise InputError(target_id, "id", "no such target in the downlink")
+
+    def truth_for(self, product_id: str) -> Optional[ImageTruth]:
+        for t in self.truth_images:
+            if t.product_id == product_id:
+                return t
+        return None
+
+    def truth_target(self, target_id: str) -> Optional[TargetTruth]:
+        for t in self.truth_targets:
+            if t.id == target_id:
+                return t
+        return None
+
+    @property
+    def has_truth(self) -> bool:
+        return bool(self.truth_images or self.truth_targets)
