@@ -58,3 +58,18 @@ def pixel_grid(n=33, margin=0.0):
     u = np.linspace(-0.5 + margin, WIDTH - 0.5 - margin, n)
     v = np.linspace(-0.5 + margin, HEIGHT - 0.5 - margin, n)
     return np.stack(np.meshgrid(u, v), axis=-1).reshape(-1, 2)
+
+
+def stereo_pair(kind="CAHVOR", baseline_m=0.2, misalign_rad=0.0, **kw):
+    """(left, right) models: right = left moved ``baseline_m`` along the image h axis, optionally rotated a little."""
+    from scipctl.core.transforms import RigidTransform, rotvec_to_matrix
+
+    make = {"CAHV": cahv, "CAHVOR": cahvor, "CAHVORE": cahvore}[kind]
+    left = make(**kw)
+    T_move = RigidTransform(np.eye(3), baseline_m * left.h_axis)
+    right = left.transformed(T_move)
+    if misalign_rad:
+        R = rotvec_to_matrix(misalign_rad * left.h_axis)  # pitch: vertical (epipolar) offset
+        T_rot = RigidTransform(R, right.C - R @ right.C)
+        right = right.transformed(T_rot)
+    return left, right
