@@ -1,0 +1,191 @@
+"""Expected images and geometric look-ups for the handoff methods (pure numerics).
+
+* :func:`splat_points` — z-buffered splatting of a coloured point cloud into a
+  camera (the paper's step 8: each point fills the four pixels it falls
+  between; the nearest point wins), with see-through holes removed and small
+  holes filled.
+* :func:`drape` — intensities of one image sampled at the projections of 3-D
+  points (the "draping" of refined geometric handoff).
+* :func:`nearest_projection` — the pixel of a per-pixel point map whose point
+  projects nearest a given pixel of another camera (pure geometric handoff),
+  refined to sub-pixel by a local affine fit.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .camera import CameraModel
+
+
+@dataclass
+class SplatResult:
+    image: np.ndarray  # (H, W) float32, NaN where no data
+    depth_m: np.ndarray  # (H, W) float32, distance from the camera centre, NaN where no data
+    filled_fraction: float  # fraction of the (ROI) pixels that received a point
+    see_through_removed: int  # pixels rejected as seen through a hole
+    origin_uv: tuple  # (u0, v0) pixel of image[0, 0] in the camera's full image
+
+
+def splat_points(
+    points: np.ndarray,
+    intensities: np.ndarray,
+    model: CameraModel,
+    width: int,
+    height: int,
+    roi: Optional[tuple] = None,
+    see_through_ratio: float = 0.05,
+    fill_holes_px: int = 2,
+) -> SplatResult:
+    """Render points ``(N, 3)`` (the model's frame) with ``intensities`` ``(N,)`` into ``model``.
+
+    ``roi = (u0, v0, w, h)`` restricts the output to a window of the full
+    ``width`` x ``height`` image (pixel ``image[0, 0]`` is ``(u0, v0)``).
+    A pixel whose depth exceeds the minimum depth of its 5x5 neighbourhood by
+    more than ``see_through_ratio`` (relative) is treated as seen through a hole
+    and cleared; holes up to ``fill_holes_px`` wide are filled from neighbours.
+    """
+    import cv2
+
+    P = np.asarray(points, dtype=float)
+    I = np.asarray(intensities, dtype=np.float32).reshape(-1)
+    if P.ndim != 2 or P.shape[1] != 3 or len(I) != len(P):
+        raise ValueError(f"points (N,3) and intensities (N,) expected, got {P.shape} and {I.shape}")
+    u0, v0, w, h = roi if roi is not None else (0, 0, width, height)
+    uv = model.project(P)
+    depth = np.linalg.norm(P - model.C, axis=-1)
+    ok = np.all(np.isfinite(uv), axis=-1) & np.isfinite(I)
+    uv, depth, I = uv[ok], depth[ok], I[ok]
+    # local pixel coords in the ROI
+    x = uv[:, 0] - u0
+    y = uv[:, 1] - v0
+    keep = (x > -1) & (x < w) & (y > -1) & (y < h)
+    x, y, depth, I = x[keep], y[keep], depth[keep], I[keep]
+    xf = np.floor(x).astype(np.int64)
+    yf = np.floor(y).astype(np.int64)
+    cand_idx, cand_depth, cand_val = [], [], []
+    for dx in (0, 1):
+        for dy in (0, 1):
+            xi, yi = xf + dx, yf + dy
+            inside = (xi >= 0) & (xi < w) & (yi >= 0) & (yi < h)
+            cand_idx.append(yi[inside] * w + xi[inside])
+            cand_depth.append(depth[inside])
+            cand_val.append(I[inside])
+    idx = np.concatenate(cand_idx)
+    dep = np.concatenate(cand_depth)
+    val = np.concatenate(cand_val)
+    img = np.full(w * h, np.nan, np.float32)
+    zbuf = np.full(w * h, np.nan, np.float32)
+    if len(idx):
+        order = np.lexsort((dep, idx))  # by pixel, then nearest first
+        idx_s = idx[order]
+        first = np.ones(len(idx_s), bool)
+        first[1:] = idx_s[1:] != idx_s[:-1]
+        sel = order[first]
+        img[idx[sel]] = val[sel]
+        zbuf[idx[sel]] = dep[sel]
+    img = img.reshape(h, w)
+    zbuf = zbuf.reshape(h, w)
+    filled = float(np.isfinite(img).mean()) if img.size else 0.0
+    # see-through rejection: compare with the nearest depth around
+    zb = np.where(np.isfinite(zbuf), zbuf, np.float32(1e9)).astype(np.float32)
+    zmin = cv2.erode(zb, np.ones((5, 5), np.uint8))
+    through = np.isfinite(zbuf) & (zbuf > zmin * (1 + see_through_ratio))
+    img[through] = np.nan
+    zbuf[through] = np.nan
+    # fill small holes by normalised box filtering of the valid pixels
+    if fill_holes_px > 0:
+        k = 2 * fill_holes_px + 1
+        valid = np.isfinite(img).astype(np.float32)
+        num = cv2.boxFilter(np.where(valid > 0, img, 0).astype(np.float32), -1, (k, k), normalize=False)
+        den = cv2.boxFilter(valid, -1, (k, k), normalize=False)
+        znum = cv2.boxFilter(np.where(valid > 0, zbuf, 0).astype(np.float32), -1, (k, k), normalize=False)
+        hole = (valid == 0) & (den >= 0.3 * k * k)
+        img[hole] = num[hole] / den[hole]
+        zbuf[hole] = znum[hole] / den[hole]
+    return SplatResult(img, zbuf, filled, int(through.sum()), (u0, v0))
+
+
+def bilinear_sample(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Sample ``image`` (H, W) at pixels ``uv`` (..., 2); NaN outside the image."""
+    img = np.asarray(image, dtype=np.float32)
+    uv = np.asarray(uv, dtype=float)
+    H, W = img.shape
+    u, v = uv[..., 0], uv[..., 1]
+    ok = np.isfinite(u) & np.isfinite(v) & (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1)
+    uc = np.where(ok, u, 0.0)
+    vc = np.where(ok, v, 0.0)
+    i0 = np.clip(np.floor(uc).astype(int), 0, W - 2)
+    j0 = np.clip(np.floor(vc).astype(int), 0, H - 2)
+    fu, fv = uc - i0, vc - j0
+    out = (
+        (1 - fu) * (1 - fv) * img[j0, i0]
+        + fu * (1 - fv) * img[j0, i0 + 1]
+        + (1 - fu) * fv * img[j0 + 1, i0]
+        + fu * fv * img[j0 + 1, i0 + 1]
+    )
+    return np.where(ok, out, np.nan).astype(np.float32)
+
+
+def drape(points: np.ndarray, model: CameraModel, image: np.ndarray) -> np.ndarray:
+    """Intensity of ``image`` (taken by ``model``) at the projection of each point ``(..., 3)``; NaN where unseen."""
+    P = np.asarray(points, dtype=float)
+    shape = P.shape[:-1]
+    flat = P.reshape(-1, 3)
+    out = np.full(len(flat), np.nan, np.float32)
+    ok = np.all(np.isfinite(flat), axis=-1)
+    if np.any(ok):
+        out[ok] = bilinear_sample(image, model.project(flat[ok]))
+    return out.reshape(shape)
+
+
+@dataclass
+class NearestProjection:
+    uv: np.ndarray  # (2,) sub-pixel position in the point map's image
+    uv_integer: np.ndarray  # (2,) the best whole pixel
+    distance_px: float  # distance of its projection from the wanted pixel (other camera's pixels)
+    xyz: np.ndarray  # (3,) the point of the best whole pixel
+
+
+def nearest_projection(
+    xyz_map: np.ndarray,
+    origin_uv: tuple,
+    model: CameraModel,
+    goal_uv,
+) -> Optional[NearestProjection]:
+    """Among the pixels of a point map ``xyz_map`` (h, w, 3) (NaN invalid), find where the projection through
+    ``model`` lands nearest ``goal_uv``; ``origin_uv`` is the full-image pixel of ``xyz_map[0, 0]``.
+
+    Sub-pixel: the projection is locally affine in the pixel position, so the
+    best pixel is refined by solving ``J dp = goal - uv(p0)`` with ``J`` from
+    valid neighbours (kept only if it moves less than one pixel).
+    """
+    goal = np.asarray(goal_uv, dtype=float).reshape(2)
+    h, w, _ = xyz_map.shape
+    flat = xyz_map.reshape(-1, 3)
+    ok = np.all(np.isfinite(flat), axis=-1)
+    if not np.any(ok):
+        return None
+    proj = np.full((len(flat), 2), np.nan)
+    proj[ok] = model.project(flat[ok])
+    d2 = np.sum((proj - goal) ** 2, axis=-1)
+    d2[~np.isfinite(d2)] = np.inf
+    k = int(np.argmin(d2))
+    if not np.isfinite(d2[k]):
+        return None
+    j, i = divmod(k, w)
+    P = proj.reshape(h, w, 2)
+    uv_int = np.array([origin_uv[0] + i, origin_uv[1] + j], float)
+    uv = uv_int.copy()
+    if 0 < i < w - 1 and 0 < j < h - 1:
+        du = (P[j, i + 1] - P[j, i - 1]) / 2
+        dv = (P[j + 1, i] - P[j - 1, i]) / 2
+        J = np.stack([du, dv], axis=1)
+        if np.all(np.isfinite(J)) and abs(np.linalg.det(J)) > 1e-9:
+            step = np.linalg.solve(J, goal - P[j, i])
+            if np.all(np.abs(step) <= 1.0):
+                uv = uv_int + step
+    return NearestProjection(uv, uv_int, float(np.sqrt(d2[k])), flat[k].copy())
