@@ -1,0 +1,103 @@
+"""Point-cloud registration for mesh-registration handoff (Open3D ICP, imported lazily)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .transforms import RigidTransform
+
+
+@dataclass
+class RegistrationResult:
+    T_target_source: RigidTransform  # maps source-cloud points onto the target cloud
+    fitness: float  # fraction of source points with a correspondence (Open3D fitness) at the finest scale
+    inlier_rmse_m: float
+    n_source: int  # points used after cropping/downsampling
+    n_target: int
+    correction_rad: float  # rotation of the refinement relative to the seed
+    correction_m: float  # translation of the refinement relative to the seed (at the crop centre)
+
+
+def _to_o3d(points: np.ndarray):
+    import open3d as o3d
+
+    pc = o3d.geometry.PointCloud()
+    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
+    return pc
+
+
+def register_clouds(
+    source_m: np.ndarray,
+    target_m: np.ndarray,
+    T_init: RigidTransform,
+    method: str = "point-to-plane",
+    scales_m: tuple = (0.04, 0.02, 0.01),
+    crop_center_m: Optional[np.ndarray] = None,
+    crop_radius_m: Optional[float] = None,
+    max_iterations: int = 40,
+) -> RegistrationResult:
+    """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_init`` (``T_target_source``).
+
+    Coarse-to-fine ICP over voxel sizes ``scales_m``; the correspondence
+    distance at each scale is 3 voxels. ``method`` is ``point-to-plane`` or
+    ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
+    frame) only points near the centre are used (both clouds, the source after
+    applying ``T_init``).
+    """
+    import open3d as o3d
+
+    src = np.asarray(source_m, dtype=float)
+    tgt = np.asarray(target_m, dtype=float)
+    if src.ndim != 2 or src.shape[1] != 3 or tgt.ndim != 2 or tgt.shape[1] != 3:
+        raise ValueError("source_m and target_m must be (N, 3)")
+    src = src[np.all(np.isfinite(src), axis=1)]
+    tgt = tgt[np.all(np.isfinite(tgt), axis=1)]
+    src_in_tgt = T_init.apply(src)
+    if crop_center_m is not None and crop_radius_m is not None:
+        c = np.asarray(crop_center_m, float)
+        keep_s = np.linalg.norm(src_in_tgt - c, axis=1) < crop_radius_m
+        keep_t = np.linalg.norm(tgt - c, axis=1) < crop_radius_m
+        src_in_tgt, tgt = src_in_tgt[keep_s], tgt[keep_t]
+    if len(src_in_tgt) < 50 or len(tgt) < 50:
+        raise ValueError(f"too few points to register ({len(src_in_tgt)} source, {len(tgt)} target)")
+    ps = _to_o3d(src_in_tgt)
+    pt = _to_o3d(tgt)
+    T = np.eye(4)
+    reg = None
+    n_s = n_t = 0
+    for voxel in scales_m:
+        s = ps.voxel_down_sample(voxel)
+        t = pt.voxel_down_sample(voxel)
+        n_s, n_t = len(s.points), len(t.points)
+        if n_s < 20 or n_t < 20:
+            continue
+        radius = voxel * 3
+        crit = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=max_iterations)
+        if method == "generalized":
+            for pc in (s, t):
+                pc.estimate_covariances(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * voxel, max_nn=30))
+            est = o3d.pipelines.registration.TransformationEstimationForGeneralizedICP()
+            reg = o3d.pipelines.registration.registration_generalized_icp(s, t, radius, T, est, crit)
+        elif method == "point-to-plane":
+            t.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * voxel, max_nn=30))
+            est = o3d.pipelines.registration.TransformationEstimationPointToPlane()
+            reg = o3d.pipelines.registration.registration_icp(s, t, radius, T, est, crit)
+        else:
+            raise ValueError(f"unknown registration method {method!r}")
+        T = np.asarray(reg.transformation)
+    if reg is None:
+        raise ValueError("registration had too few points at every scale")
+    T_corr = RigidTransform.from_matrix(T)
+    centre = np.asarray(crop_center_m, float) if crop_center_m is not None else tgt.mean(axis=0)
+    return RegistrationResult(
+        T_target_source=T_corr @ T_init,
+        fitness=float(reg.fitness),
+        inlier_rmse_m=float(reg.inlier_rmse),
+        n_source=n_s,
+        n_target=n_t,
+        correction_rad=T_corr.rotation_angle_rad(),
+        correction_m=float(np.linalg.norm(T_corr.apply(centre) - centre)),
+    )
