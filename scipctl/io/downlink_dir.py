@@ -1,0 +1,191 @@
+"""Container B: a downlink as a directory (``downlink.yaml`` + ``images/<product_id>.png``).
+
+``downlink.yaml`` holds ``format_version``, ``mission``, ``sol``,
+``rover_config`` (inline, or a path to a YAML file), ``images`` (records
+whose ``image`` is a path relative to the directory), optional ``targets``
+and ``truth: {images, targets}``. Wherever a ``camera_model`` may stand, a
+``camera_model_file`` (JPL cmod text file) may stand instead; its path is
+relative to the YAML file that names it. YAML anchors/aliases are plain YAML.
+Besides YAML 1.1 floats, exponent-only floats such as ``1e-5`` are read as
+numbers (YAML 1.2 behaviour) rather than strings.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from urllib.parse import quote
+
+import yaml
+
+from ..model import Downlink, InputError
+from . import downlink as P
+from .cmodfile import read_cmod
+
+YAML_NAME = "downlink.yaml"
+IMAGES_DIR = "images"
+
+_Base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_Dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+
+
+class _Loader(_Base):  # type: ignore[misc,valid-type]
+    """Safe YAML loader that also reads ``1e-5``-style floats as numbers."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+
+
+def load_yaml(path: Path, label: str):
+    """Parse a YAML file; :class:`InputError` ``(label, "yaml", ...)`` on unreadable or malformed text."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(label, "file", f"no such file: {path}") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise InputError(label, "file", f"cannot read {path}: {getattr(e, 'strerror', None) or e}") from None
+    try:
+        return yaml.load(text, Loader=_Loader)
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(e, "problem", None) or str(e).splitlines()[0]
+        raise InputError(label, "yaml", f"malformed YAML{where}: {problem}") from None
+
+
+def dump_yaml(obj) -> str:
+    return yaml.dump(obj, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=4096, allow_unicode=True)
+
+
+def _model_file_resolver(base_dir: Path):
+    def resolve(rel: str, product: str, field: str):
+        path = base_dir / rel
+        try:
+            return read_cmod(path)
+        except InputError as e:
+            raise InputError(product, field, f"{rel}: {e.field}: {e.message}") from None
+
+    return resolve
+
+
+def read_dir(root: Path) -> Downlink:
+    """Read container B into a :class:`Downlink` (no cross-record validation)."""
+    ypath = root / YAML_NAME
+    label = str(ypath)
+    if not ypath.is_file():
+        raise InputError(str(root), YAML_NAME, "missing: not a downlink directory (and not a workspace)")
+    doc = load_yaml(ypath, label)
+    top = P.Fields(doc, label, "")
+    fmt_version = P.check_format_version(top.req("format_version"), label)
+    mission = top.str_("mission")
+    sol = top.int_("sol")
+    resolve_here = _model_file_resolver(root)
+
+    rc = top.req("rover_config")
+    if isinstance(rc, str):
+        rc_path = root / rc
+        rover_config = P.rover_config_from_plain(load_yaml(rc_path, str(rc_path)), _model_file_resolver(rc_path.parent),
+                                                 product=f"rover_config ({rc})")
+    else:
+        rover_config = P.rover_config_from_plain(rc, resolve_here)
+
+    records = top.list_("images")
+    if not records:
+        raise InputError(label, "images", "no image products")
+    images = []
+    for i, d in enumerate(records):
+        pl = P.product_label(d, i, "images")
+        fs = P.Fields(d, pl, "")
+        rel = fs.str_("image")
+        ipath = root / rel
+        try:
+            png = ipath.read_bytes()
+        except FileNotFoundError:
+            raise InputError(pl, "image", f"file not found: {rel}") from None
+        except OSError as e:
+            raise InputError(pl, "image", f"cannot read {rel}: {e.strerror or e}") from None
+        images.append(P.product_from_plain(d, png, rover_config, pl, resolve_here))
+
+    targets = [P.target_from_plain(d, f"targets[{i}]") for i, d in enumerate(top.list_("targets", required=False))]
+    truth_images, truth_targets = [], []
+    truth = top.map_("truth", required=False)
+    if truth is not None:
+        truth_images = [P.truth_image_from_plain(d, f"truth.images[{i}]", resolve_here)
+                        for i, d in enumerate(truth.list_("images", required=False))]
+        truth_targets = [P.truth_target_from_plain(d, f"truth.targets[{i}]")
+                         for i, d in enumerate(truth.list_("targets", required=False))]
+
+    from .provenance import sha256_path
+
+    return Downlink(
+        mission=mission, sol=sol, rover_config=rover_config, images=images, targets=targets,
+        truth_images=truth_images, truth_targets=truth_targets, format_version=fmt_version,
+        source=str(root), source_sha256=sha256_path(root),
+    )
+
+
+_SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\-]*$")
+
+
+def image_file_name(product_id: str) -> str:
+    """``<product_id>.png``; ids that are not plain file names are percent-encoded (injective)."""
+    if _SAFE_NAME.match(product_id):
+        return product_id + ".png"
+    q = quote(product_id, safe="")
+    if q.startswith("."):
+        q = "%2E" + q[1:]
+    return q + ".png"
+
+
+def downlink_yaml_text(dl: Downlink) -> str:
+    doc = {
+        "format_version": int(dl.format_version) if str(dl.format_version).isdigit() else str(dl.format_version),
+        "mission": str(dl.mission),
+        "sol": int(dl.sol),
+        "rover_config": P.rover_config_to_plain(dl.rover_config),
+        "images": [],
+    }
+    for im in dl.images:
+        rec = P.product_to_plain(im)
+        rec["image"] = f"{IMAGES_DIR}/{image_file_name(im.product_id)}"
+        doc["images"].append(rec)
+    if dl.targets:
+        doc["targets"] = [P.target_to_plain(t) for t in dl.targets]
+    if dl.truth_images or dl.truth_targets:
+        doc["truth"] = {
+            "images": [P.truth_image_to_plain(t) for t in dl.truth_images],
+            "targets": [P.truth_target_to_plain(t) for t in dl.truth_targets],
+        }
+    header = "# SCIP downlink, format version 1 (container B). Written by scipctl.\n"
+    return header + dump_yaml(doc)
+
+
+def write_dir_contents(dl: Downlink, directory: Path) -> None:
+    """Write ``downlink.yaml`` and ``images/`` into an existing (normally empty, temporary) directory."""
+    (directory / IMAGES_DIR).mkdir(parents=True, exist_ok=True)
+    for im in dl.images:
+        (directory / IMAGES_DIR / image_file_name(im.product_id)).write_bytes(im.png)
+    (directory / YAML_NAME).write_text(downlink_yaml_text(dl), encoding="utf-8")
+
+
+def check_replaceable(path: Path, what: str, marker: str) -> None:
+    """Refuse to replace ``path`` unless it is absent, an empty directory, or contains ``marker``."""
+    if not path.exists():
+        return
+    if not path.is_dir():
+        raise InputError(str(path), "output", f"exists and is not a directory; refusing to replace it with {what}")
+    if any(path.iterdir()) and not (path / marker).exists():
+        raise InputError(str(path), "output", f"exists, is not empty and is not {what}; refusing to replace it")
+
+
+def write_dir(dl: Downlink, path: Path) -> Path:
+    from .atomic import atomic_directory
+
+    check_replaceable(path, "a downlink directory", YAML_NAME)
+    with atomic_directory(path) as tmp:
+        write_dir_contents(dl, tmp)
+    return path
