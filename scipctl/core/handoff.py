@@ -1,0 +1,455 @@
+"""Navcam -> hazcam handoff methods (pure numerics).
+
+The paper's twelve methods are six methods, each run from "near" navcams (the
+pair taken at the hazcam's rover position) or "far" navcams (a pair taken
+earlier, a few metres back, which brings the rover's pose estimate into the
+chain). A :class:`HandoffCase` holds one navcam pair, the hazcam pair and the
+transform between their rover frames; its shared products (dense stereo,
+clouds, registrations) are computed once and reused by every method and
+target.
+
+Paper methods (names used on the command line and in JSON):
+
+``pure-kinematic``      point stereo on the navcams -> 3-D -> hazcam model.
+``alt-pure-kinematic``  the same with the dense ("JPL", rectified) stereo range.
+``refined-kinematic``   near: expected hazcam window splatted from the navcam
+                        dense cloud, centred on the alt-pure-kinematic point,
+                        NCC-tracked into the hazcam image; far: the far navcam
+                        window scaled by IFOV and range ratios, tracked around the
+                        near pure-kinematic point (as in the paper).
+``pure-geometric``      hazcam dense cloud -> navcam image; the hazcam point whose
+                        projection lands nearest the navcam target.
+``refined-geometric``   the navcam image draped over the hazcam stereo surface as
+                        the expected hazcam window, NCC-tracked.
+``mesh-registration``   ICP between the navcam and hazcam clouds (seeded with the
+                        mast kinematics for near, the pose estimate for far), then
+                        kinematic handoff through the recovered transform.
+
+Methods beyond the paper (see docs/handoff.md):
+
+``local-registration``  ICP restricted to a patch around the target (the paper's
+                        suggestion of "a small mesh only around the navcam"
+                        target), then kinematic handoff.
+``registered-refined``  the refined-geometric expected window built through the
+                        locally registered transform, tracked in a small radius
+                        around the local-registration point, with a consistency
+                        check that falls back to that point when the track is
+                        not trustworthy.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .camera import CameraModel
+from .expected import bilinear_sample, drape, nearest_projection, splat_points
+from .transforms import RigidTransform
+
+PAPER_METHODS = (
+    "pure-kinematic",
+    "alt-pure-kinematic",
+    "refined-kinematic",
+    "pure-geometric",
+    "refined-geometric",
+    "mesh-registration",
+)
+EXTRA_METHODS = ("local-registration", "registered-refined")
+ALL_METHODS = PAPER_METHODS + EXTRA_METHODS
+
+
+@dataclass
+class HandoffParams:
+    template_half_px: int = 15  # expected hazcam window: 31 x 31 px
+    search_radius_px: float = 60.0  # NCC search around the method's starting point (hazcam px)
+    refined_min_score: float = 0.0  # the paper's refined methods always answer; the score is reported
+    point_stereo_band_px: float = 3.0
+    point_stereo_window_px: int = 11
+    nav_cloud_radius_m: float = 0.6  # navcam points used for the expected window (around the target)
+    registration_max_range_m: float = 5.0  # whole-cloud ICP uses points within this range of the hazcam
+    local_radius_m: float = 0.45  # local-registration patch radius around the target
+    registered_search_px: float = 8.0
+    registered_agree_px: float = 4.0
+    registered_min_score: float = 0.6
+
+
+@dataclass
+class StereoView:
+    """One stereo pair: images ``(H, W)`` float32 and models in the rover frame at acquisition."""
+
+    left_img: np.ndarray
+    right_img: np.ndarray
+    left_model: CameraModel
+    right_model: CameraModel
+    width: int
+    height: int
+    min_range_m: float = 0.4
+    max_range_m: float = 30.0
+    dense_downsample: int = 1
+    _dense: object = field(default=None, repr=False)
+    dense_seconds: float = 0.0
+
+    @property
+    def dense(self):
+        """Dense stereo of the pair (computed once)."""
+        if self._dense is None:
+            from .stereo import dense_stereo
+
+            t0 = time.perf_counter()
+            self._dense = dense_stereo(
+                self.left_img, self.right_img, self.left_model, self.right_model,
+                min_range_m=self.min_range_m, max_range_m=self.max_range_m, downsample=self.dense_downsample,
+            )
+            self.dense_seconds = time.perf_counter() - t0
+        return self._dense
+
+    def cloud(self) -> tuple[np.ndarray, np.ndarray]:
+        """Valid dense-stereo points ``(N, 3)`` (rover frame at acquisition) and their left intensities ``(N,)``."""
+        return self.dense.point_cloud()
+
+    def xyz_at(self, uv) -> np.ndarray:
+        """Dense-stereo points at original left pixels ``(N, 2)`` -> ``(N, 3)``, NaN where invalid."""
+        return self.dense.xyz_at_left_uv(np.asarray(uv, float).reshape(-1, 2))
+
+
+@dataclass
+class MethodResult:
+    method: str
+    navcam: str  # "near" | "far"
+    ok: bool
+    uv: Optional[np.ndarray]  # (2,) predicted hazcam-left pixel, None when the method gave no answer
+    reason: str = ""
+    diagnostics: dict = field(default_factory=dict)
+    seconds: float = 0.0
+
+
+@dataclass
+class HandoffCase:
+    """Handoff from one navcam pair to the hazcam pair.
+
+    ``T_haz_nav`` maps points in the rover frame at the navcam acquisition into
+    the rover frame at the hazcam acquisition (identity for near navcams; from
+    the pose estimates for far navcams).
+    """
+
+    label: str  # "near" | "far"
+    nav: StereoView
+    haz: StereoView
+    T_haz_nav: RigidTransform
+    params: HandoffParams = field(default_factory=HandoffParams)
+    _cache: dict = field(default_factory=dict, repr=False)
+
+    # ----------------------------------------------------------- shared
+    def point_stereo(self, nav_uv) -> object:
+        key = ("ps", tuple(np.round(np.asarray(nav_uv, float), 6)))
+        if key not in self._cache:
+            from .stereo import point_stereo
+
+            self._cache[key] = point_stereo(
+                self.nav.left_img, self.nav.right_img, self.nav.left_model, self.nav.right_model,
+                np.asarray(nav_uv, float), band_px=self.params.point_stereo_band_px,
+                window_px=self.params.point_stereo_window_px,
+            )
+        return self._cache[key]
+
+    def nav_cloud_in_haz(self) -> tuple[np.ndarray, np.ndarray]:
+        if "nav_cloud" not in self._cache:
+            pts, val = self.nav.cloud()
+            self._cache["nav_cloud"] = (self.T_haz_nav.apply(pts), val)
+        return self._cache["nav_cloud"]
+
+    def haz_cloud(self) -> np.ndarray:
+        if "haz_cloud" not in self._cache:
+            pts, _ = self.haz.cloud()
+            self._cache["haz_cloud"] = pts
+        return self._cache["haz_cloud"]
+
+    def haz_model(self) -> CameraModel:
+        return self.haz.left_model
+
+    def nav_model_in_haz(self) -> CameraModel:
+        return self.nav.left_model.transformed(self.T_haz_nav)
+
+    def whole_registration(self):
+        """ICP of the whole navcam cloud onto the hazcam cloud, seeded with ``T_haz_nav`` (cached)."""
+        if "whole_reg" not in self._cache:
+            from .registration import register_clouds
+
+            nav_pts, _ = self.nav.cloud()
+            haz_pts = self.haz_cloud()
+            C = self.haz.left_model.C
+            haz_pts = haz_pts[np.linalg.norm(haz_pts - C, axis=1) < self.params.registration_max_range_m]
+            try:
+                self._cache["whole_reg"] = register_clouds(nav_pts, haz_pts, self.T_haz_nav)
+            except ValueError as e:
+                self._cache["whole_reg"] = e
+        return self._cache["whole_reg"]
+
+    def local_registration(self, centre_haz_m: np.ndarray):
+        from .registration import register_clouds
+
+        key = ("local_reg", tuple(np.round(centre_haz_m, 4)))
+        if key not in self._cache:
+            nav_pts, _ = self.nav.cloud()
+            try:
+                self._cache[key] = register_clouds(
+                    nav_pts, self.haz_cloud(), self.T_haz_nav, scales_m=(0.02, 0.01, 0.005),
+                    crop_center_m=centre_haz_m, crop_radius_m=self.params.local_radius_m,
+                )
+            except ValueError as e:
+                self._cache[key] = e
+        return self._cache[key]
+
+    # ----------------------------------------------------------- helpers
+    def _project_haz(self, X_haz) -> np.ndarray:
+        return self.haz.left_model.project(np.asarray(X_haz, float).reshape(1, 3))[0]
+
+    def _track(self, template, start_uv, radius_px, min_score, template_center_uv=None):
+        from .tracking import track
+
+        return track(
+            template, self.haz.left_img, start_uv, radius_px, template_center_uv=template_center_uv,
+            min_score=min_score,
+        )
+
+    def _draped_window(self, centre_uv, T_haz_nav: RigidTransform, half: int):
+        """Expected hazcam window (2 half + 1)^2 around ``centre_uv``: navcam image draped over hazcam stereo."""
+        k = half
+        c = np.round(np.asarray(centre_uv, float))
+        us, vs = np.meshgrid(np.arange(c[0] - k, c[0] + k + 1), np.arange(c[1] - k, c[1] + k + 1))
+        uv = np.stack([us, vs], -1).reshape(-1, 2)
+        X_haz = self.haz.xyz_at(uv)
+        X_nav = T_haz_nav.inverse().apply(np.where(np.isfinite(X_haz), X_haz, 0.0))
+        X_nav[~np.all(np.isfinite(X_haz), axis=1)] = np.nan
+        vals = drape(X_nav, self.nav.left_model, self.nav.left_img).reshape(2 * k + 1, 2 * k + 1)
+        frac = float(np.isfinite(vals).mean())
+        return _fill_nan(vals), frac, c
+
+
+    # ----------------------------------------------------------- methods
+    def run(self, method: str, nav_uv, near_hint: Optional[MethodResult] = None) -> MethodResult:
+        """Run one method for the navcam-left pixel ``nav_uv`` (2,).
+
+        ``near_hint``: the near-navcam pure-kinematic result for the same
+        target; far refined-kinematic centres its search there, as the paper does.
+        """
+        self._near_hint = near_hint
+        fn = {
+            "pure-kinematic": self._pure_kinematic,
+            "alt-pure-kinematic": self._alt_pure_kinematic,
+            "refined-kinematic": self._refined_kinematic,
+            "pure-geometric": self._pure_geometric,
+            "refined-geometric": self._refined_geometric,
+            "mesh-registration": self._mesh_registration,
+            "local-registration": self._local_registration,
+            "registered-refined": self._registered_refined,
+        }.get(method)
+        if fn is None:
+            raise ValueError(f"unknown handoff method {method!r} (known: {', '.join(ALL_METHODS)})")
+        t0 = time.perf_counter()
+        try:
+            res = fn(np.asarray(nav_uv, float).reshape(2))
+        except _NoAnswer as e:
+            res = MethodResult(method, self.label, False, None, str(e), e.diagnostics)
+        res.method = method
+        res.navcam = self.label
+        res.seconds = time.perf_counter() - t0
+        return res
+
+    def _nav_point(self, nav_uv):
+        ps = self.point_stereo(nav_uv)
+        if not ps.ok:
+            raise _NoAnswer(f"navcam point stereo: {ps.reason}", {"stereo_score": _f(getattr(ps, "score", np.nan))})
+        return ps
+
+    def _pure_kinematic(self, nav_uv):
+        ps = self._nav_point(nav_uv)
+        X = self.T_haz_nav.apply(ps.xyz)
+        uv = self._project_haz(X)
+        if not np.all(np.isfinite(uv)):
+            raise _NoAnswer("target does not project into the hazcam")
+        return MethodResult("", "", True, uv, diagnostics={
+            "stereo_score": _f(ps.score), "range_m": _f(ps.range_m), "epipolar_offset_px": _f(ps.epipolar_offset_px),
+            "xyz_haz_rover_m": X.tolist(),
+        })
+
+    def _dense_point(self, nav_uv):
+        X = self.nav.xyz_at(np.asarray(nav_uv, float)[None])[0]
+        if not np.all(np.isfinite(X)):
+            raise _NoAnswer("no dense-stereo range at the navcam target")
+        return X
+
+    def _alt_pure_kinematic(self, nav_uv):
+        X = self.T_haz_nav.apply(self._dense_point(nav_uv))
+        uv = self._project_haz(X)
+        if not np.all(np.isfinite(uv)):
+            raise _NoAnswer("target does not project into the hazcam")
+        return MethodResult("", "", True, uv, diagnostics={"xyz_haz_rover_m": X.tolist()})
+
+    def _refined_kinematic(self, nav_uv):
+        p = self.params
+        k = p.template_half_px
+        if self.label == "near":
+            X = self.T_haz_nav.apply(self._dense_point(nav_uv))
+            centre = self._project_haz(X)
+            if not np.all(np.isfinite(centre)):
+                raise _NoAnswer("target does not project into the hazcam")
+            pts, vals = self.nav_cloud_in_haz()
+            near = np.linalg.norm(pts - X, axis=1) < p.nav_cloud_radius_m
+            c = np.round(centre).astype(int)
+            roi = (int(c[0] - k), int(c[1] - k), 2 * k + 1, 2 * k + 1)
+            sp = splat_points(pts[near], vals[near], self.haz.left_model, self.haz.width, self.haz.height, roi=roi)
+            tpl = _fill_nan(sp.image)
+            if tpl is None:
+                raise _NoAnswer("expected hazcam window is empty (no navcam stereo around the target)")
+            tc = centre - np.array([roi[0], roi[1]], float)
+            tr = self._track(tpl, centre, p.search_radius_px, p.refined_min_score, template_center_uv=tc)
+            diag = {"expected_filled": sp.filled_fraction, "start_uv": centre.tolist()}
+        else:
+            ps = self._nav_point(nav_uv)
+            near_pk = getattr(self, "_near_hint", None)
+            if near_pk is None or not near_pk.ok:
+                # fall back to the far kinematic point when the near one is not available
+                start = self._project_haz(self.T_haz_nav.apply(ps.xyz))
+                X_haz = self.T_haz_nav.apply(ps.xyz)
+            else:
+                start = near_pk.uv
+                X_haz = np.asarray(near_pk.diagnostics["xyz_haz_rover_m"])
+            from .tracking import extract_window, scale_window, window_scale_for_handoff
+
+            ifov_nav = 1.0 / self.nav.left_model.hs
+            ifov_haz = 1.0 / self.haz.left_model.hs
+            range_haz = float(np.linalg.norm(X_haz - self.haz.left_model.C))
+            scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
+            src_half = int(np.ceil(k / scale))
+            win = extract_window(self.nav.left_img, nav_uv, src_half)
+            tpl = scale_window(win, scale)
+            tr = self._track(tpl, start, p.search_radius_px, p.refined_min_score)
+            diag = {"scale": scale, "start_uv": np.asarray(start).tolist()}
+        if not np.all(np.isfinite(tr.uv)):
+            raise _NoAnswer(f"NCC track failed: {tr.reason}", diag)
+        diag.update(_track_diag(tr))
+        return MethodResult("", "", True, tr.uv, diagnostics=diag)
+
+    def _pure_geometric(self, nav_uv):
+        d = self.haz.dense
+        xyz = d.xyz  # rectified-left grid of the hazcam, hazcam rover frame
+        nav_in_haz = self.nav_model_in_haz()
+        res = nearest_projection(xyz, (0, 0), nav_in_haz, nav_uv)
+        if res is None:
+            raise _NoAnswer("no hazcam stereo projects into the navcam")
+        # sub-pixel point on the rectified grid -> 3-D -> original hazcam pixel
+        X = _interp_xyz(xyz, res.uv)
+        if X is None:
+            X = res.xyz
+        uv = self._project_haz(X)
+        return MethodResult("", "", True, uv, diagnostics={
+            "nearest_distance_navcam_px": res.distance_px, "xyz_haz_rover_m": X.tolist(),
+        })
+
+    def _refined_geometric(self, nav_uv):
+        p = self.params
+        pg = self._pure_geometric(nav_uv)
+        tpl, frac, c = self._draped_window(pg.uv, self.T_haz_nav, p.template_half_px)
+        if tpl is None:
+            raise _NoAnswer("expected hazcam window is empty (no hazcam stereo around the target)")
+        tc = np.asarray(pg.uv) - (c - p.template_half_px)
+        tr = self._track(tpl, pg.uv, p.search_radius_px, p.refined_min_score, template_center_uv=tc)
+        if not np.all(np.isfinite(tr.uv)):
+            raise _NoAnswer(f"NCC track failed: {tr.reason}")
+        diag = {"draped_fraction": frac, "start_uv": pg.uv.tolist()}
+        diag.update(_track_diag(tr))
+        return MethodResult("", "", True, tr.uv, diagnostics=diag)
+
+    def _mesh_registration(self, nav_uv):
+        ps = self._nav_point(nav_uv)
+        reg = self.whole_registration()
+        if isinstance(reg, Exception):
+            raise _NoAnswer(f"registration failed: {reg}")
+        X = reg.T_target_source.apply(ps.xyz)
+        uv = self._project_haz(X)
+        return MethodResult("", "", bool(np.all(np.isfinite(uv))), uv, diagnostics=_reg_diag(reg))
+
+    def _local_registration(self, nav_uv):
+        ps = self._nav_point(nav_uv)
+        X0 = self.T_haz_nav.apply(ps.xyz)
+        reg = self.local_registration(X0)
+        if isinstance(reg, Exception):
+            raise _NoAnswer(f"registration failed: {reg}")
+        X = reg.T_target_source.apply(ps.xyz)
+        uv = self._project_haz(X)
+        d = _reg_diag(reg)
+        d["xyz_haz_rover_m"] = X.tolist()
+        return MethodResult("", "", bool(np.all(np.isfinite(uv))), uv, diagnostics=d)
+
+    def _registered_refined(self, nav_uv):
+        p = self.params
+        lr = self._local_registration(nav_uv)
+        ps = self._nav_point(nav_uv)
+        reg = self.local_registration(self.T_haz_nav.apply(ps.xyz))
+        tpl, frac, c = self._draped_window(lr.uv, reg.T_target_source, p.template_half_px)
+        diag = {"local_registration_uv": lr.uv.tolist(), "draped_fraction": frac}
+        if tpl is None:
+            diag["fallback"] = "no hazcam stereo around the target"
+            return MethodResult("", "", True, lr.uv, diagnostics=diag)
+        tc = np.asarray(lr.uv) - (c - p.template_half_px)
+        tr = self._track(tpl, lr.uv, p.registered_search_px, p.registered_min_score, template_center_uv=tc)
+        diag.update(_track_diag(tr))
+        if tr.ok and np.linalg.norm(tr.uv - lr.uv) <= p.registered_agree_px:
+            return MethodResult("", "", True, tr.uv, diagnostics=diag)
+        diag["fallback"] = tr.reason or "track disagrees with the registered prediction"
+        return MethodResult("", "", True, lr.uv, diagnostics=diag)
+
+
+class _NoAnswer(Exception):
+    def __init__(self, msg, diagnostics=None):
+        super().__init__(msg)
+        self.diagnostics = diagnostics or {}
+
+
+def _f(x) -> Optional[float]:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if np.isfinite(x) else None
+
+
+def _track_diag(tr) -> dict:
+    return {"ncc_peak": _f(tr.score), "ncc_ratio": _f(tr.ratio), "ncc_sharpness": _f(tr.sharpness),
+            "track_ok": bool(tr.ok), "track_reason": tr.reason}
+
+
+def _reg_diag(reg) -> dict:
+    return {"icp_fitness": reg.fitness, "icp_rmse_m": reg.inlier_rmse_m, "icp_points": reg.n_source,
+            "icp_correction_deg": float(np.degrees(reg.correction_rad)), "icp_correction_m": reg.correction_m}
+
+
+def _fill_nan(img: Optional[np.ndarray]) -> Optional[np.ndarray]:
+    """Fill NaN pixels with the nearest valid values (repeated 3x3 means); None if nothing is valid."""
+    import cv2
+
+    a = np.asarray(img, np.float32).copy()
+    valid = np.isfinite(a)
+    if not valid.any():
+        return None
+    if valid.mean() < 0.3:
+        return None
+    for _ in range(64):
+        if valid.all():
+            break
+        num = cv2.boxFilter(np.where(valid, a, 0).astype(np.float32), -1, (3, 3), normalize=False,
+                            borderType=cv2.BORDER_CONSTANT)
+        den = cv2.boxFilter(valid.astype(np.float32), -1, (3, 3), normalize=False, borderType=cv2.BORDER_CONSTANT)
+        grow = ~valid & (den > 0)
+        a[grow] = num[grow] / den[grow]
+        valid = valid | grow
+    return a
+
+
+def _interp_xyz(xyz: np.ndarray, uv) -> Optional[np.ndarray]:
+    out = np.array([bilinear_sample(xyz[..., k], np.asarray(uv, float)[None])[0] for k in range(3)])
+    return out if np.all(np.isfinite(out)) else None

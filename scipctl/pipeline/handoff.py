@@ -1,0 +1,197 @@
+"""Run the navcam -> hazcam handoff methods on a downlink and score them against marks.
+
+Finds the hazcam pair, the near navcam pair (same rover position) and the far
+navcam pair (the latest earlier position with navcams) in a downlink, builds
+one :class:`~scipctl.core.handoff.HandoffCase` for each (shared products are
+computed once), and runs every method on every marked target.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Optional
+
+import numpy as np
+
+from ..core.handoff import ALL_METHODS, PAPER_METHODS, HandoffCase, HandoffParams, StereoView
+from ..core.kinematics import T_roverB_roverA
+from ..core.transforms import RigidTransform
+from ..model import Downlink, ImageProduct, InputError
+
+REFINED = {"refined-kinematic", "refined-geometric"}
+
+
+@dataclass
+class HandoffSetup:
+    hazcam: ImageProduct
+    near: Optional[ImageProduct]
+    far: Optional[ImageProduct]
+    cases: dict = field(default_factory=dict)  # "near"/"far" -> HandoffCase
+
+
+def _view(dl: Downlink, left: ImageProduct, min_range_m: float, max_range_m: float) -> StereoView:
+    right = dl.stereo_pair(left)
+    if right is None:
+        raise InputError(left.product_id, "eye", f"no right-eye {left.camera} image at position {left.position}")
+    return StereoView(
+        left_img=left.pixels_float(), right_img=right.pixels_float(),
+        left_model=left.camera_model, right_model=right.camera_model,
+        width=left.width, height=left.height, min_range_m=min_range_m, max_range_m=max_range_m,
+    )
+
+
+def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str] = None,
+                  far: Optional[str] = None) -> tuple:
+    """(hazcam left, near navcam left or None, far navcam left or None) products."""
+    def left_of(pid, camera):
+        p = dl.product(pid)
+        if p.eye != "left":
+            raise InputError(pid, "eye", f"expected a left-eye {camera} product, got {p.eye}")
+        return p
+
+    if hazcam:
+        haz = left_of(hazcam, "hazcam")
+    else:
+        hz = sorted((im for im in dl.images if im.camera == "hazcam" and im.eye == "left"), key=lambda i: i.time_s)
+        if not hz:
+            raise InputError(dl.source or "downlink", "images", "no left hazcam image to hand off to")
+        haz = hz[-1]
+    navs = sorted((im for im in dl.images if im.camera == "navcam" and im.eye == "left"), key=lambda i: i.time_s)
+    if near:
+        nr = left_of(near, "navcam")
+    else:
+        same = [n for n in navs if n.position == haz.position]
+        nr = min(same, key=lambda n: abs(n.time_s - haz.time_s)) if same else None
+    if far:
+        fr = left_of(far, "navcam")
+    else:
+        earlier = [n for n in navs if n.position != haz.position and n.time_s < haz.time_s]
+        fr = earlier[-1] if earlier else None
+    return haz, nr, fr
+
+
+def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=None, near=None, far=None) -> HandoffSetup:
+    params = params or HandoffParams()
+    haz, nr, fr = find_products(dl, hazcam, near, far)
+    haz_view = _view(dl, haz, 0.3, 6.0)
+    setup = HandoffSetup(haz, nr, fr)
+    if nr is not None:
+        T = T_roverB_roverA(haz.pose, nr.pose) if nr.position != haz.position else RigidTransform.identity()
+        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.5, 30.0), haz_view, T, params)
+    if fr is not None:
+        T = T_roverB_roverA(haz.pose, fr.pose)
+        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.5, 30.0), haz_view, T, params)
+    return setup
+
+
+@dataclass
+class HandoffRecord:
+    downlink: str
+    target: str
+    method: str
+    navcam: str
+    source_product: str
+    source_uv: Optional[list]
+    predicted_uv: Optional[list]
+    truth_uv: Optional[list]
+    error_px: Optional[float]
+    success: Optional[bool]
+    ok: bool
+    reason: str
+    diagnostics: dict
+    seconds: float
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+def run_targets(
+    dl: Downlink,
+    setup: HandoffSetup,
+    targets: list,  # list of (target_id, {"near": uv or None, "far": uv or None}, truth_uv or None)
+    methods=ALL_METHODS,
+    navcams=("near", "far"),
+    success_px: float = 4.0,
+    progress: Optional[Callable[[str], None]] = None,
+    downlink_name: str = "",
+) -> list:
+    records = []
+    for target_id, src, truth in targets:
+        near_pk = None
+        near_case = setup.cases.get("near")
+        if "far" in navcams and "refined-kinematic" in methods and near_case is not None and src.get("near") is not None:
+            near_pk = near_case.run("pure-kinematic", src["near"])  # the far refined search centre (as in the paper)
+        for nc in navcams:
+            case = setup.cases.get(nc)
+            if case is None:
+                continue
+            nav_uv = src.get(nc)
+            product = setup.near if nc == "near" else setup.far
+            for m in methods:
+                if progress:
+                    progress(f"{downlink_name} {target_id} {m} {nc}")
+                if nav_uv is None:
+                    records.append(HandoffRecord(downlink_name, target_id, m, nc, product.product_id, None, None,
+                                                 truth, None, None if truth is None else False, False,
+                                                 "target not marked in this navcam image", {}, 0.0))
+                    continue
+                res = case.run(m, nav_uv, near_hint=near_pk)
+                pred = None if res.uv is None or not np.all(np.isfinite(res.uv)) else [float(x) for x in res.uv]
+                err = None
+                succ = None
+                if truth is not None:
+                    if pred is not None:
+                        err = float(math.hypot(pred[0] - truth[0], pred[1] - truth[1]))
+                        succ = err <= success_px
+                    else:
+                        succ = False
+                records.append(HandoffRecord(downlink_name, target_id, m, nc, product.product_id,
+                                             [float(x) for x in nav_uv], pred, truth, err, succ, bool(res.ok and pred is not None),
+                                             res.reason, res.diagnostics, res.seconds))
+    return records
+
+
+def marked_targets(dl: Downlink, setup: HandoffSetup, only: Optional[str] = None) -> list:
+    """(target id, {near: uv, far: uv}, truth hazcam uv) for each marked target."""
+    out = []
+    for t in dl.targets:
+        if only and t.id != only:
+            continue
+        src = {}
+        for nc, prod in (("near", setup.near), ("far", setup.far)):
+            mk = t.mark_in(prod.product_id) if prod is not None else None
+            src[nc] = [mk.u, mk.v] if mk is not None else None
+        hm = t.mark_in(setup.hazcam.product_id)
+        out.append((t.id, src, [hm.u, hm.v] if hm is not None else None))
+    if only and not out:
+        raise InputError(only, "target", "no such marked target in the downlink")
+    return out
+
+
+def _stats(errs):
+    if not errs:
+        return None
+    a = np.asarray(errs, float)
+    return {"n": int(len(a)), "mean": float(a.mean()), "std": float(a.std()), "min": float(a.min()), "max": float(a.max())}
+
+
+def table1(records: list) -> list:
+    """Rows like the paper's Table 1: per method and navcam, success rate and error statistics."""
+    rows = []
+    order = [m for m in ALL_METHODS]
+    keys = sorted({(r.method, r.navcam) for r in records}, key=lambda k: (order.index(k[0]) if k[0] in order else 99, k[1] != "near"))
+    for m, nc in keys:
+        rs = [r for r in records if r.method == m and r.navcam == nc and r.truth_uv is not None]
+        if not rs:
+            continue
+        answered = [r for r in rs if r.error_px is not None]
+        succ = [r.error_px for r in answered if r.success]
+        fail = [r.error_px for r in answered if not r.success]
+        rows.append({
+            "method": m, "navcam": nc, "paper_method": m in PAPER_METHODS, "cases": len(rs),
+            "answered": len(answered), "success_rate": len(succ) / len(rs),
+            "all": _stats([r.error_px for r in answered]), "successes": _stats(succ), "failures": _stats(fail),
+            "refined": m in REFINED,
+        })
+    return rows
