@@ -1,0 +1,62 @@
+"""`scipctl designate`: pixel in a left stereo image -> 3-D target, saved for the other commands."""
+
+from __future__ import annotations
+
+import sys
+
+from ..cli import CommandFailed, emit_json
+from ..model import InputError
+
+
+def run(src, product, camera, pixel, target_id, band_px, json_out):
+    from ..io.provenance import provenance
+    from ..io.workspace import open_source
+    from ..pipeline.designate import designate, parse_pixel, pick_left_product
+
+    uv = parse_pixel(pixel)
+    source = open_source(src)
+    dl = source.downlink
+    left = pick_left_product(dl, product, camera)
+    targets = source.load_json("targets.json", default={"targets": []}) or {"targets": []}
+    existing = {t["id"] for t in targets.get("targets", [])}
+    if target_id is None:
+        n = 1
+        while f"t{n}" in existing:
+            n += 1
+        target_id = f"t{n}"
+    if band_px is not None and not band_px > 0:
+        raise InputError("--band-px", "band_px", "must be > 0")
+    rec = designate(dl, left, uv, band_px=band_px, target_id=target_id)
+    rec["provenance"] = provenance({"downlink": str(src)})
+    if not rec["ok"]:
+        raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec['reason']}",
+                            payload=rec)
+    targets["targets"] = [t for t in targets.get("targets", []) if t["id"] != target_id] + [rec]
+    targets["provenance"] = rec["provenance"]
+    path = source.save_json("targets.json", targets)
+    rec["saved_to"] = str(path)
+    if json_out:
+        emit_json(rec)
+    _print(rec)
+
+
+def _print(rec):
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console(stderr=True)
+    t = Table(title=f"target {rec['id']} from {rec['product_id']}", show_header=False)
+    t.add_row("pixel (u, v)", f"{rec['pixel_uv'][0]:.2f}, {rec['pixel_uv'][1]:.2f}")
+    t.add_row("rover xyz (m)", ", ".join(f"{x:.3f}" for x in rec["xyz_rover_m"]))
+    t.add_row("site xyz (m)", ", ".join(f"{x:.3f}" for x in rec["xyz_site_m"]))
+    sig = rec.get("range_sigma_m")
+    t.add_row("range (m)", f"{rec['range_m']:.3f}" + (f" ± {sig:.3f}" if sig is not None else ""))
+    t.add_row("match score", f"{rec['match_score']:.3f}")
+    eo = rec.get("epipolar_offset_px")
+    t.add_row("epipolar offset (px)", "n/a" if eo is None else f"{eo:+.2f}")
+    n = rec.get("surface_normal_rover")
+    t.add_row("surface normal (rover)", "n/a" if n is None else ", ".join(f"{x:+.2f}" for x in n))
+    t.add_row("warnings", "; ".join(rec["warnings"]) or "none")
+    t.add_row("saved to", rec["saved_to"])
+    con.print(t)
+    sys.stderr.flush()

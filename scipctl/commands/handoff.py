@@ -1,0 +1,182 @@
+"""`scipctl simulate-handoff`: run the handoff methods offline on downlinks and score them against marks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from ..cli import emit_json
+from ..model import InputError
+
+# the paper's Table 1 (Rocky8, 18 targets): mean +- std (range), px; refined: successes / failures
+PAPER_TABLE1 = {
+    ("pure-kinematic", "near"): "100%  13±3 (9-23)",
+    ("pure-kinematic", "far"): "100%  107±58 (63-182)",
+    ("alt-pure-kinematic", "near"): "100%  22±5 (15-35)",
+    ("alt-pure-kinematic", "far"): "83%  102±27 (68-152)",
+    ("refined-kinematic", "near"): "55%  1±1 / 99±76 (0-3 / 18-214)",
+    ("refined-kinematic", "far"): "67%  2±1 / 83±52 (0-4 / 16-166)",
+    ("pure-geometric", "near"): "100%  9±6 (1-22)",
+    ("pure-geometric", "far"): "100%  54±21 (20-95)",
+    ("refined-geometric", "near"): "50%  1±1 / 109±77 (0-3 / 8-261)",
+    ("refined-geometric", "far"): "17%  2±1 / 52±55 (1-3 / 19-231)",
+    ("mesh-registration", "near"): "100%  28±11 (8-58)",
+    ("mesh-registration", "far"): "100%  124±57 (36-226)",
+}
+
+
+def _parse_methods(methods):
+    from ..core.handoff import ALL_METHODS
+
+    if not methods:
+        return list(ALL_METHODS), ["near", "far"]
+    names, navcams = [], set()
+    for item in methods.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        base, nc = item, None
+        for suffix in ("-near", "-far", ":near", ":far"):
+            if item.endswith(suffix):
+                base, nc = item[: -len(suffix)], suffix[1:]
+        if base not in ALL_METHODS:
+            raise InputError("--methods", "methods", f"unknown method {item!r} (known: {', '.join(ALL_METHODS)}, optionally -near/-far)")
+        if base not in names:
+            names.append(base)
+        navcams.update([nc] if nc else ["near", "far"])
+    return names, [n for n in ("near", "far") if n in navcams]
+
+
+def _fmt_stats(s):
+    if s is None:
+        return "-"
+    return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
+
+
+def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out):
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from ..io.provenance import provenance
+    from ..io.workspace import open_source
+    from ..pipeline.designate import parse_pixel
+    from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
+
+    if not success_px > 0:
+        raise InputError("--success-px", "success_px", "must be > 0")
+    if (from_product is None) != (pixel is None):
+        raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
+    names, navcams = _parse_methods(methods)
+    con = Console(stderr=True)
+    records, chains, per_dl = [], [], []
+    sources = [open_source(s) for s in srcs]  # validate every input before any work
+    n_work = sum(1 for _ in sources) * max(1, len(names) * len(navcams))
+    with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
+                  TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
+        task = prog.add_task("handoff", total=n_work)
+        for src, source in zip(srcs, sources):
+            dl = source.downlink
+            name = Path(src).name
+            setup = build_setup(dl, hazcam=hazcam, near=near, far=far)
+            if from_product is not None:
+                p = dl.product(from_product)
+                if p.camera != "navcam" or p.eye != "left":
+                    raise InputError(from_product, "camera", "--from must be a left navcam product (near or far)")
+                nc = "near" if setup.near is not None and p.product_id == setup.near.product_id else (
+                    "far" if setup.far is not None and p.product_id == setup.far.product_id else None)
+                if nc is None:
+                    setup = build_setup(dl, hazcam=hazcam, near=p.product_id if p.position == setup.hazcam.position else near,
+                                        far=p.product_id if p.position != setup.hazcam.position else far)
+                    nc = "near" if p.position == setup.hazcam.position else "far"
+                uv = parse_pixel(pixel)
+                if not (-0.5 <= uv[0] <= p.width - 0.5 and -0.5 <= uv[1] <= p.height - 0.5):
+                    raise InputError(from_product, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the image")
+                tlist = [(target or "pixel", {nc: uv.tolist()}, None)]
+                use_navcams = [nc]
+            else:
+                tlist = marked_targets(dl, setup, only=target)
+                use_navcams = [n for n in navcams if n in setup.cases]
+            done = [0]
+
+            def progress(desc, _t=task):
+                prog.update(_t, description=desc)
+
+            recs = run_targets(dl, setup, tlist, methods=names, navcams=use_navcams, success_px=success_px,
+                               progress=progress, downlink_name=name)
+            prog.advance(task, len(names) * len(navcams))
+            records.extend(recs)
+            per_dl.append({"downlink": name, "hazcam": setup.hazcam.product_id,
+                           "near": setup.near.product_id if setup.near else None,
+                           "far": setup.far.product_id if setup.far else None,
+                           "dense_stereo_s": {k: round(c.nav.dense_seconds, 3) for k, c in setup.cases.items()},
+                           "input_sha256": dl.source_sha256})
+            if chain:
+                chains.extend(_chains(dl, name, target))
+            del done
+    rows = table1(records)
+    doc = {
+        "provenance": provenance({f"downlink{i}": str(s) for i, s in enumerate(srcs)}),
+        "success_px": success_px,
+        "downlinks": per_dl,
+        "results": [r.to_dict() for r in records],
+        "table1": rows,
+    }
+    if chain:
+        doc["chains"] = chains
+    if json_out:
+        emit_json(doc)
+    _print_table(con, rows, records)
+    if chain:
+        _print_chains(con, chains)
+
+
+def _chains(dl, name, only):
+    from ..pipeline.chain import run_chain
+
+    out = []
+    starts = sorted((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    if not starts:
+        return out
+    start = starts[0]
+    for t in dl.targets:
+        if only and t.id != only:
+            continue
+        mk = t.mark_in(start.product_id)
+        if mk is None:
+            continue
+        try:
+            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id)
+            out.append({"downlink": name, "target": t.id, "steps": [s.to_dict() for s in steps]})
+        except InputError as e:
+            out.append({"downlink": name, "target": t.id, "error": str(e), "steps": []})
+    return out
+
+
+def _print_table(con, rows, records):
+    from rich.table import Table
+
+    tab = Table(title=f"Handoff accuracy ({len({(r.downlink, r.target) for r in records})} targets) — compare the paper's Table 1")
+    for c in ("method", "navcam", "success", "answered", "mean±std (range) px", "successes / failures px", "paper"):
+        tab.add_column(c)
+    for r in rows:
+        split = "-"
+        if r["refined"]:
+            split = f"{_fmt_stats(r['successes'])} / {_fmt_stats(r['failures'])}"
+        tab.add_row(r["method"], r["navcam"], f"{100 * r['success_rate']:.0f}%", f"{r['answered']}/{r['cases']}",
+                    _fmt_stats(r["all"]), split, PAPER_TABLE1.get((r["method"], r["navcam"]), "(not in paper)"))
+    con.print(tab)
+
+
+def _print_chains(con, chains):
+    from rich.table import Table
+
+    for ch in chains:
+        tab = Table(title=f"{ch['downlink']} target {ch['target']}: tracking chain")
+        for c in ("stop", "camera", "kind", "tracked uv", "mark uv", "err px", "range m", "3-D err m"):
+            tab.add_column(c)
+        for s in ch["steps"]:
+            f2 = lambda v: "-" if v is None else f"{v[0]:.1f},{v[1]:.1f}"  # noqa: E731
+            tab.add_row(f"{s['position'][0]}/{s['position'][1]}", s["camera"], s["kind"], f2(s["tracked_uv"]), f2(s["mark_uv"]),
+                        "-" if s["error_px"] is None else f"{s['error_px']:.2f}",
+                        "-" if s["range_m"] is None else f"{s['range_m']:.2f}",
+                        "-" if s["error_3d_m"] is None else f"{s['error_3d_m']:.3f}")
+        con.print(tab)
