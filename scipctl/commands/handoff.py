@@ -104,6 +104,10 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
                                progress=progress, downlink_name=name)
             prog.advance(task, len(names) * len(navcams))
             records.extend(recs)
+            source.save_json("handoff.json", {
+                "provenance": provenance({"downlink": str(src)}), "success_px": success_px,
+                "results": [r.to_dict() for r in recs], "table1": table1(recs),
+            })
             per_dl.append({"downlink": name, "hazcam": setup.hazcam.product_id,
                            "near": setup.near.product_id if setup.near else None,
                            "far": setup.far.product_id if setup.far else None,
