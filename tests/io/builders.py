@@ -19,12 +19,17 @@ Geometry (rover frame: x forward, y right, z down):
 
 from __future__ import annotations
 
+import base64
+import io
+import json
+
 import numpy as np
 
 from scipctl.core.camera import CameraModel, cahv_from_intrinsics
 from scipctl.core.kinematics import CameraSpec, JointAxis, MastGeometry, RoverConfig, RoverPose, StereoCamera
 from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix, euler_zyx_to_matrix
 from scipctl.io.images import encode_png
+from scipctl.io.downlink_mcap import TOPIC_SCHEMAS
 from scipctl.model import Downlink, ImageProduct, ImageTruth, Mark, MastAngles, TargetMarks, TargetTruth
 
 # camera frame (x right, y down, z forward) -> rover frame (x fwd, y right, z down), looking forward
@@ -161,3 +166,50 @@ def make_small_downlink(
         mission=mission, sol=sol, rover_config=rc, images=images, targets=targets,
         truth_images=truth_images if with_truth else [], truth_targets=truth_targets if with_truth else [],
     )
+
+
+META = {"format_version": "1", "mission": "test", "sol": "42"}
+
+
+def write_raw_mcap(path, metadata, topics, encoding="json", extra_topics=None):
+    """An MCAP written directly with the mcap package (not with scipctl's writer), for producer variations.
+
+    ``topics`` maps topic -> list of message dicts (or raw bytes); ``metadata`` is the ``scip.downlink``
+    record (None: left out); ``encoding`` is the channels' message encoding.
+    """
+    from mcap.writer import Writer
+
+    buf = io.BytesIO()
+    w = Writer(buf)
+    w.start()
+    if metadata is not None:
+        w.add_metadata("scip.downlink", metadata)
+    w.add_metadata("other.tool", {"anything": "goes"})
+    for topic, items in list(topics.items()) + list((extra_topics or {}).items()):
+        sid = w.register_schema(TOPIC_SCHEMAS.get(topic, "x.Other"), "jsonschema", b"{}")
+        cid = w.register_channel(topic, encoding, sid)
+        for i, d in enumerate(items):
+            data = d if isinstance(d, bytes) else json.dumps(d).encode()
+            t = round(d["time_s"] * 1e9) if isinstance(d, dict) and "time_s" in d and isinstance(d["time_s"], float) else i
+            w.add_message(cid, t, data, t)
+    w.finish()
+    path.write_bytes(buf.getvalue())
+
+
+def plain_records(dl):
+    """The records of ``dl`` per MCAP topic, as plain dicts (as scipctl's writer produces them); mutate and
+    pass to :func:`write_raw_mcap` to make deliberately broken or unusual downlinks."""
+    import scipctl.io.downlink as P
+
+    imgs = []
+    for im in dl.images:
+        rec = P.product_to_plain(im)
+        rec["image"] = {"format": "png", "data": base64.b64encode(im.png).decode()}
+        imgs.append(rec)
+    return {
+        "/downlink/image": imgs,
+        "/downlink/rover_config": [P.rover_config_to_plain(dl.rover_config)],
+        "/downlink/targets": [P.target_to_plain(t) for t in dl.targets],
+        "/truth/image": [P.truth_image_to_plain(t) for t in dl.truth_images],
+        "/truth/targets": [P.truth_target_to_plain(t) for t in dl.truth_targets],
+    }
