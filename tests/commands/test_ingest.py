@@ -1,0 +1,140 @@
+"""``scipctl ingest`` and ``scipctl info`` through the CLI (CliRunner), plus one real subprocess."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from scipctl.cli import app
+from scipctl.io.downlink import downlink_differences, read_downlink, write_downlink
+from tests.io.builders import make_small_downlink
+
+REPO = Path(__file__).resolve().parents[2]
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    d = tmp_path_factory.mktemp("dl")
+    dl = make_small_downlink()
+    write_downlink(dl, d / "sol42.mcap")
+    return dl, d / "sol42.mcap"
+
+
+def test_ingest_json_summary_and_workspace(tmp_path, small):
+    dl, src = small
+    ws = tmp_path / "ws"
+    r = runner.invoke(app, ["ingest", str(src), "-o", str(ws), "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)  # exactly one JSON document on stdout
+    assert doc["workspace"] == str(ws)
+    s = doc["summary"]
+    assert (s["mission"], s["sol"], s["format_version"]) == ("test", 42, "1")
+    assert s["counts"] == {"images": len(dl.images), "positions": 2, "targets": len(dl.targets)}
+    # positions with poses
+    p0 = s["positions"][0]
+    assert (p0["site"], p0["drive"]) == (1, 0)
+    yaw, _, _ = dl.images[0].pose.yaw_pitch_roll_rad
+    assert p0["pose"]["yaw_deg"] == pytest.approx(np.degrees(yaw), abs=1e-9)
+    assert p0["pose"]["x_m"] == dl.images[0].pose.position_m[0]
+    assert p0["cameras"] == {"pancam": ["left", "right"], "navcam": ["left", "right"], "hazcam": ["left", "right"]}
+    assert s["positions"][1]["cameras"] == {"navcam": ["left", "right"], "hazcam": ["left", "right"]}
+    # image statistics computed from the pixels themselves
+    for rec in s["images"]:
+        px = dl.product(rec["product_id"]).pixels
+        assert rec["mean"] == pytest.approx(px.mean() / 255.0, rel=1e-12)
+        assert rec["saturated_fraction"] == pytest.approx(np.mean(px == 255), rel=1e-12)
+        im = dl.product(rec["product_id"])
+        if im.mast is not None:
+            assert rec["pan_deg"] == pytest.approx(np.degrees(im.mast.pan_rad))
+        else:
+            assert rec["pan_deg"] is None and im.camera == "hazcam"
+    assert [t["id"] for t in s["targets"]] == [t.id for t in dl.targets]
+    assert len(s["targets"][0]["marks"]) == len(dl.targets[0].marks)
+    assert s["truth"] == {"present": True, "images": len(dl.truth_images), "targets": len(dl.truth_targets)}
+    # the workspace is a valid downlink holding the same content, with the summary stored
+    assert downlink_differences(read_downlink(src), read_downlink(ws)) == []
+    stored = json.loads((ws / "scipctl" / "workspace.json").read_text())
+    assert stored["summary"]["counts"] == s["counts"]
+
+
+def test_ingest_prints_tables_on_stderr_only(tmp_path, small):
+    _, src = small
+    r = runner.invoke(app, ["ingest", str(src), "-o", str(tmp_path / "ws")], env={"COLUMNS": "160"})
+    assert r.exit_code == 0
+    assert r.stdout == ""
+    assert "Rover positions" in r.stderr and "navcam_left_1_12" in r.stderr and "Simulation truth: present" in r.stderr
+
+
+def test_info_on_workspace_and_raw_downlink(tmp_path, small):
+    _, src = small
+    ws = tmp_path / "ws"
+    assert runner.invoke(app, ["ingest", str(src), "-o", str(ws)]).exit_code == 0
+    (ws / "scipctl" / "targets.json").write_text("{}")
+    r = runner.invoke(app, ["info", str(ws), "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["workspace"]["products"] == ["targets.json"]
+    assert doc["workspace"]["ingested_from"]["path"] == str(src)
+    r2 = runner.invoke(app, ["info", str(src), "--json"])
+    raw = json.loads(r2.stdout)
+    assert "workspace" not in raw
+    assert raw["images"] == doc["images"] and raw["positions"] == doc["positions"]
+    assert not list(tmp_path.glob("*.scipctl"))  # info writes nothing
+
+
+def test_info_without_truth_or_targets(tmp_path):
+    write_downlink(make_small_downlink(with_targets=False, with_truth=False, n_positions=1), tmp_path / "x.mcap")
+    r = runner.invoke(app, ["info", str(tmp_path / "x.mcap")])
+    assert r.exit_code == 0
+    assert "Simulation truth: none" in r.stderr and "Targets" not in r.stderr
+
+
+def test_bad_input_is_exit_2_with_one_line(tmp_path, small):
+    _, src = small
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(src.read_bytes()[:-100])
+    r = runner.invoke(app, ["ingest", str(bad), "-o", str(tmp_path / "ws")])
+    assert r.exit_code == 2
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("scipctl: error: ") and str(bad) in r.stderr
+    assert not (tmp_path / "ws").exists()
+    assert [p.name for p in tmp_path.iterdir()] == ["bad.mcap"]  # no temporary directory left either
+
+
+def test_output_inside_or_containing_the_source_is_refused(tmp_path):
+    write_downlink(make_small_downlink(n_positions=1), tmp_path / "dl", container="dir")
+    r = runner.invoke(app, ["ingest", str(tmp_path / "dl"), "-o", str(tmp_path / "dl" / "ws")])
+    assert r.exit_code == 2 and "inside the source" in r.stderr
+    (tmp_path / "box").mkdir()
+    write_downlink(make_small_downlink(n_positions=1), tmp_path / "box" / "x.mcap")
+    r = runner.invoke(app, ["ingest", str(tmp_path / "box" / "x.mcap"), "-o", str(tmp_path / "box")])
+    assert r.exit_code == 2 and (tmp_path / "box" / "x.mcap").exists()
+
+
+def test_reingest_a_workspace_in_place(tmp_path, small):
+    _, src = small
+    ws = tmp_path / "ws"
+    assert runner.invoke(app, ["ingest", str(src), "-o", str(ws)]).exit_code == 0
+    r = runner.invoke(app, ["ingest", str(ws), "-o", str(ws), "--json"])
+    assert r.exit_code == 0, r.stderr
+    assert downlink_differences(read_downlink(src), read_downlink(ws)) == []
+
+
+def test_real_subprocess_exit_code_and_clean_stderr(tmp_path):
+    exe = REPO / ".venv" / "bin" / "scipctl"
+    if not exe.exists():
+        exe = Path(sys.executable).with_name("scipctl")
+    bad = tmp_path / "broken.mcap"
+    bad.write_bytes(b"\x89MCAP0\r\n" + b"\x01" * 50)
+    out = tmp_path / "ws"
+    r = subprocess.run([str(exe), "ingest", str(bad), "-o", str(out)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    assert r.stdout == ""
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("scipctl: error: ") and "broken.mcap" in lines[0]
+    assert "Traceback" not in r.stderr
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["broken.mcap"]
