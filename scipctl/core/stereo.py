@@ -1,0 +1,765 @@
+"""Stereo ranging: point stereo along an epipolar band, and dense ("JPL") stereo (pure numerics).
+
+Frames: every 3-D quantity is in the frame of the camera models passed in
+(for downlink products, the rover frame at acquisition). Pixels follow
+docs/conventions.md: ``(u, v)`` = (column, row), ``(0, 0)`` the centre of the
+top-left pixel. Range is the distance from the left camera's ``C``.
+
+Point stereo (:func:`point_stereo`), as in the SCIP handoff paper: a window
+around the left pixel is correlated (zero-mean NCC) with the right image
+within a band of ``band_px`` around the epipolar curve. For CAHVOR/CAHVORE
+models the epipolar "line" is a curve: we unproject the left pixel to a ray
+and project points on it at ranges ``min_range_m .. max_range_m`` through the
+right model. The best match is refined to sub-pixel precision and the two
+rays are intersected (closest approach). The signed perpendicular distance
+of the match from the epipolar curve is a calibration-health figure (the
+paper saw up to ~4 px on pancams).
+
+Dense stereo (:func:`dense_stereo`): rectify the pair to shared-plane CAHV
+models (:func:`scipctl.core.rectify.rectify_pair`), run OpenCV's semi-global
+block matcher (``StereoSGBM``, 3-way mode) with a left-right consistency
+check, a uniqueness ratio and a speckle filter, and convert disparity to 3-D
+on the rectified-left pixel grid.
+
+OpenCV is imported inside the functions (``scipctl --help`` stays fast).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .camera import CameraModel
+from .tracking import (
+    _iterate_subpixel,
+    _local_maxima,
+    _ncc_region,
+    as_float_image,
+    crop_window,
+    default_min_std,
+    subpixel_peak,
+)
+
+__all__ = [
+    "DEFAULT_BAND_PX",
+    "default_band_px",
+    "triangulate_rays",
+    "epipolar_curve",
+    "PointStereoResult",
+    "point_stereo",
+    "DenseStereo",
+    "dense_stereo",
+    "sgbm_parameters",
+]
+
+#: Epipolar band half-widths (px) per camera: wide enough for the ~4 px
+#: misalignment the paper saw on pancams, ~1 px (x 3 margin) on navcams.
+DEFAULT_BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
+
+
+def default_band_px(camera: str) -> float:
+    """Band half-width (px) for a camera name (``pancam``, ``navcam``, ``hazcam``; others: 6)."""
+    return DEFAULT_BAND_PX.get(str(camera).lower(), 6.0)
+
+
+def _check_model(m, name):
+    if not isinstance(m, CameraModel):
+        raise ValueError(f"{name}: expected a CameraModel, got {type(m).__name__}")
+
+
+# ------------------------------------------------------------- geometry
+def triangulate_rays(o1, d1, o2, d2):
+    """Closest approach of two rays (vectorised).
+
+    ``o1, d1, o2, d2`` are ``(..., 3)`` (broadcastable) origins and
+    directions (any length; the ray parameters are in units of ``|d|``).
+    Returns ``(midpoint (..., 3), miss_distance (...,), t (..., 2))`` where
+    ``o1 + t[..., 0] d1`` and ``o2 + t[..., 1] d2`` are the closest points and
+    the midpoint is halfway between them. Parallel rays give NaN.
+    """
+    arrs = [np.asarray(x, dtype=float) for x in (o1, d1, o2, d2)]
+    for name, a in zip(("o1", "d1", "o2", "d2"), arrs):
+        if a.shape[-1:] != (3,):
+            raise ValueError(f"{name}: expected shape (..., 3), got {a.shape}")
+    o1, d1, o2, d2 = np.broadcast_arrays(*arrs)
+    w0 = o1 - o2
+    a = np.sum(d1 * d1, -1)
+    b = np.sum(d1 * d2, -1)
+    c = np.sum(d2 * d2, -1)
+    d = np.sum(d1 * w0, -1)
+    e = np.sum(d2 * w0, -1)
+    den = a * c - b * b
+    with np.errstate(divide="ignore", invalid="ignore"):
+        par = den <= 1e-14 * a * c
+        den = np.where(par, np.nan, den)
+        t1 = (b * e - c * d) / den
+        t2 = (a * e - b * d) / den
+    p1 = o1 + t1[..., None] * d1
+    p2 = o2 + t2[..., None] * d2
+    mid = 0.5 * (p1 + p2)
+    miss = np.linalg.norm(p1 - p2, axis=-1)
+    return mid, miss, np.stack([t1, t2], -1)
+
+
+def epipolar_curve(
+    left_model: CameraModel,
+    right_model: CameraModel,
+    uv_left,
+    min_range_m: float,
+    max_range_m: float,
+    max_step_px: float = 0.5,
+    max_points: int = 20000,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The epipolar curve of left pixel ``uv_left`` (2,) in the right image.
+
+    Points ``o + r d`` on the left pixel's ray, ``r`` from ``max_range_m``
+    down to ``min_range_m`` (uniform in ``1/r``, refined until consecutive
+    points are at most ``max_step_px`` apart), projected through the right
+    model. Returns ``(uv (N, 2), range_m (N,))``, points that do not project
+    (behind the right camera) removed.
+    """
+    _check_model(left_model, "left_model")
+    _check_model(right_model, "right_model")
+    if not (0 < min_range_m < max_range_m and np.isfinite(max_range_m)):
+        raise ValueError(f"ranges: need 0 < min_range_m < max_range_m < inf, got {min_range_m}, {max_range_m}")
+    uv = np.asarray(uv_left, dtype=float).reshape(2)
+    o, d = _unproject1(left_model, uv)
+    n = 64
+    while True:
+        inv = np.linspace(1.0 / max_range_m, 1.0 / min_range_m, n)
+        r = 1.0 / inv
+        c = right_model.project(o[None, :] + r[:, None] * d[None, :])
+        good = np.all(np.isfinite(c), axis=1)
+        c, r = c[good], r[good]
+        if len(c) < 2:
+            return c, r
+        step = float(np.max(np.linalg.norm(np.diff(c, axis=0), axis=1)))
+        if step <= max_step_px or n >= max_points:
+            return c, r
+        n = int(min(max_points, math.ceil(n * step / max_step_px * 1.1) + 2))
+
+
+def _unproject1(model: CameraModel, uv) -> tuple[np.ndarray, np.ndarray]:
+    """Ray ``(origin (3,), unit direction (3,))`` of one pixel ``uv`` (2,)."""
+    o, d = model.unproject(np.asarray(uv, dtype=float).reshape(1, 2))
+    return o[0], d[0]
+
+
+def _polyline_foot(curve: np.ndarray, p: np.ndarray):
+    """Nearest point of polyline ``curve`` (N, 2) to ``p`` (2,): ``(foot, unit tangent, segment index, t)``."""
+    a = curve[:-1]
+    b = curve[1:]
+    ab = b - a
+    L2 = np.sum(ab * ab, 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.clip(np.sum((p - a) * ab, 1) / L2, 0.0, 1.0)
+    t = np.where(L2 > 0, t, 0.0)
+    q = a + t[:, None] * ab
+    dist = np.linalg.norm(q - p, axis=1)
+    k = int(np.argmin(dist))
+    # tangent from a few segments around the foot (robust to tiny segments)
+    k0, k1 = max(k - 2, 0), min(k + 3, len(curve) - 1)
+    tan = curve[k1] - curve[k0]
+    tan = tan / max(np.linalg.norm(tan), 1e-12)
+    return q[k], tan, k, float(t[k])
+
+
+# --------------------------------------------------------- point stereo
+@dataclass(frozen=True)
+class PointStereoResult:
+    """Outcome of :func:`point_stereo` (NaN fields where not computed).
+
+    ``xyz`` (3,): the target in the models' frame (midpoint of the two rays'
+    closest approach). ``range_m``: ``|xyz - C_left|``. ``range_sigma_m``:
+    range uncertainty for a matching uncertainty of ``disparity_sigma_px``
+    along the epipolar curve. ``uv_right`` (2,): the sub-pixel match.
+    ``score``: peak NCC; ``second_score``/``ratio``: best competing match
+    in the band and ``score / second_score``; ``sharpness``: peak curvature
+    (per px^2). ``epipolar_offset_px``: signed perpendicular distance of the
+    match from the epipolar curve (sign convention in :func:`point_stereo`),
+    a calibration-health figure. ``miss_distance_m``: distance between the
+    two rays at closest approach.
+    """
+
+    ok: bool
+    reason: str
+    xyz: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    range_m: float = float("nan")
+    range_sigma_m: float = float("nan")
+    uv_right: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    score: float = float("nan")
+    second_score: float = float("nan")
+    ratio: float = float("nan")
+    sharpness: float = float("nan")
+    epipolar_offset_px: float = float("nan")
+    miss_distance_m: float = float("nan")
+
+
+def _band_mask(curve_pl: np.ndarray, shape: tuple, band_px: float) -> np.ndarray:
+    """Boolean ``shape`` mask of grid points within ``band_px`` of polyline ``curve_pl`` (grid pixel units)."""
+    import cv2
+
+    shift = 4
+    canvas = np.zeros(shape, np.uint8)
+    pts = np.round(curve_pl * (1 << shift)).astype(np.int32).reshape(-1, 1, 2)
+    cv2.polylines(canvas, [pts], False, 255, thickness=1, lineType=cv2.LINE_8, shift=shift)
+    if not canvas.any():
+        return np.zeros(shape, bool)
+    dist = cv2.distanceTransform(255 - canvas, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    return dist <= band_px
+
+
+def point_stereo(
+    left_img,
+    right_img,
+    left_model: CameraModel,
+    right_model: CameraModel,
+    uv_left,
+    band_px: float = 6.0,
+    window_px: int = 21,
+    min_range_m: float = 0.3,
+    max_range_m: float = 100.0,
+    min_score: float = 0.6,
+    disparity_sigma_px: float = 0.25,
+    min_window_std: Optional[float] = None,
+    saturation_level: Optional[float] = None,
+    max_saturated_fraction: float = 0.25,
+    subpixel_iterations: int = 4,
+    affine: bool = True,
+) -> PointStereoResult:
+    """Range one left pixel by NCC matching in a band around its epipolar curve.
+
+    Parameters
+    ----------
+    left_img, right_img : (H, W) arrays (uint8, uint16 or float)
+    left_model, right_model : CameraModel
+        Same frame (e.g. rover frame at acquisition); any kind.
+    uv_left : (2,)
+        The left pixel (sub-pixel allowed).
+    band_px : float
+        Half-width of the search band around the epipolar curve (right
+        pixels); see :data:`DEFAULT_BAND_PX` / :func:`default_band_px`.
+    window_px : int
+        Side of the correlation window (odd; an even value is increased by 1).
+        Near the image border the window is clipped to the image (at least
+        half of it must be inside).
+    min_range_m, max_range_m : float
+        Range interval of the epipolar curve searched.
+    min_score : float
+        Peak NCC below this -> ``ok=False``.
+    disparity_sigma_px : float
+        Matching uncertainty along the epipolar curve, propagated to
+        ``range_sigma_m`` by finite differences of the triangulation.
+    min_window_std : float, optional
+        Texture threshold for the left window (image units; default
+        :func:`scipctl.core.tracking.default_min_std`).
+    saturation_level : float, optional
+        Pixel value counted as saturated (default: the dtype's maximum for
+        integer images, none for float images).
+    max_saturated_fraction : float
+        More saturated pixels than this fraction in the left window -> ``ok=False``.
+    affine : bool
+        Refine the match with a window warp that lets the disparity vary
+        linearly across the window (surfaces seen obliquely, e.g. the ground:
+        a translation-only NCC peak is then biased by 0.1-0.7 px on our test
+        scenes; with the warp, ~0.05 px). Costs a few milliseconds.
+
+    Returns
+    -------
+    PointStereoResult
+        ``ok=False`` with ``reason`` one of: "pixel outside image", "window
+        mostly outside image", "saturated window", "textureless window",
+        "epipolar curve outside the right image", "no match above threshold
+        ...", "match at the edge of the epipolar band ...", "rays do not
+        converge", "intersection behind a camera".
+
+    The signed ``epipolar_offset_px`` is ``(uv_right - foot) . n`` with
+    ``foot`` the nearest curve point and ``n`` the curve's unit normal
+    ``(-t_v, t_u)``, ``t`` the unit tangent oriented towards increasing ``u``
+    (towards increasing ``v`` for a vertical curve): for a left-to-right curve
+    a positive offset means the match lies below (larger ``v``).
+    """
+    _check_model(left_model, "left_model")
+    _check_model(right_model, "right_model")
+    ldtype = np.asarray(left_img).dtype
+    L = as_float_image(left_img, "left_img")
+    R = as_float_image(right_img, "right_img")
+    uv = np.asarray(uv_left, dtype=float).reshape(-1)
+    if uv.shape != (2,) or not np.all(np.isfinite(uv)):
+        raise ValueError(f"uv_left: expected a finite (u, v) pair, got {uv_left!r}")
+    if not (band_px >= 0 and np.isfinite(band_px)):
+        raise ValueError(f"band_px: must be finite and >= 0, got {band_px}")
+    window_px = int(window_px)
+    if window_px < 3:
+        raise ValueError(f"window_px: must be >= 3, got {window_px}")
+    half = window_px // 2
+    if not (0 < min_range_m < max_range_m and np.isfinite(max_range_m)):
+        raise ValueError(f"ranges: need 0 < min_range_m < max_range_m < inf, got {min_range_m}, {max_range_m}")
+    H, W = L.shape
+    if not (-0.5 <= uv[0] <= W - 0.5 and -0.5 <= uv[1] <= H - 0.5):
+        return PointStereoResult(False, "pixel outside image")
+
+    # --- the left window
+    tpl_raw, c_win, frac = crop_window(np.asarray(left_img), uv, half)
+    if frac < 0.5:
+        return PointStereoResult(False, "window mostly outside image")
+    if saturation_level is None and ldtype.kind in "ui":
+        saturation_level = float(np.iinfo(ldtype).max)
+    if saturation_level is not None:
+        sat = float(np.mean(np.asarray(tpl_raw, dtype=float) >= saturation_level))
+        if sat > max_saturated_fraction:
+            return PointStereoResult(False, f"saturated window ({100 * sat:.0f}% of pixels at {saturation_level:g})")
+    tpl = as_float_image(tpl_raw, "left window")
+    if min_window_std is None:
+        min_window_std = default_min_std(ldtype)
+    if float(tpl.std()) < min_window_std:
+        return PointStereoResult(False, f"textureless window (std {float(tpl.std()):.3g} < {min_window_std:g})")
+    th, tw = tpl.shape
+    tpl0 = tpl - np.float32(tpl.mean())
+
+    # --- the epipolar curve and the band
+    curve, curve_r = epipolar_curve(left_model, right_model, uv, min_range_m, max_range_m)
+    Hr, Wr = R.shape
+    if len(curve) >= 2:
+        inside = (
+            (curve[:, 0] >= -0.5 - band_px) & (curve[:, 0] <= Wr - 0.5 + band_px)
+            & (curve[:, 1] >= -0.5 - band_px) & (curve[:, 1] <= Hr - 0.5 + band_px)
+        )
+        keep = np.nonzero(inside)[0]
+    else:
+        keep = np.zeros(0, int)
+    if len(keep) < 2:
+        return PointStereoResult(False, "epipolar curve outside the right image")
+    curve_in = curve[keep[0] : keep[-1] + 1]
+    # top-left placements of the window whose centre point lies within the band's bounding box
+    lo = np.floor(curve_in.min(0) - band_px - 1 - c_win).astype(int)
+    hi = np.ceil(curve_in.max(0) + band_px + 1 - c_win).astype(int)
+    res = _ncc_region(tpl0, R, lo[0], hi[0], lo[1], hi[1])
+    if res is None:
+        return PointStereoResult(False, "epipolar curve outside the right image")
+    m, x0, y0 = res
+    # grid (x, y) of the map <-> right pixel (x0 + x + c_win_u, y0 + y + c_win_v)
+    mask = _band_mask(curve_in - c_win - np.array([x0, y0]), m.shape, band_px)
+    if not mask.any():
+        return PointStereoResult(False, "epipolar curve outside the right image")
+
+    ys, xs = _local_maxima(m, mask)
+    if len(ys) == 0:
+        return PointStereoResult(False, "no correlation peak in the epipolar band")
+    by, bx = int(ys[0]), int(xs[0])
+    score = float(m[by, bx])
+    excl = max(2.0, min(th, tw) / 4.0)
+    second = -1.0
+    for yy, xx in zip(ys[1:], xs[1:]):
+        if (yy - by) ** 2 + (xx - bx) ** 2 > excl * excl:
+            second = float(m[yy, xx])
+            break
+    # a band-limited maximum that is not a maximum of the unrestricted map: the true peak is outside the band
+    y_lo, y_hi = max(by - 1, 0), min(by + 2, m.shape[0])
+    x_lo, x_hi = max(bx - 1, 0), min(bx + 2, m.shape[1])
+    at_band_edge = float(m[y_lo:y_hi, x_lo:x_hi].max()) > score
+
+    dx, dy, sharp = subpixel_peak(m, by, bx)
+    peak_xy = np.array([x0 + bx, y0 + by], dtype=float)
+    if subpixel_iterations > 0:
+        it = _iterate_subpixel(tpl0, R, peak_xy, (dx, dy), subpixel_iterations)
+        if it is not None:
+            (dx, dy), sharp, sc = it
+            score = max(score, sc)
+    uv_r = peak_xy + np.array([dx, dy]) + c_win
+    if affine:
+        aff = _affine_refine(tpl0, R, uv_r, c_win, _along_curve(curve, uv_r))
+        if aff is not None:
+            uv_r, score, _ = aff
+    ratio = score / second if second > 0 else float("inf")
+
+    foot, tan, _, _ = _polyline_foot(curve, uv_r)
+    if tan[0] < 0 or (tan[0] == 0 and tan[1] < 0):
+        tan = -tan
+    normal = np.array([-tan[1], tan[0]])
+    offset = float(np.dot(uv_r - foot, normal))
+
+    common = dict(uv_right=uv_r, score=score, second_score=second, ratio=ratio, sharpness=sharp,
+                  epipolar_offset_px=offset)
+    if score < min_score:
+        return PointStereoResult(False, f"no match above threshold (peak NCC {score:.3f} < {min_score:.3f})", **common)
+    if at_band_edge:
+        return PointStereoResult(
+            False, f"match at the edge of the epipolar band (models misaligned by more than {band_px:g} px?)", **common
+        )
+
+    o1, d1 = _unproject1(left_model, uv)
+    along = _along_curve(curve, uv_r)
+
+    def tri(p):
+        o2, d2 = _unproject1(right_model, p)
+        return triangulate_rays(o1, d1, o2, d2)
+
+    X, miss, t = tri(uv_r)
+    common["miss_distance_m"] = float(miss)
+    if not np.all(np.isfinite(X)):
+        return PointStereoResult(False, "rays do not converge", **common)
+    if t[0] <= 0 or t[1] <= 0:
+        return PointStereoResult(False, "intersection behind a camera", **common)
+    rng = float(np.linalg.norm(X - left_model.C))
+    h = 0.5
+    Xp, _, tp = tri(uv_r + h * along)
+    Xm, _, tm = tri(uv_r - h * along)
+    rp = float(np.linalg.norm(Xp - left_model.C))
+    rm = float(np.linalg.norm(Xm - left_model.C))
+    if np.isfinite(rp) and np.isfinite(rm) and tp[0] > 0 and tm[0] > 0:
+        sigma = abs(rp - rm) / (2 * h) * disparity_sigma_px
+    else:
+        sigma = float("inf")
+    return PointStereoResult(True, "", xyz=X, range_m=rng, range_sigma_m=float(sigma), **common)
+
+
+def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.ndarray, tangent: np.ndarray,
+                   max_gradient: float = 0.6):
+    """Refine a match allowing the disparity to vary linearly across the window.
+
+    A surface that is not fronto-parallel (the ground seen obliquely) has a
+    disparity gradient ``g`` (px per px): the right-image view of the window
+    is sheared/stretched along the epipolar direction ``tangent``, and a
+    translation-only NCC peak is biased by tenths of a pixel. We maximise the
+    NCC over the warp ``x -> uv_r + x - tangent (g . x)`` (``x``: template
+    offsets from the tracked point ``c_win``; bicubic resampling) in the
+    4 parameters (translation, ``g``) with Nelder-Mead, starting from the
+    translation-only match. Returns ``(uv_r (2,), score, g (2,))`` or ``None``
+    when it did not improve the NCC or wandered more than 1.5 px.
+    """
+    import cv2
+    from scipy.optimize import minimize
+
+    th, tw = tpl0.shape
+    ys, xs = np.mgrid[0:th, 0:tw].astype(np.float64)
+    x = xs - c_win[0]
+    y = ys - c_win[1]
+    t = np.asarray(tangent, dtype=float)
+    tn = tpl0.astype(np.float64).ravel()
+    tn = tn - tn.mean()
+    tnorm = np.sqrt(np.dot(tn, tn))
+    Hr, Wr = R.shape
+
+    def ncc(p):
+        du, dv, gx, gy = p
+        s = gx * x + gy * y
+        U = (uv_r[0] + du + x - t[0] * s).astype(np.float32)
+        V = (uv_r[1] + dv + y - t[1] * s).astype(np.float32)
+        patch = cv2.remap(R, U, V, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE).astype(np.float64).ravel()
+        patch = patch - patch.mean()
+        den = np.sqrt(np.dot(patch, patch)) * tnorm
+        return float(np.dot(patch, tn) / den) if den > 0 else -1.0
+
+    def cost(p):
+        if abs(p[2]) > max_gradient or abs(p[3]) > max_gradient:
+            return 2.0
+        return -ncc(p)
+
+    p0 = np.zeros(4)
+    s0 = ncc(p0)
+    simplex = np.array([p0, [0.3, 0, 0, 0], [0, 0.3, 0, 0], [0, 0, 0.05, 0], [0, 0, 0, 0.05]])
+    res = minimize(cost, p0, method="Nelder-Mead",
+                   options=dict(initial_simplex=simplex, xatol=1e-4, fatol=1e-9, maxiter=600, maxfev=1200))
+    p = res.x
+    if -res.fun <= s0 or np.hypot(p[0], p[1]) > 1.5:
+        return None
+    return uv_r + p[:2], float(-res.fun), p[2:].copy()
+
+
+def _along_curve(curve: np.ndarray, p: np.ndarray) -> np.ndarray:
+    _, tan, _, _ = _polyline_foot(curve, p)
+    return tan
+
+
+# --------------------------------------------------------- dense stereo
+def sgbm_parameters(num_disparities: int, min_disparity: int = 0, block_size: int = 5,
+                    uniqueness_ratio: int = 10, speckle_window: int = 100, speckle_range_px: int = 2,
+                    pre_filter_cap: int = 63) -> dict:
+    """Keyword arguments for ``cv2.StereoSGBM_create``: smoothness penalties ``P1 = 8 b^2``, ``P2 = 32 b^2``
+    (OpenCV's recommendation for single-channel images, ``b`` = block size), 3-way mode (the fastest:
+    parallel over image strips)."""
+    import cv2
+
+    nd = int(num_disparities)
+    if nd < 16 or nd % 16:
+        raise ValueError(f"num_disparities: must be a positive multiple of 16, got {nd}")
+    b = int(block_size)
+    if b < 1 or b % 2 == 0:
+        raise ValueError(f"block_size: must be odd and >= 1, got {b}")
+    return dict(
+        minDisparity=int(min_disparity),
+        numDisparities=nd,
+        blockSize=b,
+        P1=8 * b * b,
+        P2=32 * b * b,
+        disp12MaxDiff=-1,  # the left-right check is done by dense_stereo(lr_check="flip")
+        preFilterCap=int(pre_filter_cap),
+        uniquenessRatio=int(uniqueness_ratio),
+        speckleWindowSize=int(speckle_window),
+        speckleRange=int(speckle_range_px),
+        mode=cv2.STEREO_SGBM_MODE_SGBM_3WAY,
+    )
+
+
+@dataclass
+class DenseStereo:
+    """Dense stereo of a pair on the rectified-left pixel grid.
+
+    ``rectified``: the :class:`scipctl.core.rectify.RectifiedPair`.
+    ``disparity_px`` (h, w) float32: ``u_left - u_right`` in rectified pixels,
+    NaN where invalid. ``xyz`` (h, w, 3) float64: 3-D points in the models'
+    frame, NaN where invalid. ``valid`` (h, w) bool. ``range_m`` (h, w):
+    distance from the left camera centre, NaN where invalid.
+    ``left_rect`` (h, w) float32: the rectified left image (input units).
+    ``downsample``: the factor (1, 2, 4) of the rectified grid relative to the input images.
+    """
+
+    rectified: object
+    disparity_px: np.ndarray
+    xyz: np.ndarray
+    valid: np.ndarray
+    range_m: np.ndarray
+    left_rect: np.ndarray
+    downsample: int = 1
+    num_disparities: int = 0
+    min_disparity: int = 0
+
+    def point_cloud(self) -> tuple[np.ndarray, np.ndarray]:
+        """Valid points ``(N, 3)`` (models' frame) and their rectified-left intensities ``(N,)``."""
+        return self.xyz[self.valid], self.left_rect[self.valid].astype(float)
+
+    def depth_from_disparity(self, disparity_px) -> np.ndarray:
+        """Depth along the rectified axis ``A`` (m) for rectified disparities."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self._fb() / np.asarray(disparity_px, dtype=float)
+
+    def _fb(self) -> float:
+        rp = self.rectified
+        return float(rp.left_model.hs * np.dot(rp.right_model.C - rp.left_model.C, rp.left_model.h_axis))
+
+    def disparity_at_rect_uv(self, uv_rect) -> np.ndarray:
+        """Disparity at rectified-left pixels ``(N, 2)`` -> ``(N,)``: bilinear where the 4 neighbours are valid
+        and agree within 1 px, else the nearest pixel's; NaN where that is invalid or outside."""
+        p = np.asarray(uv_rect, dtype=float)
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"uv_rect: expected (N, 2), got {p.shape}")
+        D = self.disparity_px
+        h, w = D.shape
+        out = np.full(len(p), np.nan)
+        fin = np.all(np.isfinite(p), axis=1)
+        u, v = np.where(fin, p[:, 0], -10.0), np.where(fin, p[:, 1], -10.0)
+        inside = fin & (u >= -0.5) & (u <= w - 0.5) & (v >= -0.5) & (v <= h - 0.5)
+        iu0 = np.clip(np.floor(u).astype(int), 0, w - 2)
+        iv0 = np.clip(np.floor(v).astype(int), 0, h - 2)
+        fu = np.clip(u - iu0, 0.0, 1.0)
+        fv = np.clip(v - iv0, 0.0, 1.0)
+        d00 = D[iv0, iu0].astype(float)
+        d01 = D[iv0, iu0 + 1].astype(float)
+        d10 = D[iv0 + 1, iu0].astype(float)
+        d11 = D[iv0 + 1, iu0 + 1].astype(float)
+        quad = np.stack([d00, d01, d10, d11], 1)
+        fin4 = np.all(np.isfinite(quad), 1)
+        q = np.where(fin4[:, None], quad, 0.0)
+        ok4 = fin4 & ((q.max(1) - q.min(1)) <= 1.0)
+        bil = (1 - fv) * ((1 - fu) * d00 + fu * d01) + fv * ((1 - fu) * d10 + fu * d11)
+        nu = np.clip(np.floor(u + 0.5).astype(int), 0, w - 1)
+        nv = np.clip(np.floor(v + 0.5).astype(int), 0, h - 1)
+        near = D[nv, nu].astype(float)
+        out = np.where(ok4, bil, near)
+        out[~inside] = np.nan
+        return out
+
+    def xyz_at_left_uv(self, uv) -> np.ndarray:
+        """3-D points ``(N, 3)`` (models' frame) seen at ORIGINAL left pixels ``uv`` ``(N, 2)``; NaN where invalid.
+
+        The pixel is mapped to the rectified grid, the disparity interpolated
+        there (:meth:`disparity_at_rect_uv`), turned into depth along the
+        rectified axis and placed on the original pixel's own ray.
+        """
+        p = np.asarray(uv, dtype=float)
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"uv: expected (N, 2), got {p.shape}")
+        rp = self.rectified
+        uv_rect = rp.left_uv_to_rect(p)
+        d = self.disparity_at_rect_uv(uv_rect)
+        Z = self.depth_from_disparity(d)
+        o, dirs = rp.orig_left.unproject(p)
+        A = rp.left_model.A
+        C = rp.left_model.C
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (Z - (o - C) @ A) / (dirs @ A)
+        X = o + t[:, None] * dirs
+        bad = ~(np.isfinite(t) & (t > 0))
+        X[bad] = np.nan
+        return X
+
+
+def _to_uint8(img: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """Stretch the 0.5..99.5 percentiles of the valid pixels to 0..255 (equalises camera gains)."""
+    vals = img[valid]
+    if vals.size == 0:
+        return np.zeros(img.shape, np.uint8)
+    lo, hi = np.percentile(vals, [0.5, 99.5])
+    if hi <= lo:
+        hi = lo + 1.0
+    out = (img - lo) * (255.0 / (hi - lo))
+    return np.clip(out, 0, 255).astype(np.uint8)
+
+
+def _map_valid(maps, shape_src) -> np.ndarray:
+    """Rectified pixels whose source position lies inside the source image ``shape_src`` (H, W)."""
+    mu, mv = maps
+    Hs, Ws = shape_src
+    return (mu >= -0.5) & (mu <= Ws - 0.5) & (mv >= -0.5) & (mv <= Hs - 0.5)
+
+
+def dense_stereo(
+    left_img,
+    right_img,
+    left_model: CameraModel,
+    right_model: CameraModel,
+    min_range_m: float = 0.5,
+    max_range_m: float = 30.0,
+    downsample: int = 1,
+    block_size: int = 5,
+    uniqueness_ratio: int = 10,
+    speckle_window: int = 100,
+    speckle_range_px: int = 2,
+    lr_check: str = "flip",
+    lr_max_diff_px: float = 1.0,
+    rectified=None,
+) -> DenseStereo:
+    """Dense disparity and 3-D for a stereo pair (rectify + ``cv2.StereoSGBM``).
+
+    Parameters
+    ----------
+    left_img, right_img : (H, W) arrays, same shape (uint8, uint16 or float)
+    left_model, right_model : CameraModel
+        Same frame; any kind (CAHVORE is rectified for ``ref_range_m`` = 2 m).
+    min_range_m, max_range_m : float
+        Disparity search interval: ``d = f B / Z`` from ``Z = max_range_m``
+        to ``Z = min_range_m`` (depth along the rectified axis is at most the
+        range, so ``min_range_m`` bounds the largest disparity); points whose
+        range falls outside the interval are invalid.
+    downsample : 1, 2 or 4
+        Rectified grid at ``1/downsample`` of the input resolution (the input
+        is reduced with ``cv2.pyrDown`` first, so there is no aliasing).
+    block_size, uniqueness_ratio, speckle_window, speckle_range_px
+        SGBM parameters (see :func:`sgbm_parameters`).
+    lr_check : "flip" or "none"
+        Left-right consistency: ``flip`` computes the right-view disparity
+        map with a second matcher on the mirrored images (right image as the
+        reference) and rejects left pixels whose right-view disparity differs
+        by more than ``lr_max_diff_px`` (occlusions, the left border where
+        the right camera does not see, mismatches); it doubles the matching
+        time. (SGBM's own ``disp12MaxDiff`` check changed nothing on our
+        occlusion test scenes in any mode of OpenCV 5.0, so it is not used.)
+    rectified : RectifiedPair, optional
+        A precomputed rectification of these models (with ``scale = 1/downsample``).
+
+    Returns
+    -------
+    DenseStereo
+        On the rectified-left grid; see :class:`DenseStereo`.
+    """
+    import cv2
+
+    from .rectify import rectify_pair
+
+    _check_model(left_model, "left_model")
+    _check_model(right_model, "right_model")
+    L = as_float_image(left_img, "left_img")
+    R = as_float_image(right_img, "right_img")
+    if L.shape != R.shape:
+        raise ValueError(f"left_img {L.shape} and right_img {R.shape}: dense stereo needs equal image sizes")
+    if downsample not in (1, 2, 4):
+        raise ValueError(f"downsample: must be 1, 2 or 4, got {downsample}")
+    if not (0 < min_range_m < max_range_m and np.isfinite(max_range_m)):
+        raise ValueError(f"ranges: need 0 < min_range_m < max_range_m < inf, got {min_range_m}, {max_range_m}")
+    if lr_check not in ("flip", "none"):
+        raise ValueError(f"lr_check: must be 'flip' or 'none', got {lr_check!r}")
+    H, W = L.shape
+    rp = rectified if rectified is not None else rectify_pair(left_model, right_model, W, H, scale=1.0 / downsample)
+    lm, rm = rp.left_model, rp.right_model
+    f = float(lm.hs)
+    b = rm.C - lm.C
+    B_h = float(np.dot(b, lm.h_axis))
+    if B_h <= 0 or abs(np.dot(b, lm.A)) > 1e-6 * np.linalg.norm(b) + 1e-9:
+        raise ValueError("rectified pair: the baseline is not along +h (rectification is inconsistent)")
+    fb = f * B_h
+
+    # reduce the inputs to the rectified scale before resampling (pyrDown pixel i sits on pixel 2i)
+    Ls, Rs = L, R
+    for _ in range(int(round(math.log2(downsample)))):
+        Ls, Rs = cv2.pyrDown(Ls), cv2.pyrDown(Rs)
+    k = 1.0 / downsample
+    mapsL = (rp.map_left[0] * np.float32(k), rp.map_left[1] * np.float32(k))
+    mapsR = (rp.map_right[0] * np.float32(k), rp.map_right[1] * np.float32(k))
+    Lr = cv2.remap(Ls, mapsL[0], mapsL[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    Rr = cv2.remap(Rs, mapsR[0], mapsR[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    vL = _map_valid(mapsL, Ls.shape)
+    vR = _map_valid(mapsR, Rs.shape)
+    L8 = _to_uint8(Lr, vL)
+    R8 = _to_uint8(Rr, vR)
+
+    h, w = L8.shape
+    d_min = max(int(math.floor(fb / max_range_m)) - 1, 0)
+    d_max = int(math.ceil(fb / min_range_m)) + 1
+    d_max = min(d_max, d_min + w - 1)
+    nd = max(16, int(math.ceil((d_max - d_min + 1) / 16.0)) * 16)
+    params = sgbm_parameters(nd, d_min, block_size, uniqueness_ratio, speckle_window, speckle_range_px)
+    sgbm = cv2.StereoSGBM_create(**params)
+    # pad on the left so that pixels near the left border are searched too (SGBM skips the first
+    # minDisparity + numDisparities columns)
+    pad = d_min + nd
+    Lp = cv2.copyMakeBorder(L8, 0, 0, pad, 0, cv2.BORDER_REPLICATE)
+    Rp = cv2.copyMakeBorder(R8, 0, 0, pad, 0, cv2.BORDER_REPLICATE)
+    raw = sgbm.compute(Lp, Rp)[:, pad:]
+    valid = raw >= d_min * 16
+    disp = raw.astype(np.float32) / 16.0
+
+    if lr_check == "flip":
+        # right-view disparity: match the mirrored right image against the mirrored left image
+        Lf = cv2.copyMakeBorder(np.ascontiguousarray(R8[:, ::-1]), 0, 0, pad, 0, cv2.BORDER_REPLICATE)
+        Rf = cv2.copyMakeBorder(np.ascontiguousarray(L8[:, ::-1]), 0, 0, pad, 0, cv2.BORDER_REPLICATE)
+        sg2 = cv2.StereoSGBM_create(**params)
+        raw2 = sg2.compute(Lf, Rf)[:, pad:][:, ::-1]
+        dR = np.where(raw2 >= d_min * 16, raw2.astype(np.float32) / 16.0, np.nan)
+        ur = np.round(np.arange(w)[None, :] - disp).astype(int)
+        inside = (ur >= 0) & (ur < w)
+        rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
+        dr = np.full((h, w), np.nan, np.float32)
+        dr[inside] = dR[rows[inside], ur[inside]]
+        with np.errstate(invalid="ignore"):
+            valid &= np.abs(dr - disp) <= lr_max_diff_px
+
+    # both rectified pixels must come from inside the original images
+    valid &= vL
+    us = np.arange(w, dtype=np.float32)[None, :] - disp
+    ur_n = np.clip(np.round(us).astype(int), 0, w - 1)
+    valid &= (us >= -0.5) & vR[np.arange(h)[:, None], ur_n]
+    valid &= disp > 0
+
+    disp = np.where(valid, disp, np.nan).astype(np.float32)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Z = fb / disp.astype(np.float64)
+    uu, vv = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    hax, vax = lm.h_axis, lm.v_axis
+    # rectified CAHV: P = C + Z (A + (u - hc)/hs h' + (v - vc)/vs v')  (orthogonal h', v', A)
+    xn = (uu - lm.hc) / lm.hs
+    yn = (vv - lm.vc) / lm.vs
+    xyz = lm.C + Z[..., None] * (lm.A + xn[..., None] * hax + yn[..., None] * vax)
+    rng = np.linalg.norm(xyz - lm.C, axis=-1)
+    with np.errstate(invalid="ignore"):
+        valid &= (rng >= min_range_m) & (rng <= max_range_m)
+    disp[~valid] = np.nan
+    xyz[~valid] = np.nan
+    rng[~valid] = np.nan
+    return DenseStereo(
+        rectified=rp, disparity_px=disp, xyz=xyz, valid=valid, range_m=rng, left_rect=Lr,
+        downsample=downsample, num_disparities=nd, min_disparity=d_min,
+    )
