@@ -1,0 +1,462 @@
+"""Uplink command sequence for the single-cycle approach, with flight-rule checks (docs/sequence.md).
+
+The command stems are NOTIONAL (no flight command dictionary is implied):
+they name what the rover is asked to do, with the arguments a real
+dictionary would need. Two forms:
+
+* SeqN-style text (NASA AMMOS Aerie's sequence notation: ``@ID``,
+  ``@METADATA "key" <json>``, one command per line ``R<hh:mm:ss> STEM args``
+  with a relative time tag = the estimated duration of the previous command,
+  ``#`` comments);
+* JSON (same content, named arguments).
+
+Both are deterministic: the same inputs give byte-identical output (fixed
+float formatting, sorted keys, a seeded Monte Carlo, no wall-clock time; the
+provenance carries the tool version, the command line and input hashes).
+
+Flight rules (:func:`check_rules`) are checked before anything is written;
+a violation means no sequence.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from .predict import ApproachPlan, Prediction, camera_model_at
+
+FORMAT = "scipctl-sequence/1"
+NOTIONAL = "NOTIONAL command stems (scipctl planning vocabulary, not a flight command dictionary)"
+
+# paper's Table 1 (near navcams): refined kinematic has the best success rate of the refined methods,
+# pure geometric the smallest error of the methods that always answer
+DEFAULT_HANDOFF = ("refined-kinematic", "pure-geometric")
+FALLBACK_RULE = {"min_ncc": 0.7, "max_disagreement_px": 8.0}
+
+
+@dataclass(frozen=True)
+class FlightRules:
+    max_drive_m: float = 15.0
+    min_standoff_m: float = 0.6  # horizontal rover origin -> target at the final pose
+    target_keep_out_m: float = 0.25  # footprint -> target, whole path
+    rock_keep_out_m: float = 0.15  # footprint -> rock cells, whole path
+    max_tilt_rad: float = math.radians(15.0)  # terrain tilt at the final pose
+    min_confidence: float = 0.7  # predicted P(success)
+    hazcam_fov_margin_px: float = 20.0
+
+
+@dataclass(frozen=True)
+class Timing:
+    """Notional durations (s) for the relative time tags."""
+
+    drive_speed_m_s: float = 0.05
+    drive_overhead_s: float = 30.0
+    turn_rate_rad_s: float = 0.05
+    turn_overhead_s: float = 10.0
+    mast_s: float = 10.0
+    image_s: float = 20.0
+    track_s: float = 15.0
+    stereo_s: float = 10.0
+    handoff_scaled_s: float = 20.0
+    handoff_hazcam_s: float = 60.0
+    arm_s: float = 600.0
+    misc_s: float = 1.0
+
+
+@dataclass
+class RuleCheck:
+    rule: str
+    ok: bool
+    value: Optional[float]
+    limit: Optional[float]
+    unit: str
+    message: str
+    blocking: bool = True
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class Command:
+    stem: str
+    args: list  # [(name, value)] in order; value: float | int | str | ("enum", NAME)
+    duration_s: float
+    comment: str = ""
+    stop: Optional[int] = None
+
+
+# ============================================================================ rules
+def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = None) -> list:
+    """Flight-rule checks on the planned approach and its prediction. Returns :class:`RuleCheck` (blocking ones decide)."""
+    r = rules or FlightRules()
+    plan = pred.plan
+    fin = plan.final
+    X = plan.target_site_m
+    out = []
+    out.append(RuleCheck("max-drive-distance", plan.path_length_m <= r.max_drive_m, plan.path_length_m, r.max_drive_m,
+                         "m", f"path length {plan.path_length_m:.2f} m (limit {r.max_drive_m:.2f} m)"))
+    d_fin = float(np.linalg.norm(X[:2] - fin.T_site_rover.t[:2]))
+    out.append(RuleCheck("min-standoff", d_fin >= r.min_standoff_m, d_fin, r.min_standoff_m, "m",
+                         f"final rover-origin-to-target distance {d_fin:.2f} m (minimum {r.min_standoff_m:.2f} m)"))
+    mt = plan.clearance.get("min_target_m", float("inf"))
+    out.append(RuleCheck("target-keep-out", mt >= r.target_keep_out_m, _fin(mt), r.target_keep_out_m, "m",
+                         f"closest rover footprint approach to the target {mt:.2f} m (keep-out {r.target_keep_out_m:.2f} m)"))
+    mr = plan.clearance.get("min_rock_m", float("inf"))
+    where = plan.clearance.get("worst_rock_xy")
+    out.append(RuleCheck("rock-keep-out", mr >= r.rock_keep_out_m, _fin(mr), r.rock_keep_out_m, "m",
+                         (f"closest rover footprint approach to a rock {mr:.2f} m" + (
+                             f" at site ({where[0]:.2f}, {where[1]:.2f})" if where else "") if np.isfinite(mr)
+                          else "no rocks in the stereo terrain") + f" (keep-out {r.rock_keep_out_m:.2f} m)"))
+    # hazcams and arm at the final pose
+    worst_margin = float("inf")
+    for eye in ("left", "right"):
+        if "hazcam" not in rover_config.cameras:
+            worst_margin = -float("inf")
+            break
+        spec = rover_config.spec("hazcam", eye)
+        m = camera_model_at(rover_config, "hazcam", eye, None, None, fin.T_site_rover)
+        uv = m.project(X[None])[0]
+        if not np.all(np.isfinite(uv)):
+            worst_margin = -float("inf")
+            break
+        margin = min(uv[0], uv[1], spec.width - 1 - uv[0], spec.height - 1 - uv[1])
+        worst_margin = min(worst_margin, float(margin))
+    out.append(RuleCheck("hazcam-fov-final", worst_margin >= r.hazcam_fov_margin_px, _fin(worst_margin),
+                         r.hazcam_fov_margin_px, "px",
+                         "target inside both hazcam images at the final pose" + (
+                             f" ({worst_margin:.0f} px from the edge)" if np.isfinite(worst_margin) else " (behind the camera)")))
+    xy = fin.T_site_rover.inverse().apply(X)[:2]
+    in_arm = bool(plan.params.arm.contains(xy[None])[0])
+    a = plan.params.arm
+    out.append(RuleCheck("arm-workspace", in_arm, float(np.hypot(*xy)), None, "m",
+                         f"target at ({xy[0]:.2f}, {xy[1]:.2f}) m in the final rover frame; workspace "
+                         f"{a.r_min_m:.2f}-{a.r_max_m:.2f} m ahead, |y| <= {a.half_width_m:.2f} m"))
+    tilt_ok = fin.terrain_known and fin.tilt_rad <= r.max_tilt_rad
+    out.append(RuleCheck("final-tilt", tilt_ok, fin.tilt_rad, r.max_tilt_rad, "rad",
+                         (f"terrain tilt at the final pose {math.degrees(fin.tilt_rad):.1f} deg "
+                          f"(limit {math.degrees(r.max_tilt_rad):.1f} deg)") if fin.terrain_known
+                         else "no stereo terrain under the final pose: tilt unknown"))
+    out.append(RuleCheck("prediction-confidence", pred.confidence >= r.min_confidence, pred.confidence, r.min_confidence,
+                         "", f"predicted P(success) {pred.confidence:.2f} (minimum {r.min_confidence:.2f})"))
+    kf = plan.clearance.get("terrain_known_fraction", 0.0)
+    out.append(RuleCheck("terrain-known-along-path", kf >= 0.5, kf, 0.5, "",
+                         f"{100 * kf:.0f}% of the path is covered by today's stereo (obstacles elsewhere are unchecked)",
+                         blocking=False))
+    return out
+
+
+def broken(checks: list) -> list:
+    return [c for c in checks if c.blocking and not c.ok]
+
+
+def _fin(x):
+    return float(x) if np.isfinite(x) else None
+
+
+# ============================================================================ handoff choice
+def choose_handoff(table1_rows: Optional[list]) -> dict:
+    """(primary, fallback) navcam->hazcam methods from near-navcam results (``handoff.json`` table1 rows).
+
+    Primary: the highest success rate (ties: smaller mean error); fallback:
+    among the others that always answered, the smallest mean error. Without
+    results: the paper's choice (:data:`DEFAULT_HANDOFF`).
+    """
+    rows = [r for r in (table1_rows or []) if isinstance(r, dict) and r.get("navcam") == "near" and r.get("cases")]
+    if not rows:
+        return {"primary": DEFAULT_HANDOFF[0], "fallback": DEFAULT_HANDOFF[1], "navcam": "near",
+                "basis": "the paper's Table 1 (no handoff results for this downlink)", **FALLBACK_RULE}
+
+    def mean(r):
+        s = r.get("all") or {}
+        return float(s.get("mean", float("inf")) if s.get("mean") is not None else float("inf"))
+
+    best = sorted(rows, key=lambda r: (-float(r.get("success_rate", 0.0)), mean(r), r["method"]))[0]
+    rest = [r for r in rows if r["method"] != best["method"] and r.get("answered") == r.get("cases")]
+    fb = sorted(rest, key=lambda r: (mean(r), r["method"]))[0] if rest else None
+    return {"primary": best["method"], "fallback": fb["method"] if fb else DEFAULT_HANDOFF[1], "navcam": "near",
+            "basis": f"handoff results: {best['method']} near {100 * float(best.get('success_rate', 0)):.0f}% success"
+                     + (f", {fb['method']} near mean {mean(fb):.1f} px" if fb else ""), **FALLBACK_RULE}
+
+
+# ============================================================================ commands
+def _exposures(dl, position) -> dict:
+    out = {}
+    for cam in ("pancam", "navcam", "hazcam"):
+        vals = sorted(im.exposure_ms for im in dl.images if im.camera == cam and im.exposure_ms is not None
+                      and im.position == position)
+        if not vals:
+            vals = sorted(im.exposure_ms for im in dl.images if im.camera == cam and im.exposure_ms is not None)
+        out[cam] = float(vals[len(vals) // 2]) if vals else None
+    return out
+
+
+def build_commands(pred: Prediction, record: dict, handoff: dict, exposures: dict, timing: Optional[Timing] = None) -> list:
+    """The command list for the planned approach (see the module docstring; stems are notional)."""
+    from .chain import BAND_PX
+
+    tm = timing or Timing()
+    plan = pred.plan
+    X = plan.target_site_m
+    cmds = [Command("SCIP_BEGIN", [("target", record["id"])], tm.misc_s, "single-cycle instrument placement"),
+            Command("SCIP_TARGET_SET", [("x_m", X[0]), ("y_m", X[1]), ("z_m", X[2]), ("frame", ("enum", "SITE"))], tm.misc_s,
+                    "designated 3-D target, today's site frame"),
+            Command("TRK_INIT_TEMPLATE", [("product", record["product_id"]), ("u_px", record["pixel_uv"][0]),
+                                          ("v_px", record["pixel_uv"][1]),
+                                          ("template_half_px", _half(record.get("camera", "pancam")))], tm.misc_s,
+                    "first tracking window from today's image")]
+    prev_heading = plan.stops[0].heading_rad
+    for st in plan.stops[1:]:
+        # drive legs (waypoints of the planned path), turning at each vertex
+        pts = st.path_from_previous
+        for a, b in zip(pts[:-1], pts[1:]):
+            L = math.hypot(b[0] - a[0], b[1] - a[1])
+            if L < 1e-6:
+                continue
+            hd = math.atan2(b[1] - a[1], b[0] - a[0])
+            turn = _wrap(hd - prev_heading)
+            if abs(turn) > math.radians(1.0):
+                cmds.append(Command("DRV_TURN_TO_HEADING", [("heading_rad", hd)], tm.turn_overhead_s + abs(turn) / tm.turn_rate_rad_s,
+                                    f"turn {math.degrees(turn):+.0f} deg", st.index))
+            prev_heading = hd
+            if st.kind in ("hazcam", "final"):
+                continue  # closed-loop approach below
+            cmds.append(Command("DRV_GOTO_WAYPOINT", [("x_m", b[0]), ("y_m", b[1]), ("frame", ("enum", "SITE")),
+                                                      ("max_dist_m", L * 1.2 + 0.1), ("hazard_avoid", ("enum", "ON"))],
+                                tm.drive_overhead_s + L / tm.drive_speed_m_s, f"leg {L:.2f} m", st.index))
+        if st.kind in ("hazcam", "final"):
+            cmds.append(Command("DRV_APPROACH_TARGET", [("distance_m", st.distance_m), ("max_dist_m", st.leg_m * 1.5 + 0.1)],
+                                tm.drive_overhead_s + st.leg_m / tm.drive_speed_m_s,
+                                "closed loop on the tracked target" + (" (final approach to the standoff)" if st.kind == "final" else ""),
+                                st.index))
+        if st.kind == "navcam-hazcam-handoff":
+            cmds.append(Command("DRV_TURN_TO_TARGET", [("camera", ("enum", "HAZCAM"))],
+                                tm.turn_overhead_s + abs(st.turn_rad) / tm.turn_rate_rad_s,
+                                "face the tracked target so the hazcams see it", st.index))
+            prev_heading = st.heading_rad
+        for sh in st.cameras:
+            cam = sh.camera
+            if sh.pan_rad is not None:
+                cmds.append(Command("MAST_POINT_AT_TARGET", [("camera", ("enum", cam.upper())),
+                                                             ("expected_pan_rad", sh.pan_rad), ("expected_tilt_rad", sh.tilt_rad)],
+                                    tm.mast_s, "point at the on-board target estimate", st.index))
+            exp = exposures.get(cam)
+            cmds.append(Command("IMG_STEREO", [("camera", ("enum", cam.upper())),
+                                               ("exposure_ms", exp if exp is not None else ("enum", "AUTO"))],
+                                tm.image_s, f"expected target pixel ({sh.uv[0]:.0f}, {sh.uv[1]:.0f}), range {sh.range_m:.2f} m"
+                                if sh.uv is not None else "target not expected in view", st.index))
+            if st.kind == "pancam-navcam-handoff" and cam == "navcam":
+                cmds.append(Command("TRK_HANDOFF_SCALED", [("from", ("enum", "PANCAM")), ("to", ("enum", "NAVCAM")),
+                                                           ("template_half_px", sh.template_half_px),
+                                                           ("search_radius_px", sh.search_radius_px), ("min_ncc", 0.3)],
+                                    tm.handoff_scaled_s, "pancam window shrunk by the IFOV ratio, NCC-tracked", st.index))
+            elif st.kind == "navcam-hazcam-handoff" and cam == "hazcam":
+                cmds.append(Command("TRK_HANDOFF_NAVCAM_HAZCAM", [("method", ("enum", _enum(handoff["primary"]))),
+                                                                  ("fallback", ("enum", _enum(handoff["fallback"]))),
+                                                                  ("navcam", ("enum", "NEAR")),
+                                                                  ("fallback_min_ncc", handoff["min_ncc"]),
+                                                                  ("fallback_max_disagreement_px", handoff["max_disagreement_px"])],
+                                    tm.handoff_hazcam_s, handoff["basis"], st.index))
+            else:
+                cmds.append(Command("TRK_TRACK", [("camera", ("enum", cam.upper())), ("template_half_px", sh.template_half_px),
+                                                  ("search_radius_px", sh.search_radius_px), ("min_ncc", 0.3)],
+                                    tm.track_s, "window scaled by the range ratio", st.index))
+            cmds.append(Command("TRK_STEREO_UPDATE", [("camera", ("enum", cam.upper())), ("band_px", BAND_PX.get(cam, 4.0))],
+                                tm.stereo_s, "re-range the tracked target", st.index))
+    fin = plan.final
+    cmds.append(Command("ARM_PLACE_AT_TARGET", [("instrument", ("enum", "CONTACT")), ("approach", ("enum", "SURFACE_NORMAL")),
+                                                ("max_offset_m", 0.02)],
+                        tm.arm_s, f"target expected {fin.distance_m:.2f} m ahead", fin.index))
+    cmds.append(Command("SCIP_END", [("target", record["id"])], 0.0, ""))
+    return cmds
+
+
+def _half(camera):
+    from .chain import TEMPLATE_HALF_PX
+
+    return TEMPLATE_HALF_PX.get(camera, 15)
+
+
+def _enum(s: str) -> str:
+    return s.upper().replace("-", "_")
+
+
+def _wrap(a: float) -> float:
+    return float((a + math.pi) % (2 * math.pi) - math.pi)
+
+
+# ============================================================================ document and formats
+def _round(o, nd: int = 6):
+    """Round floats recursively (stable text across tiny floating-point differences)."""
+    if isinstance(o, float):
+        if not math.isfinite(o):
+            return None
+        v = round(o, nd)
+        return 0.0 if v == 0 else v
+    if isinstance(o, (np.floating,)):
+        return _round(float(o), nd)
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, np.ndarray):
+        return _round(o.tolist(), nd)
+    if isinstance(o, dict):
+        return {str(k): _round(v, nd) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_round(v, nd) for v in o]
+    return o
+
+
+def canonical_hash(obj) -> str:
+    return hashlib.sha256(json.dumps(_round(obj), sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+
+
+def time_tag(seconds: float) -> str:
+    """``Rhh:mm:ss`` (whole seconds, rounded up)."""
+    s = int(math.ceil(max(0.0, seconds) - 1e-9))
+    return f"R{s // 3600:02d}:{(s % 3600) // 60:02d}:{s % 60:02d}"
+
+
+def sequence_document(pred: Prediction, record: dict, checks: list, commands: list, handoff: dict,
+                      provenance: dict, mission: str = "", sol: Optional[int] = None) -> dict:
+    """The deterministic document both formats are written from."""
+    plan = pred.plan
+    seq_id = f"scip_{_ident(record['id'])}" + (f"_sol{sol}" if sol is not None else "")
+    cmd_docs = []
+    prev = 0.0
+    t = 0.0
+    for i, c in enumerate(commands):
+        t += prev
+        cmd_docs.append({"index": i, "time_tag": time_tag(prev if i else 0.0), "start_s": t, "stem": c.stem,
+                         "args": [_arg_doc(n, v) for n, v in c.args],
+                         "duration_s": c.duration_s, "stop": c.stop, "comment": c.comment})
+        prev = c.duration_s
+    doc = {
+        "format": FORMAT,
+        "notional": NOTIONAL,
+        "sequence_id": seq_id,
+        "mission": mission,
+        "sol": sol,
+        "provenance": provenance,
+        "target": {"id": record["id"], "product_id": record["product_id"], "pixel_uv": record["pixel_uv"],
+                   "xyz_site_m": record["xyz_site_m"], "range_m": record.get("range_m"),
+                   "designated_from": record.get("designated_from", "targets.json")},
+        "plan": {"path_length_m": plan.path_length_m, "bearing_rad": plan.bearing_rad, "detour_rad": plan.detour_rad,
+                 "stops": [{"index": s.index, "kind": s.kind, "distance_m": s.distance_m,
+                            "xy_site_m": s.T_site_rover.t[:2].tolist(), "heading_rad": s.heading_rad,
+                            "tilt_rad": s.tilt_rad, "cameras": [c.camera for c in s.cameras]} for s in plan.stops],
+                 "clearance": {k: v for k, v in plan.clearance.items()}},
+        "handoff": handoff,
+        "prediction": {"confidence": pred.confidence, "sigma_source": pred.sigma_source,
+                       "p_arm_workspace": None if pred.mc is None else pred.mc.p_arm_workspace,
+                       "risks": [r.to_dict() for r in pred.risks]},
+        "rules": [c.to_dict() for c in checks],
+        "total_duration_s": t + prev,
+        "commands": cmd_docs,
+    }
+    return _round(doc)
+
+
+def _arg_doc(name: str, v) -> dict:
+    if isinstance(v, tuple):
+        return {"name": name, "type": "enum", "value": str(v[1])}
+    if isinstance(v, (bool, np.bool_)):
+        return {"name": name, "type": "bool", "value": bool(v)}
+    if isinstance(v, (int, np.integer)):
+        return {"name": name, "type": "int", "value": int(v)}
+    if isinstance(v, (float, np.floating)):
+        return {"name": name, "type": "float", "value": float(v)}
+    return {"name": name, "type": "string", "value": str(v)}
+
+
+def _ident(s: str) -> str:
+    out = "".join(ch if (ch.isalnum() or ch == "_") else "_" for ch in str(s))
+    return out if out and out[0].isalpha() else "t_" + out
+
+
+def format_json(doc: dict) -> str:
+    return json.dumps(doc, indent=2, sort_keys=True, ensure_ascii=True) + "\n"
+
+
+def _arg_text(a: dict) -> str:
+    t, v = a["type"], a["value"]
+    if t == "enum":
+        return str(v)
+    if t == "string":
+        return json.dumps(v)
+    if t == "bool":
+        return "true" if v else "false"
+    if t == "int":
+        return str(int(v))
+    if v is None:
+        return "null"
+    return _num(float(v))
+
+
+def _num(x: float) -> str:
+    s = f"{x:.6f}".rstrip("0")
+    if s.endswith("."):
+        s += "0"
+    return "0.0" if s in ("-0.0",) else s
+
+
+def format_seqn(doc: dict) -> str:
+    """SeqN-style text: header comments, ``@ID``, ``@METADATA`` lines (compact JSON), one command per line."""
+    lines = [
+        f"# {doc['sequence_id']}: single-cycle instrument placement uplink for target {doc['target']['id']}",
+        f"# {doc['notional']}",
+        "# time tags: R<hh:mm:ss> relative to the previous command (notional durations); frames: SITE = today's site frame",
+        f"# {FORMAT}; generated by scipctl (see the provenance metadata)",
+        f"@ID {json.dumps(doc['sequence_id'])}",
+    ]
+    meta = [("format", doc["format"]), ("notional", True), ("provenance", doc["provenance"]), ("target", doc["target"]),
+            ("handoff", doc["handoff"]),
+            ("prediction", {"confidence": doc["prediction"]["confidence"], "risks": len(doc["prediction"]["risks"])}),
+            ("rules", [{"rule": r["rule"], "ok": r["ok"]} for r in doc["rules"]]),
+            ("total_duration_s", doc["total_duration_s"])]
+    for k, v in meta:
+        lines.append(f"@METADATA {json.dumps(k)} {json.dumps(v, sort_keys=True, separators=(',', ':'))}")
+    stop = None
+    for c in doc["commands"]:
+        if c["stop"] is not None and c["stop"] != stop:
+            stop = c["stop"]
+            s = next(s for s in doc["plan"]["stops"] if s["index"] == stop)
+            lines.append(f"# stop {stop}: {s['kind']}, {s['distance_m']:.2f} m from the target")
+        args = " ".join(_arg_text(a) for a in c["args"])
+        cm = f" # {c['comment']}" if c["comment"] else ""
+        lines.append(f"{c['time_tag']} {c['stem']}" + (f" {args}" if args else "") + cm)
+    return "\n".join(lines) + "\n"
+
+
+def format_text(doc: dict) -> str:
+    """A plain, human-readable rendering (plan, rule checks, risks, commands)."""
+    out = [f"{doc['sequence_id']}  ({doc['notional']})", "",
+           f"target {doc['target']['id']}: site ({', '.join(f'{x:.3f}' for x in doc['target']['xyz_site_m'])}) m, "
+           f"from {doc['target']['product_id']} pixel ({doc['target']['pixel_uv'][0]:.1f}, {doc['target']['pixel_uv'][1]:.1f})",
+           f"path {doc['plan']['path_length_m']:.2f} m, approach bearing {math.degrees(doc['plan']['bearing_rad']):.1f} deg "
+           f"(detour {math.degrees(doc['plan']['detour_rad']):+.0f} deg), {len(doc['plan']['stops']) - 1} stops, "
+           f"~{doc['total_duration_s'] / 60:.0f} min",
+           f"handoff navcam->hazcam: {doc['handoff']['primary']} (fallback {doc['handoff']['fallback']}); {doc['handoff']['basis']}",
+           f"predicted P(success) {doc['prediction']['confidence']:.2f}", "", "stops:"]
+    for s in doc["plan"]["stops"]:
+        out.append(f"  {s['index']:2d} {s['kind']:<22s} {s['distance_m']:6.2f} m  xy ({s['xy_site_m'][0]:7.2f}, {s['xy_site_m'][1]:7.2f})"
+                   f"  heading {math.degrees(s['heading_rad']):6.1f} deg  tilt {math.degrees(s['tilt_rad']):4.1f} deg  {'+'.join(s['cameras'])}")
+    out += ["", "flight rules:"]
+    for r in doc["rules"]:
+        out.append(f"  [{'ok ' if r['ok'] else 'NO '}] {r['rule']:<26s} {r['message']}" + ("" if r["blocking"] else "  (advisory)"))
+    out += ["", "risks:" if doc["prediction"]["risks"] else "risks: none"]
+    for k in doc["prediction"]["risks"]:
+        p = "" if k["probability"] is None else f" P={k['probability']:.2f}"
+        out.append(f"  stop {k['stop']} {k['camera']} ({k['what']}){p}: " + "; ".join(k["reasons"]))
+    out += ["", "commands:"]
+    for c in doc["commands"]:
+        args = ", ".join(f"{a['name']}={_arg_text(a)}" for a in c["args"])
+        out.append(f"  {c['time_tag']}  {c['stem']}({args})" + (f"  -- {c['comment']}" if c["comment"] else ""))
+    return "\n".join(out) + "\n"
+
+
+FORMATTERS = {"seqn": format_seqn, "json": format_json, "text": format_text}
