@@ -43,8 +43,16 @@ class Scene:
         self.box = None if box is None else (np.asarray(box[0], float), np.asarray(box[1], float))
 
     def texture(self, P):
-        ph = P @ self.k.T * (2 * np.pi) + self.phase
-        return np.cos(ph) @ self.amp
+        """Texture at points ``P`` (N, 3); float32 phases (ample for images), in chunks to bound memory."""
+        k = (2 * np.pi * self.k.T).astype(np.float32)
+        ph0 = self.phase.astype(np.float32)
+        amp = self.amp.astype(np.float32)
+        out = np.empty(len(P))
+        for i in range(0, len(P), 65536):
+            ph = P[i : i + 65536].astype(np.float32) @ k
+            ph += ph0
+            out[i : i + 65536] = np.cos(ph, out=ph) @ amp
+        return out
 
     def intersect(self, o, d):
         """Nearest hit along rays ``o + t d`` ``(N, 3)`` -> ``(t (N,), P (N, 3))``; NaN for no hit."""
