@@ -294,29 +294,37 @@ def grid_mesh(xyz: np.ndarray, centre_m, max_edge_ratio: float = 20.0, min_edge_
 def smooth_grid(xyz: np.ndarray, centre_m, sigma_px: float = 1.5, max_rel: float = 0.03) -> np.ndarray:
     """Smooth an organised point grid ``xyz`` (h, w, 3) (NaN invalid) along its rays from ``centre_m`` (3,).
 
-    The range image is filtered with a NaN-aware (normalised) Gaussian of
-    ``sigma_px`` grid cells; where the smoothed range departs from the original
-    by more than ``max_rel`` (relative), a depth discontinuity, the original
-    point is kept. Points move only along their own rays, so their pixels do
-    not change. Returns a new (h, w, 3) array.
+    Each range is replaced by the Gaussian-weighted mean (``sigma_px`` grid
+    cells, window ``+-ceil(2 sigma)``) of the valid neighbours whose range is
+    within ``max_rel`` (relative) of its own: a range-gated ("bilateral")
+    filter, so depth discontinuities stay sharp. Points move only along their
+    own rays (their pixels do not change). Returns a new (h, w, 3) array.
     """
-    import cv2
-
     P = np.asarray(xyz, float)
     if P.ndim != 3 or P.shape[2] != 3:
         raise ValueError(f"xyz: expected (h, w, 3), got {P.shape}")
     if sigma_px <= 0:
         return P.copy()
     C = np.asarray(centre_m, float).reshape(3)
+    h, w, _ = P.shape
     valid = np.all(np.isfinite(P), axis=2)
-    r = np.where(valid, np.linalg.norm(P - C, axis=2), 0.0)
-    w = valid.astype(np.float32)
-    num = cv2.GaussianBlur((r * w).astype(np.float32), (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
-    den = cv2.GaussianBlur(w, (0, 0), sigma_px, borderType=cv2.BORDER_CONSTANT)
+    r = np.where(valid, np.linalg.norm(P - C, axis=2), np.nan)
+    k = int(math.ceil(2 * sigma_px))
+    rp = np.pad(r, k, constant_values=np.nan)
+    num = np.zeros((h, w))
+    den = np.zeros((h, w))
+    for dy in range(-k, k + 1):
+        for dx in range(-k, k + 1):
+            g = math.exp(-(dx * dx + dy * dy) / (2 * sigma_px * sigma_px))
+            rn = rp[k + dy:k + dy + h, k + dx:k + dx + w]
+            with np.errstate(invalid="ignore"):
+                m = np.abs(rn - r) <= max_rel * r
+            num += np.where(m, g * rn, 0.0)
+            den += np.where(m, g, 0.0)
+    out = P.copy()
+    use = valid & (den > 0)
     with np.errstate(invalid="ignore", divide="ignore"):
         rs = num / den
-        use = valid & (den > 0.2) & (np.abs(rs - r) <= max_rel * r)
-        out = P.copy()
         dirs = (P - C) / np.where(valid, r, 1.0)[..., None]
     out[use] = C + rs[use][:, None] * dirs[use]
     return out
@@ -508,6 +516,9 @@ class Terrain:
         mid = starts[has] + count[has] // 2
         med[has] = zs[mid]
         max_up[~has] = np.nan
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.stack([np.bincount(flat, weights=P[:, k], minlength=nx * ny) / count for k in range(3)], axis=1)
+        self._rock_cache[("means", float(cell_m))] = means.reshape(ny, nx, 3)
         out = (float(x0), float(y0), max_up.reshape(ny, nx), med.reshape(ny, nx), count.reshape(ny, nx))
         self._rock_cache[key] = out
         return out
@@ -543,11 +554,12 @@ class Terrain:
 
     def ground_plane(self, T_site_rover_guess: RigidTransform, body: RoverBody, cell_m: float = 0.05,
                      min_cells: int = 12):
-        """Plane ``(a, b, c)`` (``z = a x + b y + c``, site) fitted to the cell medians under the footprint.
+        """Plane ``(a, b, c)`` (``z = a x + b y + c``, site) fitted to the cell means under the footprint.
 
         Returns ``(plane or None, n_cells, known_fraction)``.
         """
         x0, y0, _, med_z, _ = self.height_grid(cell_m)
+        means = self._rock_cache[("means", float(cell_m))]
         ny, nx = med_z.shape
         corners = T_site_rover_guess.apply(np.c_[body.corners(), np.zeros(4)])[:, :2]
         lo, hi = corners.min(axis=0), corners.max(axis=0)
@@ -561,17 +573,17 @@ class Terrain:
         jj, ii = np.mgrid[j0:j1, i0:i1]
         xs = x0 + (ii + 0.5) * cell_m
         ys = y0 + (jj + 0.5) * cell_m
-        z = med_z[j0:j1, i0:i1]
+        mm = means[j0:j1, i0:i1].reshape(-1, 3)
         pts = np.stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)], axis=1)
         local = T_site_rover_guess.inverse().apply(pts)[:, :2]
         inside = body.distance(local) <= 0.0
-        zz = z.ravel()
-        use = inside & np.isfinite(zz)
+        zz = mm[:, 2]
+        use = inside & np.all(np.isfinite(mm), axis=1)
         n = int(use.sum())
         frac = float(min(1.0, n / max(area_cells, 1.0)))
         if n < min_cells:
             return None, n, frac
-        A = np.c_[xs.ravel()[use], ys.ravel()[use], np.ones(n)]
+        A = np.c_[mm[use, 0], mm[use, 1], np.ones(n)]
         # robust: two passes, dropping cells more than 5 cm off the first plane (rocks under the footprint)
         sol = np.linalg.lstsq(A, zz[use], rcond=None)[0]
         res = np.abs(A @ sol - zz[use])
@@ -702,11 +714,12 @@ class ApproachPlan:
 def stop_distances(start_m: float, p: ApproachParams, designation_camera: str = "pancam") -> list:
     """Planned stop distances (m, decreasing, last = the final standoff) and their kinds.
 
-    Regular stops every ``stop_fraction`` of the remaining distance (at least
-    ``min_leg_m`` apart) down to the navcam->hazcam handoff; special stops at
-    ``pancam_handoff_m`` (when starting beyond it with pancams),
-    ``hazcam_handoff_m``, ``hazcam_stops_m`` and the final standoff. Regular
-    stops within ``merge_m`` of a special one are dropped.
+    Special stops at ``pancam_handoff_m`` (when starting beyond it with
+    pancams), ``hazcam_handoff_m``, ``hazcam_stops_m`` and the final standoff;
+    above the navcam->hazcam handoff, regular stops every ``stop_fraction`` of
+    the remaining distance (at least ``min_leg_m``) from the previous stop; a
+    regular stop that would fall within ``merge_m`` of the next special stop
+    is replaced by it.
     """
     d_final = p.final_distance_m
     if not start_m > d_final:
@@ -720,22 +733,19 @@ def stop_distances(start_m: float, p: ApproachParams, designation_camera: str = 
         if d_final + p.merge_m < d < min(start_m, p.hazcam_handoff_m) - p.merge_m:
             specials[float(d)] = "hazcam"
     specials[d_final] = "final"
-    regular = []
-    d = start_m
-    while True:
-        step = max(p.stop_fraction * d, p.min_leg_m)
-        d = d - step
-        if d <= p.hazcam_handoff_m + p.merge_m:
-            break
-        if all(abs(d - s) > p.merge_m for s in specials):
-            regular.append(d)
     out = []
-    for d in sorted(set(regular) | set(specials), reverse=True):
-        if d in specials:
-            kind = specials[d]
+    d = start_m
+    while d > d_final:
+        below = [x for x in specials if x < d - 1e-9]
+        s_next = max(below)
+        cand = d - max(p.stop_fraction * d, p.min_leg_m)
+        if d <= p.hazcam_handoff_m + 1e-9 or cand <= s_next + p.merge_m:
+            d = s_next
+            out.append((float(d), specials[d]))
         else:
+            d = cand
             kind = "pancam" if (designation_camera == "pancam" and d > p.pancam_handoff_m) else "navcam"
-        out.append((float(d), kind))
+            out.append((float(d), kind))
     # a start already inside the pancam->navcam handoff distance hands off at the first stop
     if designation_camera == "pancam" and start_m <= p.pancam_handoff_m + p.merge_m and out:
         if out[0][1] == "navcam":

@@ -23,12 +23,12 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
-from .predict import ApproachPlan, Prediction, camera_model_at
+from .predict import Prediction, camera_model_at
 
 FORMAT = "scipctl-sequence/1"
 NOTIONAL = "NOTIONAL command stems (scipctl planning vocabulary, not a flight command dictionary)"

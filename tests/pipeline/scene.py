@@ -228,6 +228,24 @@ def oracle_sources(world: World, dl: Downlink, cameras=("pancam", "navcam", "haz
     return out
 
 
+_CACHE = {}
+
+
+def cached(name: str):
+    """(world, downlink) for ``"rock"`` (box rock: t_rock on its face, t_flat on the ground) or ``"slab"``
+    (t_slab on a 45-degree slab, t_flat), rendered once per test session."""
+    if name not in _CACHE:
+        if name == "rock":
+            w = default_world()
+            _CACHE[name] = (w, make_downlink(w, targets={"t_rock": TARGET_ROCK_SITE, "t_flat": TARGET_FLAT_SITE}))
+        elif name == "slab":
+            w = slab_world()
+            _CACHE[name] = (w, make_downlink(w, targets={"t_slab": TARGET_SLAB_SITE, "t_flat": TARGET_FLAT_SITE}))
+        else:
+            raise KeyError(name)
+    return _CACHE[name]
+
+
 def designation_record(dl: Downlink, target_id: str, world: World = None) -> dict:
     """An exact designation record (as ``scipctl designate`` writes) from the target's mark in the left pancam."""
     tm = dl.target(target_id)
