@@ -96,6 +96,14 @@ def _distorted(m: CameraModel, R=(0.0, -0.12, 0.04), tilt=0.004) -> CameraModel:
     return CameraModel("CAHVOR", m.C, m.A, m.H, m.V, O=T.R @ (o / np.linalg.norm(o)), R=list(R))
 
 
+def _cahvore(m: CameraModel, tilt=0.004, e=(0.0005, 0.004, -0.002)) -> CameraModel:
+    """A wide-angle, non-central CAHVORE (type 3, linearity 0.37) from a CAHV model."""
+    T = camera_frame(m)
+    o = np.array([np.sin(tilt), -0.5 * np.sin(tilt), 1.0])
+    return CameraModel("CAHVORE", m.C, m.A, m.H, m.V, O=T.R @ (o / np.linalg.norm(o)), R=[0.0, -0.02, 0.004],
+                       E=list(e), cahvore_type=3, linearity=0.37)
+
+
 def make_pair(kind="CAHV", f_px=F_PX, width=W, height=H, baseline_m=BASELINE_M, tilt_down_rad=0.5,
               toe_in_rad=0.0, C=(0.4, 0.1, -1.5)):
     """A navcam-like pair in the rover frame: left at ``C``, right ``baseline_m`` along the camera x axis."""
@@ -106,6 +114,8 @@ def make_pair(kind="CAHV", f_px=F_PX, width=W, height=H, baseline_m=BASELINE_M, 
     right = cahv_from_intrinsics(f_px * 0.999, f_px * 1.001, cx - 1.3, cy + 0.8, T_r)
     if kind == "CAHVOR":
         left, right = _distorted(left), _distorted(right, R=(0.0, -0.10, 0.03), tilt=-0.003)
+    elif kind == "CAHVORE":
+        left, right = _cahvore(left), _cahvore(right, tilt=-0.003, e=(0.0004, 0.003, -0.001))
     return left, right
 
 
@@ -113,7 +123,7 @@ def make_pair(kind="CAHV", f_px=F_PX, width=W, height=H, baseline_m=BASELINE_M, 
 def rendered(kind="CAHV", with_box=False, seed=0):
     box = ((3.0, -0.35, -0.45), (3.5, 0.35, 0.0)) if with_box else None
     scene = Scene(box=box, seed=seed)
-    left, right = make_pair(kind)
+    left, right = make_pair(kind, f_px=300.0 if kind == "CAHVORE" else F_PX)  # CAHVORE: hazcam-like wide angle
     return scene, left, right, scene.render(left), scene.render(right)
 
 
@@ -179,7 +189,7 @@ def test_default_band():
 POINTS = [(256.0, 300.0), (100.4, 350.2), (420.7, 330.9), (300.2, 220.6), (150.0, 200.0)]
 
 
-@pytest.mark.parametrize("kind", ["CAHV", "CAHVOR"])
+@pytest.mark.parametrize("kind", ["CAHV", "CAHVOR", "CAHVORE"])
 def test_point_stereo_recovers_3d_point(kind):
     scene, left, right, L, R = rendered(kind)
     for uv in POINTS:
@@ -310,7 +320,7 @@ def _rect_truth(ds, scene):
     return d_true.reshape(h, w), P.reshape(h, w, 3)
 
 
-@pytest.mark.parametrize("kind", ["CAHV", "CAHVOR"])
+@pytest.mark.parametrize("kind", ["CAHV", "CAHVOR", "CAHVORE"])
 def test_dense_stereo_plane(kind):
     scene, left, right, L, R = rendered(kind)
     ds = dense_stereo(_uint8(L), _uint8(R), left, right, min_range_m=1.0, max_range_m=30.0)
@@ -322,10 +332,17 @@ def test_dense_stereo_plane(kind):
     # SGBM's sub-pixel (1/16 px, parabola-interpolated) disparities are good to ~0.1-0.2 px
     assert np.median(err) < 0.2, f"median disparity error {np.median(err):.3f} px"
     assert np.percentile(err, 99) < 1.0
-    # xyz agrees with the plane within the disparity error: |z| ~ depth^2 / (f B) * error * |dz/dZ|
-    Z = (ds.xyz[valid] - left.C) @ ds.rectified.left_model.A
-    z_tol = Z**2 / (ds.rectified.left_model.hs * BASELINE_M) * (err + 0.05)
-    assert np.all(np.abs(ds.xyz[valid][:, 2]) <= z_tol + 1e-6)
+    # xyz agrees with the plane up to exactly the disparity error: the estimate and the truth lie on the same
+    # rectified ray, at depths f B / d and f B / d_true
+    lm, rm = ds.rectified.left_model, ds.rectified.right_model
+    fb = lm.hs * np.dot(rm.C - lm.C, lm.h_axis)
+    P = P_true[valid]
+    Z_true = (P - lm.C) @ lm.A
+    ray = (P - lm.C) / Z_true[:, None]
+    Z_est = fb / ds.disparity_px[valid].astype(float)
+    expected = np.abs(Z_est - Z_true) * np.linalg.norm(ray, axis=1)
+    assert np.allclose(np.linalg.norm(ds.xyz[valid] - P, axis=1), expected, rtol=1e-5, atol=1e-9)
+    assert np.median(np.abs(ds.xyz[valid][:, 2])) < 0.01  # ground plane z = 0, 1 cm at <= 6 m
     assert np.allclose(ds.range_m[ds.valid], np.linalg.norm(ds.xyz[ds.valid] - left.C, axis=-1))
     assert np.all(np.isnan(ds.xyz[~ds.valid]))
     assert np.all(np.isnan(ds.disparity_px[~ds.valid]))
