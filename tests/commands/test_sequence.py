@@ -1,0 +1,86 @@
+"""``scipctl sequence`` through the CLI on a synthetic downlink (a 45-degree slab target, real dense stereo)."""
+
+import json
+import shutil
+
+import pytest
+from typer.testing import CliRunner
+
+from scipctl.cli import app
+from scipctl.io.downlink import read_downlink, write_downlink
+from tests.pipeline import scene as S
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def slab_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("seq") / "sol7"
+    _, dl = S.cached("slab")
+    write_downlink(dl, d, container="dir")
+    return d
+
+
+def test_seqn_sequence_is_written_and_byte_identical_on_a_rerun(tmp_path, slab_dir):
+    out = tmp_path / "t_slab.seqn"
+    args = ["sequence", str(slab_dir), "--target", "t_slab", "-o", str(out)]
+    r1 = runner.invoke(app, args)
+    assert r1.exit_code == 0, r1.stderr
+    first = out.read_bytes()
+    r2 = runner.invoke(app, args)
+    assert r2.exit_code == 0, r2.stderr
+    assert out.read_bytes() == first
+    assert r1.stdout == ""  # the sequence went to the file
+    text = first.decode()
+    assert '@ID "scip_t_slab_sol7"' in text and "NOTIONAL" in text
+    lines = text.splitlines()
+    meta = {ln.split(" ", 2)[1].strip('"'): json.loads(ln.split(" ", 2)[2]) for ln in lines if ln.startswith("@METADATA")}
+    sha = read_downlink(slab_dir).source_sha256
+    assert meta["provenance"]["inputs"]["downlink"]["sha256"] == sha
+    assert meta["provenance"]["tool"] == "scipctl" and "time_utc" not in meta["provenance"]
+    assert all(r["ok"] for r in meta["rules"])
+    stems = [ln.split()[1] for ln in lines if ln.startswith("R")]
+    assert stems[-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"] and "TRK_HANDOFF_NAVCAM_HAZCAM" in stems
+
+
+def test_json_format_and_summary_on_stdout(slab_dir):
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--format", "json", "--json"])
+    assert r.exit_code == 0, r.stderr
+    summary = json.loads(r.stdout)  # one JSON document: the rule summary, carrying the sequence
+    assert summary["ok"] and summary["designated_now"]  # t_slab is only marked: designated on the fly
+    assert {c["rule"] for c in summary["rules"]} >= {"max-drive-distance", "prediction-confidence", "final-tilt"}
+    doc = json.loads(summary["sequence"])
+    assert doc["format"] == "scipctl-sequence/1" and doc["target"]["designated_from"] == "mark"
+    assert len(doc["commands"]) == summary["commands"]
+    truth = S.TARGET_SLAB_SITE
+    assert sum((a - b) ** 2 for a, b in zip(doc["target"]["xyz_site_m"], truth)) ** 0.5 < 0.05
+
+
+def test_a_broken_rule_means_no_sequence_and_exit_1(tmp_path, slab_dir):
+    src = tmp_path / "sol7"
+    shutil.copytree(slab_dir, src)
+    dl = read_downlink(src)
+    rec = S.designation_record(dl, "t_slab")
+    rec.update({"id": "t_far", "xyz_site_m": [30.0, 0.0, 0.0]})  # far beyond the drive limit
+    side = src.parent / "sol7.scipctl"
+    side.mkdir()
+    (side / "targets.json").write_text(json.dumps({"targets": [rec]}))
+    out = tmp_path / "far.seqn"
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_far", "-o", str(out), "--json"])
+    assert r.exit_code == 1
+    assert not out.exists()
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("scipctl: error: t_far:") and "max-drive-distance" in last and "no sequence written" in last
+    summary = json.loads(r.stdout)
+    assert summary["ok"] is False
+    assert "max-drive-distance" in {c["rule"] for c in summary["rules"] if not c["ok"]}
+
+
+def test_bad_input_is_one_line_and_exit_2(tmp_path, slab_dir):
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "no_such_target"])
+    assert r.exit_code == 2
+    assert r.stderr.count("\n") == 1 and "no_such_target" in r.stderr and "t_slab" in r.stderr
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--format", "yaml"])
+    assert r.exit_code == 2 and "--format" in r.stderr and r.stderr.count("\n") == 1
+    r = runner.invoke(app, ["sequence", str(tmp_path / "missing"), "--target", "t_slab"])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1

@@ -1,0 +1,188 @@
+"""Flight rules, handoff choice, command list and the three sequence formats (deterministic, SeqN-shaped)."""
+
+import json
+import math
+import re
+
+import numpy as np
+import pytest
+
+from scipctl.pipeline import predict as P
+from scipctl.pipeline import sequence as Q
+from tests.pipeline import scene as S
+from tests.pipeline.test_predict import box_fn, flat, heightfield_source, start_pose
+
+TARGET = np.array([9.0, 0.0, 0.0])
+RECORD = {"id": "t1", "ok": True, "product_id": "pancam_left_1_0", "camera": "pancam", "pixel_uv": [127.5, 127.5],
+          "xyz_site_m": TARGET.tolist(), "range_m": 9.1}
+
+
+@pytest.fixture(scope="module")
+def rc():
+    return S.rover_config()
+
+
+@pytest.fixture(scope="module")
+def flat_terrain():
+    return P.Terrain([heightfield_source(flat)], smooth_sigma_px=0)
+
+
+def prediction(rc, terrain, target=TARGET, confidence=0.95, approach=None):
+    plan = P.plan_approach(start_pose(), target, terrain, rc, approach or P.ApproachParams())
+    return P.Prediction("t1", plan, None, None, [], {}, np.asarray(target, float), confidence, "test")
+
+
+def broken_names(pred, rc, rules=None):
+    return sorted(c.rule for c in Q.broken(Q.check_rules(pred, rc, rules)))
+
+
+# ----------------------------------------------------------------------------- rules
+
+
+def test_a_good_approach_breaks_no_rule(rc, flat_terrain):
+    checks = Q.check_rules(prediction(rc, flat_terrain), rc)
+    assert Q.broken(checks) == []
+    assert {c.rule for c in checks} >= {"max-drive-distance", "min-standoff", "target-keep-out", "rock-keep-out",
+                                        "hazcam-fov-final", "arm-workspace", "final-tilt", "prediction-confidence"}
+
+
+def test_each_rule_can_be_broken_alone(rc, flat_terrain):
+    base = prediction(rc, flat_terrain)
+    assert broken_names(base, rc, Q.FlightRules(max_drive_m=5.0)) == ["max-drive-distance"]
+    assert broken_names(base, rc, Q.FlightRules(min_confidence=0.99)) == ["prediction-confidence"]
+    assert broken_names(base, rc, Q.FlightRules(min_standoff_m=0.9)) == ["min-standoff"]
+    short_arm = prediction(rc, flat_terrain, approach=P.ApproachParams(standoff_m=0.8, arm=P.ArmWorkspace(0.9, 1.2, 0.4)))
+    assert broken_names(short_arm, rc) == ["arm-workspace"]
+    close = prediction(rc, flat_terrain, approach=P.ApproachParams(standoff_m=0.5))  # too close: several rules at once
+    assert {"min-standoff", "arm-workspace", "target-keep-out"} <= set(broken_names(close, rc))
+    long_nose = prediction(rc, flat_terrain, approach=P.ApproachParams(body=P.RoverBody(front_m=0.7)))
+    assert broken_names(long_nose, rc) == ["target-keep-out"]
+    high = prediction(rc, flat_terrain, target=np.array([9.0, 0.0, -1.6]))  # a target 1.6 m up: above the hazcams
+    assert "hazcam-fov-final" in broken_names(high, rc)
+
+
+def test_rock_beside_the_final_pose_breaks_the_rock_keep_out(rc):
+    rock = (8.0, 0.45, 8.4, 0.7, 0.3)  # 5 cm from the final footprint's side
+    ter = P.Terrain([heightfield_source(box_fn([rock]))], smooth_sigma_px=0)
+    pred = prediction(rc, ter, approach=P.ApproachParams(detour_bearings_rad=(0.0,)))
+    assert broken_names(pred, rc) == ["rock-keep-out"]
+    chk = next(c for c in Q.check_rules(pred, rc) if c.rule == "rock-keep-out")
+    assert chk.value == pytest.approx(0.05, abs=0.03)
+
+
+def test_steep_or_unknown_terrain_at_the_final_pose_breaks_the_tilt_rule(rc):
+    slope = math.tan(math.radians(20.0))
+    ter = P.Terrain([heightfield_source(lambda X, Y: slope * X)], smooth_sigma_px=0)
+    steep = prediction(rc, ter, target=np.array([9.0, 0.0, -slope * 9.0]))
+    chk = next(c for c in Q.check_rules(steep, rc) if c.rule == "final-tilt")
+    assert not chk.ok and chk.value == pytest.approx(math.radians(20.0), abs=1e-3)
+    unknown = prediction(rc, None)
+    chk = next(c for c in Q.check_rules(unknown, rc) if c.rule == "final-tilt")
+    assert not chk.ok and "unknown" in chk.message
+
+
+# ----------------------------------------------------------------------------- handoff choice
+
+
+def test_choose_handoff_from_results_and_default():
+    rows = [
+        {"method": "pure-kinematic", "navcam": "near", "cases": 6, "answered": 6, "success_rate": 0.2, "all": {"mean": 9.0}},
+        {"method": "pure-geometric", "navcam": "near", "cases": 6, "answered": 6, "success_rate": 0.3, "all": {"mean": 5.0}},
+        {"method": "refined-geometric", "navcam": "near", "cases": 6, "answered": 5, "success_rate": 0.8, "all": {"mean": 30.0}},
+        {"method": "refined-kinematic", "navcam": "far", "cases": 6, "answered": 6, "success_rate": 1.0, "all": {"mean": 1.0}},
+    ]
+    ch = Q.choose_handoff(rows)
+    assert ch["primary"] == "refined-geometric" and ch["fallback"] == "pure-geometric" and ch["navcam"] == "near"
+    d = Q.choose_handoff(None)
+    assert (d["primary"], d["fallback"]) == Q.DEFAULT_HANDOFF and "paper" in d["basis"]
+
+
+# ----------------------------------------------------------------------------- commands and formats
+
+
+def _doc(rc, terrain):
+    pred = prediction(rc, terrain)
+    checks = Q.check_rules(pred, rc)
+    handoff = Q.choose_handoff(None)
+    cmds = Q.build_commands(pred, RECORD, handoff, {"pancam": 12.5, "navcam": None, "hazcam": 4.0})
+    prov = {"tool": "scipctl", "version": "test", "command": "scipctl sequence X --target t1", "inputs": {}}
+    return pred, Q.sequence_document(pred, RECORD, checks, cmds, handoff, prov, mission="m", sol=3)
+
+
+def test_commands_cover_every_stop_and_end_with_the_arm(rc, flat_terrain):
+    pred, doc = _doc(rc, flat_terrain)
+    stems = [c["stem"] for c in doc["commands"]]
+    assert stems[0] == "SCIP_BEGIN" and stems[-1] == "SCIP_END" and stems[-2] == "ARM_PLACE_AT_TARGET"
+    for st in pred.plan.stops[1:]:
+        imgs = [c for c in doc["commands"] if c["stop"] == st.index and c["stem"] == "IMG_STEREO"]
+        assert [a["args"][0]["value"] for a in imgs] == [sh.camera.upper() for sh in st.cameras]
+    assert stems.count("TRK_HANDOFF_SCALED") == 1 and stems.count("TRK_HANDOFF_NAVCAM_HAZCAM") == 1
+    assert stems.count("DRV_TURN_TO_TARGET") == 1
+    # the waypoints are the planned stops before the turn; after it the rover closes in on the tracked target
+    wps = [c for c in doc["commands"] if c["stem"] == "DRV_GOTO_WAYPOINT"]
+    before = [s for s in pred.plan.stops[1:] if s.kind not in ("hazcam", "final")]
+    assert len(wps) == len(before)
+    for c, s in zip(wps, before):
+        assert [c["args"][0]["value"], c["args"][1]["value"]] == pytest.approx(s.T_site_rover.t[:2].tolist(), abs=1e-6)
+    appr = [c for c in doc["commands"] if c["stem"] == "DRV_APPROACH_TARGET"]
+    assert appr[-1]["args"][0]["value"] == pytest.approx(pred.plan.params.final_distance_m)
+    # exposures from today's images; AUTO where there is none
+    exp = {c["args"][0]["value"]: c["args"][1] for c in doc["commands"] if c["stem"] == "IMG_STEREO"}
+    assert exp["PANCAM"]["value"] == 12.5 and exp["NAVCAM"] == {"name": "exposure_ms", "type": "enum", "value": "AUTO"}
+    # relative time tags add up to the start times
+    t = 0
+    for c in doc["commands"]:
+        h, m, s = (int(x) for x in c["time_tag"][1:].split(":"))
+        t += 3600 * h + 60 * m + s
+        assert abs(t - c["start_s"]) <= len(doc["commands"])  # whole seconds, rounded up per command
+
+
+def test_formats_are_deterministic_and_consistent(rc, flat_terrain):
+    _, d1 = _doc(rc, flat_terrain)
+    _, d2 = _doc(rc, P.Terrain([heightfield_source(flat)], smooth_sigma_px=0))  # recomputed from scratch
+    for name, fmt in Q.FORMATTERS.items():
+        assert fmt(d1) == fmt(d2), name
+    assert json.loads(Q.format_json(d1)) == d1
+    text = Q.format_text(d1)
+    for r in d1["rules"]:
+        assert r["rule"] in text
+    assert Q.NOTIONAL in Q.format_seqn(d1) and Q.NOTIONAL in text and d1["notional"] == Q.NOTIONAL
+
+
+_ARG = r'(?:-?\d+(?:\.\d+)?|"(?:[^"\\]|\\.)*"|[A-Za-z][A-Za-z0-9_-]*)'
+_CMD = re.compile(r'^R\d\d:\d\d:\d\d [A-Za-z][A-Za-z0-9_-]*(?: ' + _ARG + r')*(?: # .*)?$')
+
+
+def test_seqn_text_follows_the_notation(rc, flat_terrain):
+    _, doc = _doc(rc, flat_terrain)
+    lines = Q.format_seqn(doc).splitlines()
+    kinds = []
+    for ln in lines:
+        if ln.startswith("#"):
+            kinds.append("comment")
+        elif ln.startswith("@ID "):
+            assert json.loads(ln[4:]) == doc["sequence_id"]
+            kinds.append("id")
+        elif ln.startswith("@METADATA "):
+            m = re.match(r'^@METADATA ("(?:[^"\\]|\\.)*") (.*)$', ln)
+            assert m, ln
+            json.loads(m.group(1))
+            json.loads(m.group(2))
+            kinds.append("meta")
+        else:
+            assert _CMD.match(ln), ln
+            kinds.append("cmd")
+    # order: comments, @ID, one block of @METADATA, then commands (with comment lines between them)
+    first_cmd = kinds.index("cmd")
+    assert kinds.index("id") < kinds.index("meta") < first_cmd
+    meta = [i for i, k in enumerate(kinds) if k == "meta"]
+    assert meta == list(range(meta[0], meta[-1] + 1)) and meta[-1] == first_cmd - 1
+    assert set(kinds[first_cmd:]) <= {"cmd", "comment"}
+    assert kinds.count("cmd") == len(doc["commands"])
+    assert lines[first_cmd].startswith("R00:00:00 SCIP_BEGIN")
+
+
+def test_time_tags():
+    assert Q.time_tag(0) == "R00:00:00"
+    assert Q.time_tag(59.2) == "R00:01:00"
+    assert Q.time_tag(3725) == "R01:02:05"
