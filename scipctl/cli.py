@@ -9,7 +9,12 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
+
+# Small matrix products dominate our numerics; multi-threaded BLAS only adds overhead on 2 cores.
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "2")
 from pathlib import Path
 from typing import List, Optional
 

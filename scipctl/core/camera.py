@@ -370,7 +370,7 @@ class CameraModel:
         rr = np.cross(f, g)
         rr = rr / np.linalg.norm(rr, axis=-1, keepdims=True)
         sgn = np.sign(_dot(rr, self.A))
-        sgn[sgn == 0] = 1
+        sgn = np.where(sgn == 0, 1.0, sgn)
         rr = rr * sgn[..., None]
         origin = np.broadcast_to(self.C, rr.shape).copy()
         if self.kind == "CAHV":

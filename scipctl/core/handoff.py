@@ -67,7 +67,7 @@ class HandoffParams:
     search_radius_px: float = 60.0  # NCC search around the method's starting point (hazcam px)
     refined_min_score: float = 0.0  # the paper's refined methods always answer; the score is reported
     point_stereo_band_px: float = 3.0
-    point_stereo_window_px: int = 11
+    point_stereo_window_px: int = 21
     nav_cloud_radius_m: float = 0.6  # navcam points used for the expected window (around the target)
     registration_max_range_m: float = 5.0  # whole-cloud ICP uses points within this range of the hazcam
     local_radius_m: float = 0.45  # local-registration patch radius around the target

@@ -20,7 +20,7 @@ from ..model import Downlink, ImageProduct, InputError
 TEMPLATE_HALF_PX = {"pancam": 20, "navcam": 15, "hazcam": 15}
 SEARCH_RADIUS_PX = {"pancam": 120.0, "navcam": 60.0, "hazcam": 60.0}
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
-STEREO_WINDOW_PX = {"pancam": 15, "navcam": 11, "hazcam": 11}
+STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
 
 @dataclass

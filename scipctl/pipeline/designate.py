@@ -10,7 +10,7 @@ from ..model import Downlink, ImageProduct, InputError
 
 # epipolar search band half-width per camera (px): wide enough for the ~4 px pancam misalignment
 DEFAULT_BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
-WINDOW_PX = {"pancam": 15, "navcam": 11, "hazcam": 11}
+WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 EDGE_MARGIN_PX = 20
 
 

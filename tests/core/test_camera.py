@@ -125,3 +125,13 @@ def test_degenerate_models_name_the_field(field, mutate):
 def test_dict_round_trip(name):
     m = MODELS[name]
     assert CameraModel.from_dict(m.to_dict()).almost_equal(m, tol=0)
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_single_pixel_and_point_shapes(name):
+    m = MODELS[name]
+    o, d = m.unproject(np.array([300.0, 400.0]))
+    assert o.shape == (3,) and d.shape == (3,)
+    uv = m.project(o + 2.0 * d)
+    assert uv.shape == (2,)
+    assert np.allclose(uv, [300.0, 400.0], atol=1e-6)
