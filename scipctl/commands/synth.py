@@ -17,8 +17,14 @@ from typing import Optional
 from ..model import InputError
 
 
-def regenerate_command(scenario: str, seed: int, container: str, run: str, no_errors: bool) -> str:
-    cmd = f"scipctl synth --scenario {scenario} --seed {seed} --container {container} --runs {run}"
+def regenerate_command(scenario: str, seed: int, container: str, run: str, no_errors: bool,
+                       image_scale: float = 1.0, supersample: int = 2) -> str:
+    env = ""
+    if image_scale != 1.0:
+        env += f"SCIPCTL_SYNTH_IMAGE_SCALE={image_scale:g} "
+    if supersample != 2:
+        env += f"SCIPCTL_SYNTH_SUPERSAMPLE={supersample} "
+    cmd = f"{env}scipctl synth --scenario {scenario} --seed {seed} --container {container} --runs {run}"
     return cmd + (" --no-errors" if no_errors else "") + " -o OUT"
 
 
@@ -58,7 +64,8 @@ def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str]
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(str(out), "-o/--out", "exists and is not a directory")
-    written = synthesize(scenario, seed, out, container, selected, no_errors)
+    image_scale, supersample = _env_quality()
+    written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample)
     if json_out:
         from ..cli import emit_json
 
@@ -66,6 +73,28 @@ def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str]
     else:
         for w in written:
             sys.stdout.write(f"{w['path']}  ({w['images']} images, {len(w['targets'])} targets, {w['bytes']} bytes)\n")
+
+
+def _env_quality() -> tuple[float, int]:
+    """Preview/test hooks: ``SCIPCTL_SYNTH_IMAGE_SCALE`` (e.g. 0.125 -> 128 x 128 images) and
+    ``SCIPCTL_SYNTH_SUPERSAMPLE`` (samples per pixel side, default 2). Both are recorded in the .sim.json."""
+    import os
+
+    raw_s = os.environ.get("SCIPCTL_SYNTH_IMAGE_SCALE", "1")
+    raw_q = os.environ.get("SCIPCTL_SYNTH_SUPERSAMPLE", "2")
+    try:
+        scale = float(raw_s)
+        if not (0 < scale <= 1) or abs(1024 * scale - round(1024 * scale)) > 1e-9:
+            raise ValueError
+    except ValueError:
+        raise InputError("environment", "SCIPCTL_SYNTH_IMAGE_SCALE", f"{raw_s!r}: want a number in (0, 1] with 1024 x scale whole") from None
+    try:
+        ss = int(raw_q)
+        if not 1 <= ss <= 8:
+            raise ValueError
+    except ValueError:
+        raise InputError("environment", "SCIPCTL_SYNTH_SUPERSAMPLE", f"{raw_q!r}: want an integer 1 .. 8") from None
+    return scale, ss
 
 
 def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, no_errors: bool,
@@ -101,7 +130,8 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
             from .. import __version__
 
             rec["written_by"] = {"tool": "scipctl", "version": __version__,
-                                 "regenerate": regenerate_command(scenario, seed, container, run_name, no_errors)}
+                                 "regenerate": regenerate_command(scenario, seed, container, run_name, no_errors,
+                                                                 image_scale, supersample)}
             rec["no_errors"] = bool(no_errors)
             rec_path = out / f"{name}.sim.json"
             atomic_write_text(rec_path, record_json(rec))

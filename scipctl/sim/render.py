@@ -37,6 +37,16 @@ def subpixel_offsets(supersample: int) -> np.ndarray:
     return (np.arange(s) + 0.5) / s - 0.5
 
 
+def crop_model(model: CameraModel, u0_px: float, v0_px: float) -> CameraModel:
+    """The model of a window whose pixel (0, 0) is the original's ``(u0_px, v0_px)``: ``u' = u - u0``.
+
+    ``H' = H - u0 A``, ``V' = V - v0 A``; rendering a crop through it gives exactly the original's pixels there.
+    """
+    from dataclasses import replace
+
+    return replace(model, H=model.H - float(u0_px) * model.A, V=model.V - float(v0_px) * model.A)
+
+
 def _block(scene, model_site: CameraModel, width: int, v0: int, v1: int, ss: int, shadows: bool, lod: bool):
     off = subpixel_offsets(ss)
     us = (np.arange(width)[:, None] + off[None, :]).ravel()  # (W*ss,)

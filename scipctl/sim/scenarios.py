@@ -88,6 +88,9 @@ class StopPlan:
     xy_m: np.ndarray  # (2,) true rover origin, site frame
     yaw_rad: float  # true heading
     cameras: tuple  # camera pairs imaged at this stop, in order
+    ref_camera: str = "navcam"  # the pair whose ground distance to the rock is ``ref_dist_m``
+    ref_dist_m: float = 0.0
+    bearing_rad: float = 0.0  # from the rock towards the reference cameras
     path_length_m: float = 0.0  # drive from the previous stop
     turn_rad: float = 0.0
 
@@ -167,16 +170,17 @@ def plan_run(scenario: str, run: str, seed: int) -> RunPlan:
     if scenario == "paper":
         alpha = 0.0 if approach == "straight" else sgn * 30.0 * DEG
         b_far = beta + alpha
-        jitter = (rr.normal(0, 0.01), rr.normal(0, 0.01), rr.normal(0, 0.75 * DEG))
+        # the near stop of the two runs of a scene: the same place up to ~1 cm and ~1 deg
+        near_d, near_b, near_yaw = 1.0 + rr.normal(0, 0.01), beta + rr.normal(0, 0.5 * DEG), rr.normal(0, 0.75 * DEG)
         stops = []
         xy, yaw = _place(MAST_REF_X_M, 10.0, b_far)
-        stops.append(StopPlan("pan10", xy, yaw, ("pancam",)))
+        stops.append(StopPlan("pan10", xy, yaw, ("pancam",), "pancam", 10.0, b_far))
         xy, yaw = _place(MAST_REF_X_M, 4.5, b_far)
-        stops.append(StopPlan("mid", xy, yaw, ("pancam", "navcam")))
+        stops.append(StopPlan("mid", xy, yaw, ("pancam", "navcam"), "navcam", 4.5, b_far))
         xy, yaw = _place(NAVCAM_REF_X_M, 3.0, b_far)
-        stops.append(StopPlan("far", xy, yaw, ("navcam",)))
-        xy, yaw = _place(HAZCAM_REF_X_M, 1.0, beta, jitter)
-        stops.append(StopPlan("near", xy, yaw, ("navcam", "hazcam")))
+        stops.append(StopPlan("far", xy, yaw, ("navcam",), "navcam", 3.0, b_far))
+        xy, yaw = _place(HAZCAM_REF_X_M, near_d, near_b, (0.0, 0.0, near_yaw))
+        stops.append(StopPlan("near", xy, yaw, ("navcam", "hazcam"), "hazcam", near_d, near_b))
         _finish_legs(stops, arc_legs={3} if alpha else set())
         keep = _corridors([beta, beta + sgn * 30.0 * DEG])
         # the arc between the far arc stop and the near stop
@@ -207,7 +211,9 @@ def plan_run(scenario: str, run: str, seed: int) -> RunPlan:
         if d - haz_off <= 2.0 + 1e-9:
             cams.append("hazcam")
         xy, yaw = _place(MAST_REF_X_M, d, b)
-        stops.append(StopPlan(f"d{k:02d}", xy, yaw, tuple(cams)))
+        ref = "hazcam" if "hazcam" in cams else ("navcam" if "navcam" in cams else "pancam")
+        ref_d = d - haz_off if ref == "hazcam" else d
+        stops.append(StopPlan(f"d{k:02d}", xy, yaw, tuple(cams), ref, ref_d, b))
     _finish_legs(stops, arc_legs=set(range(1, len(stops))) if curve else set())
     bs = np.linspace(0, 1, 8)
     keep = []
@@ -265,6 +271,30 @@ def true_rover_pose(scene: Scene, xy_m, yaw_rad: float) -> RigidTransform:
     return RigidTransform(R, np.array([xy_m[0], xy_m[1], -a0]))
 
 
+def _ref_point_xy(stop: StopPlan, T: RigidTransform, calibrated: RoverConfig, true_cfg: RoverConfig, aim_site) -> np.ndarray:
+    """Site (x, y) of the middle of the stop's reference camera pair (true models; mast pointed at the aim)."""
+    cam = stop.ref_camera
+    pan = tilt = 0.0
+    if calibrated.cameras[cam].mount == "mast":
+        pan, tilt = calibrated.point_at(cam, T.inverse().apply(aim_site))
+    c = [true_cfg.camera_model(cam, eye, pan, tilt).transformed(T).C for eye in ("left", "right")]
+    return 0.5 * (c[0][:2] + c[1][:2])
+
+
+def place_on_terrain(scene: Scene, stop: StopPlan, calibrated: RoverConfig, true_cfg: RoverConfig, aim_site,
+                     iterations: int = 4) -> RigidTransform:
+    """The true ``T_site_rover`` of a stop, moved so that its reference cameras really stand ``ref_dist_m`` from
+    the rock along ``bearing_rad`` (the rover's roll and pitch on the terrain move the mast head sideways).
+    Updates ``stop.xy_m``."""
+    want = stop.ref_dist_m * np.array([np.cos(stop.bearing_rad), np.sin(stop.bearing_rad)]) + scene.target_rock.centre_xy_m
+    xy = np.array(stop.xy_m, float)
+    for _ in range(iterations):
+        T = true_rover_pose(scene, xy, stop.yaw_rad)
+        xy = xy + (want - _ref_point_xy(stop, T, calibrated, true_cfg, aim_site))
+    stop.xy_m = xy
+    return true_rover_pose(scene, xy, stop.yaw_rad)
+
+
 @dataclass
 class ProductPlan:
     """One image to make: everything but the pixels."""
@@ -293,8 +323,10 @@ class ProductPlan:
 def project_visible(scene: Scene, model_site: CameraModel, width: int, height: int, X_site, tol_m: float = OCCLUSION_TOL_M):
     """Project points ``X_site`` ``(K, 3)``; ``(uv (K, 2), visible (K,) bool)``.
 
-    Visible = finite projection inside ``[-0.5, W - 0.5] x [-0.5, H - 0.5]`` and nothing hit between the
-    model's ray origin for that pixel (the CAHVORE entrance pupil moves with the ray) and the point.
+    Visible = finite projection inside ``[-0.5, W - 0.5] x [-0.5, H - 0.5]``, and the ray from the model's
+    origin for that pixel (the CAHVORE entrance pupil moves with the ray) towards the point first hits the
+    surface at the point (within ``tol_m``): nothing in front of it, and the ray does not slip past it
+    (a point exactly on a silhouette).
     """
     X = np.asarray(X_site, float).reshape(-1, 3)
     uv = model_site.project(X)
@@ -307,7 +339,7 @@ def project_visible(scene: Scene, model_site: CameraModel, width: int, height: i
         v = X[idx] - o
         dist = np.linalg.norm(v, axis=1)
         hits = scene.cast(o, v / dist[:, None])
-        vis[idx] = hits.t_m >= dist - tol_m
+        vis[idx] = np.abs(hits.t_m - dist) <= tol_m  # the first hit is the point itself
     return uv, vis
 
 
@@ -414,11 +446,20 @@ def choose_targets(scene: Scene, plan: RunPlan, products: list, rng: np.random.G
                 edge_pts.append(P[i])
                 edge_scores.append(-abs(np.einsum("j,j->", nrm[i], d[i])))
         pools["edge"] = (np.array(edge_pts).reshape(-1, 3), np.array(edge_scores))
-    # point: hull corners of the big rock, sharpest first, above the ground
+    # point: next to the hull corners of the big rock (3 mm in, on an adjacent facet), sharpest first
+    from .scene import vertex_normals
+
     cv = rock.vertices[rock.corner_idx]
     g = scene.ground_height_m(cv[:, :2])
     above = (-cv[:, 2]) - g > 0.03
-    pools["point"] = (cv[above], rock.corner_sharpness_rad[above])
+    vn = vertex_normals(rock.vertices, rock.triangles)[rock.corner_idx]
+    inward = np.array([rock.centre_xy_m[0], rock.centre_xy_m[1], rock.aim_point_site()[2]])[None, :] - cv
+    inward -= np.einsum("ij,ij->i", inward, vn)[:, None] * vn
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
+    hc = scene.cast(cv + 0.05 * vn + 0.003 * inward, -vn)
+    ok = above & hc.hit & (hc.geometry_id == GEOM_ROCKS) & (hc.primitive_id < n_rock_tris)
+    ok &= np.linalg.norm(np.nan_to_num(hc.points - cv, nan=1.0), axis=1) < 0.008
+    pools["point"] = (hc.points[ok], rock.corner_sharpness_rad[ok])
     # contrast: local albedo range within 4 mm, over rock and ground candidates
     cc = np.flatnonzero(cand & ((hits.material == MAT_TERRAIN) | (hits.material == MAT_ROCK)))
     if len(cc):
@@ -483,12 +524,16 @@ def _pose_dict(T: RigidTransform) -> dict:
 def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: ErrorSettings):
     """Geometry of every image of a run: poses, pointing, calibrated and true models. Returns (products, record)."""
     true_cfg = true_rover_config(calibrated, errors)
-    T_true = [true_rover_pose(scene, s.xy_m, s.yaw_rad) for s in plan.stops]
+    aim_site = scene.target_rock.aim_point_site()
+    T_true = [place_on_terrain(scene, s, calibrated, true_cfg, aim_site) for s in plan.stops]
+    for k in range(1, len(plan.stops)):  # the drive between the placed stops
+        s0, s1 = plan.stops[k - 1], plan.stops[k]
+        arc = s1.path_length_m > 1.0001 * np.linalg.norm(s1.xy_m - s0.xy_m)
+        s1.path_length_m = float(np.linalg.norm(T_true[k].t[:2] - T_true[k - 1].t[:2])) * (1.05 if arc else 1.0)
     r_odo = _rng(plan.seed, plan.scenario, plan.run, "odometry")
     T_est, odo_rec = estimate_poses(T_true, [s.path_length_m for s in plan.stops], [s.turn_rad for s in plan.stops], errors, r_odo)
     r_point = _rng(plan.seed, plan.scenario, plan.run, "pointing")
     r_vib = _rng(plan.seed, plan.scenario, plan.run, "vibration")
-    aim_site = scene.target_rock.aim_point_site()
     head = np.asarray(calibrated.mast.tilt.origin_m)
     products, stops_rec = [], []
     t = 1000.0

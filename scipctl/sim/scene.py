@@ -399,7 +399,8 @@ class Hits:
 class Scene:
     seed: int
     field: HeightField
-    terrain_xy: np.ndarray  # (Nv, 2)
+    terrain_axis_m: np.ndarray  # (n,) grid line positions, the same for x and y
+    terrain_xy: np.ndarray  # (Nv, 2) = all (x_i, y_j), index i * n + j
     terrain_tris: np.ndarray  # (Mt, 3)
     terrain_spacing_m: np.ndarray  # (Nv,)
     rocks: list  # list[Rock]; rocks[0] is the target rock
@@ -411,7 +412,6 @@ class Scene:
     ambient: float = 0.28
     sky_radiance: float = 0.42
     _rc: object = field(default=None, repr=False)
-    _terrain_rc: object = field(default=None, repr=False)
     _cache: dict = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------ geometry
@@ -544,20 +544,23 @@ class Scene:
         return t < tmax
 
     def ground_height_m(self, xy) -> np.ndarray:
-        """Height (positive up) of the terrain mesh under ``xy`` ``(N, 2)`` (rocks and pebbles ignored)."""
-        import open3d as o3d
+        """Height (positive up) of the terrain mesh under ``xy`` ``(N, 2)`` (rocks and pebbles ignored).
 
-        xy = np.asarray(xy, float)
-        if self._terrain_rc is None:
-            rc = o3d.t.geometry.RaycastingScene()
-            rc.add_triangles(self._mesh(self.terrain_vertices(), self.terrain_tris))
-            self._terrain_rc = rc
-        o = np.concatenate([xy, np.full((len(xy), 1), -1000.0)], axis=1)
-        d = np.tile([0.0, 0.0, 1.0], (len(xy), 1))
-        t = self._cast_raw(self._terrain_rc, o, d)["t_hit"].numpy().astype(np.float64)
-        if not np.all(np.isfinite(t)):
+        Exact for the triangulated grid: the cell is looked up and its triangle interpolated.
+        """
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        ax = self.terrain_axis_m
+        n = len(ax)
+        if np.any(np.abs(xy) > ax[-1]):
             raise ValueError("ground_height_m: point outside the terrain")
-        return -(-1000.0 + t)
+        i = np.clip(np.searchsorted(ax, xy[:, 0], side="right") - 1, 0, n - 2)
+        j = np.clip(np.searchsorted(ax, xy[:, 1], side="right") - 1, 0, n - 2)
+        fx = (xy[:, 0] - ax[i]) / (ax[i + 1] - ax[i])
+        fy = (xy[:, 1] - ax[j]) / (ax[j + 1] - ax[j])
+        h = -self.terrain_vertices()[:, 2]
+        ha, hb, hc, hd = h[i * n + j], h[(i + 1) * n + j], h[(i + 1) * n + j + 1], h[i * n + j + 1]
+        lower = fx >= fy  # triangle (a, b, c); else (a, c, d)
+        return np.where(lower, ha + fx * (hb - ha) + fy * (hc - hb), ha + fy * (hd - ha) + fx * (hc - hd))
 
     # ----------------------------------------------------------- appearance
     def radiance(self, hits: Hits, dirs: np.ndarray, footprint_m: Optional[np.ndarray] = None, shadows: bool = True) -> np.ndarray:
@@ -717,7 +720,7 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_de
         az = float(sun_azimuth_rad)
     sun = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
     return Scene(
-        seed=int(seed), field=field_, terrain_xy=xy, terrain_tris=tris, terrain_spacing_m=spacing, rocks=rocks,
+        seed=int(seed), field=field_, terrain_axis_m=xs, terrain_xy=xy, terrain_tris=tris, terrain_spacing_m=spacing, rocks=rocks,
         pebble_vertices=np.concatenate(Vp) if Vp else np.zeros((0, 3)),
         pebble_tris=np.concatenate(Fp) if Fp else np.zeros((0, 3), np.int64),
         pebble_tri_scale=np.concatenate(Sp) if Sp else np.zeros(0, np.float32),
