@@ -11,39 +11,47 @@ from ..model import InputError
 FORMATS = ("seqn", "json", "text")
 
 
-def make_sequence(source, target: str, params=None, rules=None):
+def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None):
     """Everything the command does short of writing: returns ``(doc or None, checks, prediction, record)``.
 
-    ``doc`` is None when a blocking rule is broken.
+    ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
     """
-    from ..io.provenance import provenance
     from ..pipeline.predict import predict_target, resolve_target
+
+    dl = source.downlink
+    if pred is None or record is None:
+        targets_doc = source.load_json("targets.json")
+        if targets_doc is not None and not isinstance(targets_doc, dict):
+            raise InputError(str(source.products_dir / "targets.json"), "targets",
+                             "expected a JSON object with a 'targets' list")
+        record, now = resolve_target(dl, target, targets_doc)
+        if not record.get("ok", True) or record.get("xyz_site_m") is None:
+            raise CommandFailed(f"{target}: no reliable 3-D position for the target "
+                                f"({record.get('reason') or 'no stereo match'}); no sequence",
+                                payload={"target": target, "designation": record})
+        pred = predict_target(dl, record, params, designated_now=now)
+    handoff_doc = source.load_json("handoff.json")
+    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
+    doc, checks = document_for(dl, record, pred, rows, rules)
+    return doc, checks, pred, record
+
+
+def document_for(dl, record, pred, table1_rows=None, rules=None):
+    """(sequence document or None when a blocking rule is broken, rule checks) for a prediction."""
+    from ..io.provenance import provenance
     from ..pipeline.sequence import (broken, build_commands, canonical_hash, check_rules, choose_handoff,
                                      sequence_document, _exposures)
 
-    dl = source.downlink
-    targets_doc = source.load_json("targets.json")
-    if targets_doc is not None and not isinstance(targets_doc, dict):
-        raise InputError(str(source.products_dir / "targets.json"), "targets", "expected a JSON object with a 'targets' list")
-    record, now = resolve_target(dl, target, targets_doc)
-    if not record.get("ok", True) or record.get("xyz_site_m") is None:
-        raise CommandFailed(f"{target}: no reliable 3-D position for the target ({record.get('reason') or 'no stereo match'}); "
-                            "no sequence", payload={"target": target, "designation": record})
-    handoff_doc = source.load_json("handoff.json")
-    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
-    pred = predict_target(dl, record, params, designated_now=now)
     checks = check_rules(pred, dl.rover_config, rules)
-    bad = broken(checks)
-    if bad:
-        return None, checks, pred, record
-    handoff = choose_handoff(rows)
-    inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash({k: v for k, v in record.items()})}
-    if rows:
-        inputs["handoff_results"] = canonical_hash(rows)
+    if broken(checks):
+        return None, checks
+    handoff = choose_handoff(table1_rows)
+    inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash(record)}
+    if table1_rows:
+        inputs["handoff_results"] = canonical_hash(table1_rows)
     prov = provenance(inputs, deterministic=True)
     cmds = build_commands(pred, record, handoff, _exposures(dl, dl.product(record["product_id"]).position))
-    doc = sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol)
-    return doc, checks, pred, record
+    return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol), checks
 
 
 def run(src, target, out, fmt, json_out):
@@ -75,6 +83,7 @@ def run(src, target, out, fmt, json_out):
     if out is not None:
         try:
             atomic_write_text(out, text)
+            _share(out)
         except OSError as e:
             raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
         summary["written_to"] = str(out)
@@ -104,3 +113,15 @@ def _print(checks, pred, target):
         for k in pred.risks:
             r.add_row(str(k.stop), k.camera, k.what, "-" if k.probability is None else f"{k.probability:.2f}", "; ".join(k.reasons))
         con.print(r)
+
+
+def _share(path) -> None:
+    """Atomic writes create private (0600) files; give the output the usual permissions (0666 minus the umask)."""
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    try:
+        os.chmod(path, 0o666 & ~mask)
+    except OSError:
+        pass

@@ -154,10 +154,10 @@ class UncertaintyParams:
 
     sigma_position_m: Optional[float] = None
     sigma_yaw_rad: Optional[float] = None
-    default_sigma_position_m: float = 0.05
-    default_sigma_yaw_rad: float = 0.01
-    drive_error_frac: float = 0.02
-    yaw_error_rad_per_m: float = 0.002
+    default_sigma_position_m: float = 0.01
+    default_sigma_yaw_rad: float = math.radians(0.5)
+    drive_error_frac: float = 0.05  # wheel odometry: a few % of the distance driven
+    yaw_error_rad_per_m: float = math.radians(1.0)  # heading drift per metre
     disparity_sigma_px: float = 0.25
     n_samples: int = 1000
     n_track_samples: int = 8
@@ -1625,7 +1625,7 @@ STEREO_CAMERAS = ("pancam", "navcam", "hazcam")
 _PRIORITY = {"pancam": 0, "navcam": 1, "hazcam": 2}
 
 
-def resolve_target(dl, target_id: str, targets_doc: Optional[dict]) -> tuple:
+def resolve_target(dl, target_id: str, targets_doc: Optional[dict], with_normal: bool = True) -> tuple:
     """The designation record for ``target_id``: from ``targets.json`` (``targets_doc``) if designated there,
     else designated on the fly from its mark in the first left pancam image (or navcam if there is no pancam).
 
@@ -1650,7 +1650,7 @@ def resolve_target(dl, target_id: str, targets_doc: Optional[dict]) -> tuple:
         for im in lefts:
             mk = marks.mark_in(im.product_id)
             if mk is not None and dl.stereo_pair(im) is not None:
-                rec = designate(dl, im, [mk.u, mk.v], target_id=target_id)
+                rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal)
                 rec["designated_from"] = "mark"
                 return rec, True
         if lefts:

@@ -1,0 +1,140 @@
+"""`scipctl report`: a self-contained HTML diagnostic report of a downlink (and a short summary)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from ..cli import emit_json
+from ..model import InputError
+
+
+def build(source, progress=None, params=None):
+    """(html text, summary dict, data) for an opened source. No file is written."""
+    from ..io.provenance import provenance
+    from ..io.report_html import render_report
+    from ..pipeline.report_data import ReportParams, collect
+    from ..pipeline.sequence import format_seqn
+    from .handoff import PAPER_TABLE1
+    from .sequence import document_for
+
+    dl = source.downlink
+    targets_doc = source.load_json("targets.json")
+    if targets_doc is not None and not isinstance(targets_doc, dict):
+        raise InputError(str(source.products_dir / "targets.json"), "targets", "expected a JSON object with a 'targets' list")
+    handoff_doc = source.load_json("handoff.json")
+    data = collect(dl, targets_doc, handoff_doc, params or ReportParams(), progress)
+    rows = data["handoff"]["table1"]
+    sequences = {}
+    for t in data["targets"]:
+        pred, rec = t["prediction"], t["record"]
+        if pred is None or rec is None:
+            continue
+        try:
+            doc, checks = document_for(dl, rec, pred, rows)
+            sequences[t["id"]] = {"checks": [c.to_dict() for c in checks], "text": format_seqn(doc) if doc else None}
+        except (InputError, ValueError) as e:
+            sequences[t["id"]] = {"checks": [], "text": None, "error": str(e)}
+    prov = provenance({"downlink": dl.source_sha256})
+    html = render_report(data, sequences, PAPER_TABLE1, prov)
+    summary = _summary(data, sequences)
+    return html, summary, data
+
+
+def _summary(data, sequences) -> dict:
+    targets = []
+    for t in data["targets"]:
+        pred = t["prediction"]
+        fin = next((s for s in reversed(t["chain"]) if s.get("error_px") is not None), None)
+        near = [r for r in t["handoff"] if r.get("navcam") == "near" and r.get("error_px") is not None]
+        best = min(near, key=lambda r: r["error_px"]) if near else None
+        seq = sequences.get(t["id"])
+        targets.append({
+            "id": t["id"], "designated": t["record"] is not None,
+            "chain_final_error_px": None if fin is None else fin["error_px"],
+            "best_near_handoff": None if best is None else {"method": best["method"], "error_px": best["error_px"]},
+            "predicted_success": None if pred is None else pred.confidence,
+            "risks": None if pred is None else len(pred.risks),
+            "rules_broken": None if not seq else [c["rule"] for c in seq["checks"] if c["blocking"] and not c["ok"]],
+        })
+    mb = data["calibration"].get("mast_bias")
+    return {
+        "mission": data["mission"], "sol": data["sol"], "targets": targets,
+        "handoff_source": data["handoff"]["source"],
+        "mast_bias_deg": None if not mb else {"pan": math.degrees(mb["dpan_rad"]), "tilt": math.degrees(mb["dtilt_rad"]),
+                                              "rms_before_px": mb["rms_before_px"], "rms_after_px": mb["rms_after_px"]},
+        "flagged_images": sum(1 for s in data["image_stats"] if s["flags"]),
+        "notes": data["notes"], "seconds": {k: round(v, 3) for k, v in data["seconds"].items()},
+    }
+
+
+def run(src, out, json_out):
+    from rich.console import Console
+
+    from ..io.atomic import atomic_write_text
+    from ..io.workspace import open_source
+
+    out = Path(out)
+    if out.exists() and out.is_dir():
+        raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
+    source = open_source(src)
+    con = Console(stderr=True)
+    with con.status("report", spinner="dots") as st:
+        html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None)
+    try:
+        atomic_write_text(out, html)
+        _share(out)
+    except OSError as e:
+        raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
+    summary["report"] = str(out)
+    summary["bytes"] = len(html.encode())
+    summary["embedded_images"] = html.count("<img ")
+    try:
+        from ..io.annotations_mcap import write_annotations
+
+        mc = out.with_suffix(".annotations.mcap")
+        write_annotations(source.downlink, data, mc)
+        summary["annotations_mcap"] = str(mc)
+    except ImportError:
+        pass
+    if json_out:
+        emit_json(summary)
+    _print(con, summary)
+
+
+def _print(con, s):
+    con.print(f"report: {s['report']} ({s['bytes'] / 1e6:.1f} MB, {s['embedded_images']} images)"
+              + (f"; annotations: {s['annotations_mcap']}" if s.get("annotations_mcap") else ""))
+    for t in s["targets"]:
+        parts = [f"target {t['id']}:"]
+        if t["chain_final_error_px"] is not None:
+            parts.append(f"chain final error {t['chain_final_error_px']:.1f} px")
+        if t["best_near_handoff"]:
+            parts.append(f"best near handoff {t['best_near_handoff']['method']} {t['best_near_handoff']['error_px']:.1f} px")
+        if t["predicted_success"] is not None:
+            parts.append(f"predicted P(success) {t['predicted_success']:.2f}, {t['risks']} risk(s)")
+        if t["rules_broken"] is not None:
+            parts.append("sequence ok" if not t["rules_broken"] else "rules broken: " + ", ".join(t["rules_broken"]))
+        if not t["designated"]:
+            parts.append("not designated")
+        con.print(" ".join(parts))
+    if s["mast_bias_deg"]:
+        m = s["mast_bias_deg"]
+        con.print(f"mast bias estimate: pan {m['pan']:+.3f} deg, tilt {m['tilt']:+.3f} deg "
+                  f"(hazcam rms {m['rms_before_px']:.1f} -> {m['rms_after_px'] or float('nan'):.1f} px)")
+    if s["flagged_images"]:
+        con.print(f"{s['flagged_images']} image(s) flagged for gain/saturation")
+    for n in s["notes"]:
+        con.print(f"note: {n}")
+
+
+def _share(path) -> None:
+    """Atomic writes create private (0600) files; give the output the usual permissions (0666 minus the umask)."""
+    import os
+
+    mask = os.umask(0)
+    os.umask(mask)
+    try:
+        os.chmod(path, 0o666 & ~mask)
+    except OSError:
+        pass

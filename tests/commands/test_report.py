@@ -1,0 +1,128 @@
+"""``scipctl report``: a self-contained HTML report (checked for its content and opened in headless Chromium)."""
+
+import base64
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from scipctl.cli import app
+from scipctl.io.downlink import write_downlink
+from tests.pipeline import scene as S
+
+runner = CliRunner()
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def report(tmp_path_factory):
+    d = tmp_path_factory.mktemp("rep")
+    _, dl = S.cached("slab")
+    src = d / "sol7"
+    write_downlink(dl, src, container="dir")
+    out = d / "out" / "report.html"
+    r = runner.invoke(app, ["report", str(src), "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.stderr
+    return src, out, json.loads(r.stdout), r.stderr, dl
+
+
+def test_report_is_self_contained_with_decodable_images(report):
+    import cv2
+
+    _, out, summary, _, _ = report
+    html = out.read_text()
+    srcs = re.findall(r'<img src="([^"]+)"', html)
+    assert len(srcs) == summary["embedded_images"] == html.count("<img ") > 0
+    for s in srcs:
+        assert s.startswith("data:image/png;base64,")
+        img = cv2.imdecode(np.frombuffer(base64.b64decode(s.split(",", 1)[1]), np.uint8), cv2.IMREAD_UNCHANGED)
+        assert img is not None and img.size > 0
+    # nothing is fetched from elsewhere
+    assert not re.search(r'(src|href)="(https?:|//|file:)', html)
+    assert "<link" not in html and "@import" not in html
+
+
+def test_report_content_and_summary(report):
+    _, out, summary, stderr, dl = report
+    html = out.read_text()
+    ids = [t.id for t in dl.targets]
+    assert [t["id"] for t in summary["targets"]] == ids
+    for tid in ids:
+        assert f'id="t-{tid}"' in html
+    for section in ("Handoff results (Table-1 style)", "Calibration health", "Gain and saturation",
+                    "Pre-uplink prediction", "Uplink sequence and flight rules", "Expected views rendered",
+                    "Systematic mast bias estimate", "Tracking chain"):
+        assert section in html, section
+    # per target: a chip for every left image where the target is marked
+    for t in dl.targets:
+        marked_left = [m.product_id for m in t.marks if dl.product(m.product_id).eye == "left"]
+        sec = html.split(f'id="t-{t.id}"', 1)[1].split("<h2", 1)[0]
+        for pid in marked_left:
+            assert f"<b>{pid} (" in sec
+    # the gain table has one row per image, and the handoff table covers the methods run
+    gain = html.split('id="images"', 1)[1].split("<h2", 1)[0]
+    assert gain.count("<tr>") == len(dl.images) + 1
+    slab = next(t for t in summary["targets"] if t["id"] == "t_slab")
+    assert slab["designated"] and slab["predicted_success"] is not None and slab["rules_broken"] == []
+    assert "SCIP_BEGIN" in html and "ARM_PLACE_AT_TARGET" in html  # the t_slab sequence is embedded
+    # exact world, no calibration error: the mast bias is nil
+    assert abs(summary["mast_bias_deg"]["tilt"]) < 0.01 and abs(summary["mast_bias_deg"]["pan"]) < 0.01
+    assert f"report: {out}" in stderr.replace("\n", "")
+
+
+def test_report_reuses_saved_handoff_results(report):
+    from scipctl.commands.report import build
+    from scipctl.io.workspace import open_source
+    from scipctl.pipeline.report_data import ReportParams
+
+    src, _, _, _, _ = report
+    source = open_source(src)
+    rec = {"downlink": "x", "target": "t_slab", "method": "pure-geometric", "navcam": "near", "source_product": "p",
+           "source_uv": [1.0, 2.0], "predicted_uv": [100.0, 50.0], "truth_uv": [103.0, 54.0], "error_px": 5.0,
+           "success": False, "ok": True, "reason": "", "diagnostics": {}, "seconds": 0.1}
+    row = {"method": "pure-geometric", "navcam": "near", "paper_method": True, "cases": 1, "answered": 1,
+           "success_rate": 0.0, "all": {"n": 1, "mean": 5.0, "std": 0.0, "min": 5.0, "max": 5.0},
+           "successes": None, "failures": {"n": 1, "mean": 5.0, "std": 0.0, "min": 5.0, "max": 5.0}, "refined": False}
+    source.save_json("handoff.json", {"results": [rec], "table1": [row]})
+    try:
+        html, summary, data = build(source, params=ReportParams(run_prediction=False, run_chain=False,
+                                                                calib_points_per_pair=1))
+    finally:
+        (source.products_dir / "handoff.json").unlink()
+    assert data["handoff"]["source"].startswith("handoff.json")
+    assert data["handoff"]["table1"] == [row]
+    assert "100.0, 50.0" in html and "5.0±0.0 (5.0-5.0)" in html
+    assert next(t for t in summary["targets"] if t["id"] == "t_slab")["best_near_handoff"] == {
+        "method": "pure-geometric", "error_px": 5.0}
+
+
+def test_bad_output_path_is_one_line_exit_2(tmp_path, report):
+    src = report[0]
+    r = runner.invoke(app, ["report", str(src), "-o", str(tmp_path)])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "directory" in r.stderr
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (Debian package `chromium`; .ci/setup installs it)")
+def test_report_renders_with_its_images_in_headless_chromium(tmp_path, report):
+    import cv2
+
+    _, out, summary, _, _ = report
+    base = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+            "--disable-background-networking", "--disable-component-update", "--disable-sync",
+            f"--user-data-dir={tmp_path / 'profile'}"]
+    dom = subprocess.run(base + ["--dump-dom", out.resolve().as_uri()], capture_output=True, text=True, timeout=180)
+    assert dom.returncode == 0, dom.stderr[-2000:]
+    ok = re.search(r'data-images-ok="(\d+)"', dom.stdout)
+    total = re.search(r'data-images-total="(\d+)"', dom.stdout)
+    assert ok and total, "the report's load script did not run"
+    assert int(ok.group(1)) == int(total.group(1)) == summary["embedded_images"] > 0
+    shot = tmp_path / "shot.png"
+    r = subprocess.run(base + [f"--screenshot={shot}", "--window-size=1200,2000", out.resolve().as_uri()],
+                       capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0 and shot.exists(), r.stderr[-2000:]
+    img = cv2.imread(str(shot), cv2.IMREAD_GRAYSCALE)
+    assert img.shape == (2000, 1200) and float(img.std()) > 10  # not a blank page
