@@ -89,14 +89,15 @@ def run(src, out, json_out):
     summary["report"] = str(out)
     summary["bytes"] = len(html.encode())
     summary["embedded_images"] = html.count("<img ")
-    try:
-        from ..io.annotations_mcap import write_annotations
+    from ..io.annotations_mcap import write_annotations
 
-        mc = out.with_suffix(".annotations.mcap")
+    mc = out.with_suffix(".annotations.mcap")  # the same annotations for Foxglove
+    try:
         write_annotations(source.downlink, data, mc)
+        _share(mc)
         summary["annotations_mcap"] = str(mc)
-    except ImportError:
-        pass
+    except OSError as e:
+        summary["notes"].append(f"annotations MCAP not written: {e}")
     if json_out:
         emit_json(summary)
     _print(con, summary)

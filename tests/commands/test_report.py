@@ -126,3 +126,29 @@ def test_report_renders_with_its_images_in_headless_chromium(tmp_path, report):
     assert r.returncode == 0 and shot.exists(), r.stderr[-2000:]
     img = cv2.imread(str(shot), cv2.IMREAD_GRAYSCALE)
     assert img.shape == (2000, 1200) and float(img.std()) > 10  # not a blank page
+
+
+def test_foxglove_annotations_mcap_matches_the_marks(report):
+    from mcap.reader import make_reader
+
+    _, out, summary, _, dl = report
+    path = out.with_suffix(".annotations.mcap")
+    assert summary["annotations_mcap"] == str(path)
+    with open(path, "rb") as f:
+        msgs = [(sch.name, ch.topic, m.log_time, json.loads(m.data)) for sch, ch, m in make_reader(f).iter_messages()]
+    images = {d["frame_id"]: (topic, t) for name, topic, t, d in msgs if name == "foxglove.CompressedImage"}
+    anns = [(topic, t, d) for name, topic, t, d in msgs if name == "foxglove.ImageAnnotations"]
+    assert len(anns) == len(images) > 0
+    for pid, (topic, t) in images.items():
+        im = dl.product(pid)
+        assert topic == f"/scipctl/{im.camera}_{im.eye}/image" and t == round(im.time_s * 1e9)
+    # every mark of every target in an annotated image is there, in Foxglove's corner-origin pixels
+    for topic, t, d in anns:
+        pid = next(p for p, (tp, tt) in images.items() if tt == t and tp.rsplit("/", 1)[0] == topic.rsplit("/", 1)[0])
+        for tm in dl.targets:
+            mk = tm.mark_in(pid)
+            if mk is None:
+                continue
+            hits = [c for c, x in zip(d["circles"], d["texts"]) if x["text"] == f"{tm.id}: true (mark)"]
+            assert len(hits) == 1
+            assert hits[0]["position"] == {"x": pytest.approx(mk.u + 0.5), "y": pytest.approx(mk.v + 0.5)}
