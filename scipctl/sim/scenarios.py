@@ -241,7 +241,7 @@ def scene_for(plan: RunPlan) -> Scene:
     """The plan's scene (cached per scene seed: both runs of a scene share it)."""
     key = (plan.scenario, plan.scene_seed)
     if key not in _SCENES:
-        if len(_SCENES) >= 2:
+        if len(_SCENES) >= 4:  # ~170 MB each
             _SCENES.pop(next(iter(_SCENES)))
         # corridors of both runs of the scene (they share the scene)
         keep = []

@@ -173,7 +173,7 @@ def test_washed_out_far_navcam_in_run_s2_arc():
 def test_paper_has_18_cases_of_all_kinds():
     kinds = []
     for run in list_runs("paper"):
-        sim = build_run("paper", run, 7, image_scale=SMALL, supersample=1, render=False)
+        sim = build_run("paper", run, 1, image_scale=SMALL, supersample=1, render=False)
         assert len(sim.downlink.targets) == 3
         assert len({t.kind for t in sim.downlink.targets}) == 3
         assert len({t.id for t in sim.downlink.targets}) == 3
@@ -190,13 +190,13 @@ def test_build_is_deterministic(run_exact):
     assert [i.png for i in a.images] == [i.png for i in b.images]
     for t1, t2 in zip(a.targets, b.targets):
         assert [(m.product_id, m.u, m.v) for m in t1.marks] == [(m.product_id, m.u, m.v) for m in t2.marks]
-    other = build_run("paper", "s1-arc", 2, errors=ErrorSettings.none(), image_scale=SMALL, supersample=1, render=False)
-    assert not np.allclose(other.scene.target_rock.vertices[:5], run_exact.scene.target_rock.vertices[:5])
+    other = plan_run("paper", "s1-arc", 2)  # another seed, another scene and approach
+    assert other.scene_seed != run_exact.plan.scene_seed and other.bearing_rad != run_exact.plan.bearing_rad
 
 
 def test_traverse_plan_and_marks():
     for run in list_runs("traverse"):
-        plan = plan_run("traverse", run, 3)
+        plan = plan_run("traverse", run, 1)
         d = [np.linalg.norm(s.xy_m) for s in plan.stops]
         assert all(b < a for a, b in zip(d, d[1:]))
         cams = [s.cameras for s in plan.stops]
@@ -208,7 +208,7 @@ def test_traverse_plan_and_marks():
         mast_d = [np.linalg.norm(s.xy_m + 0.37 * np.array([np.cos(s.yaw_rad), np.sin(s.yaw_rad)])) for s in plan.stops]
         frac = [1 - b / a for a, b in zip(mast_d, mast_d[1:])]
         assert sum(0.099 < f < 0.201 for f in frac) >= len(frac) - 4
-    sim = build_run("traverse", "s1-curved", 3, image_scale=SMALL, supersample=1, render=False)
+    sim = build_run("traverse", "s1-curved", 1, image_scale=SMALL, supersample=1, render=False)
     dl = sim.downlink
     assert len(dl.targets) == 3
     for tm in dl.targets:
