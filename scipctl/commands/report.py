@@ -51,6 +51,10 @@ def _summary(data, sequences) -> dict:
         seq = sequences.get(t["id"])
         targets.append({
             "id": t["id"], "designated": t["record"] is not None,
+            "designation_ok": bool(t["record"] and t["record"].get("ok", True) and t["record"].get("xyz_site_m")),
+            "prediction_check": [{k: r.get(k) for k in ("product_id", "expected_error_px", "expected_error_true_pose_px",
+                                                         "render_pose", "ncc", "shift_px")}
+                                 for r in t.get("prediction_check", [])],
             "chain_final_error_px": None if fin is None else fin["error_px"],
             "best_near_handoff": None if best is None else {"method": best["method"], "error_px": best["error_px"]},
             "predicted_success": None if pred is None else pred.confidence,
@@ -118,6 +122,12 @@ def _print(con, s):
             parts.append("sequence ok" if not t["rules_broken"] else "rules broken: " + ", ".join(t["rules_broken"]))
         if not t["designated"]:
             parts.append("not designated")
+        elif not t["designation_ok"]:
+            parts.append("designation failed (no reliable stereo match)")
+        chk = [c for c in t["prediction_check"] if c["ncc"] is not None]
+        if chk:
+            parts.append(f"expected views vs {len(chk)} later image(s): NCC "
+                         + ", ".join(f"{c['ncc']:.2f}" for c in chk))
         con.print(" ".join(parts))
     if s["mast_bias_deg"]:
         m = s["mast_bias_deg"]

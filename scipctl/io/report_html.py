@@ -336,6 +336,20 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         pred = t["prediction"]
         if pred is not None:
             add(_prediction_html(pred, palette))
+        if t.get("prediction_check"):
+            add("<h3>Prediction against the later images of this downlink</h3>")
+            add("<p class=\"small\">Expected pixel: the designated 3-D target through each later image's model and "
+                "downlinked (estimated) pose. Render check: today's stereo terrain rendered through the same model, "
+                "NCC-matched to the real image around the mark (best shift within ±150 px): the NCC measures how well the "
+                "expected appearance matches, the shift how far today's geometry (calibration) puts it.</p>")
+            add(_table(["image", "camera", "position", "mark", "expected (downlinked pose)", "error px",
+                        "error px at the true pose", "rendered at pose", "terrain coverage", "render NCC", "render shift px"],
+                       [[_e(r["product_id"]), _e(r["camera"]), f"{r['position'][0]}/{r['position'][1]}", _uv(r["mark_uv"]),
+                         _uv(r["expected_uv"]), _f(r["expected_error_px"], 1), _f(r.get("expected_error_true_pose_px"), 1),
+                         _e(r.get("render_pose", "")), _f(r["coverage"]), _f(r["ncc"]), _uv(r["shift_px"])]
+                        for r in t["prediction_check"]]))
+            add('<details><summary>actual vs expected chips</summary><div class="chips">'
+                + "".join(_chip_html(c, palette) for c in t["prediction_check_chips"]) + "</div></details>")
         seq = sequences.get(t["id"])
         if seq:
             add("<h3>Uplink sequence and flight rules</h3>")

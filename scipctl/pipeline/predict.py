@@ -1478,7 +1478,7 @@ def assess_risks(plan: ApproachPlan, mc: Optional[McResult], chain: Optional[Cha
                 if sh.incidence_rad is not None and sh.incidence_rad > params.max_incidence_rad:
                     reasons.append(f"too oblique (incidence {math.degrees(sh.incidence_rad):.0f} deg)")
             if v is not None:
-                if v.p_in_fov < params.risk_probability:
+                if v.p_in_fov < params.risk_probability and sh.in_fov:
                     reasons.append(f"out of field of view (P in view {v.p_in_fov:.2f})")
                 if v.p_in_search < params.risk_probability:
                     reasons.append(f"outside the search region (P {v.p_in_search:.2f}, rms offset {v.offset_px_rms:.0f} px)")
@@ -1486,7 +1486,9 @@ def assess_risks(plan: ApproachPlan, mc: Optional[McResult], chain: Optional[Cha
                     reasons.append(f"occlusion (P visible {v.p_visible:.2f})")
             if c is not None:
                 pk = c.get("p_kept_given_visible")
-                if not c["nominal_kept"] and c["nominal_reason"] != "target lost earlier":
+                geometric = ("target lost earlier", "out of the field of view", "occluded", "target behind the camera",
+                             "cannot point", "target not in view")
+                if not c["nominal_kept"] and c["nominal_reason"] not in geometric and c["nominal_reason"] != sh.note:
                     reasons.append(f"tracking loses the target on the nominal expected view ({c['nominal_reason']})")
                 elif pk is not None and pk < params.risk_probability:
                     reasons.append(f"tracking loses the target on expected views (P kept {pk:.2f})")

@@ -332,6 +332,72 @@ def expected_view_chips(pred) -> list:
     return chips
 
 
+# ============================================================================ prediction vs later images
+def prediction_check(dl: Downlink, record: dict, pred, half: int = 40, search_px: int = 150) -> tuple:
+    """Check the prediction against the images of this downlink taken after today's position.
+
+    For each later left image where the target is marked: the expected pixel
+    of the designated 3-D target through the image's model and downlinked
+    (estimated) pose, against the mark (pose-estimate error included); with
+    simulation truth also through the true model and pose (the designation's
+    error alone); and today's terrain rendered around the mark through the
+    true model and pose when known (else the downlinked ones), NCC-matched to
+    the real image (best shift within ``search_px``): the fidelity of the
+    expected views. Returns ``(rows, chips)``.
+    """
+    import cv2
+
+    terrain = getattr(pred, "terrain", None)
+    tm = next((t for t in dl.targets if t.id == record["id"]), None)
+    if terrain is None or tm is None:
+        return [], []
+    today = dl.product(record["product_id"])
+    X = np.asarray(record["xyz_site_m"], float)
+    rows, chips = [], []
+    for im in sorted((i for i in dl.images if i.eye == "left" and i.position != today.position and i.time_s > today.time_s),
+                     key=lambda i: i.time_s):
+        mk = tm.mark_in(im.product_id)
+        if mk is None:
+            continue
+        ms = im.camera_model.transformed(im.pose.T_site_rover)
+        uv_exp = ms.project(X[None])[0]
+        tr = dl.truth_for(im.product_id)
+        uv_true_pose = None
+        if tr is not None:
+            ms = tr.camera_model.transformed(tr.pose.T_site_rover)  # render at the true pose
+            uv_true_pose = ms.project(X[None])[0]
+        c = np.round([mk.u, mk.v]).astype(int)
+        R = half + search_px
+        view = terrain.render(ms, 0, 0, roi=(int(c[0] - R), int(c[1] - R), 2 * R + 1, 2 * R + 1))
+        actual, origin = _crop(im.pixels_float(), c, half)
+        row = {"product_id": im.product_id, "camera": im.camera, "position": list(im.position),
+               "mark_uv": [mk.u, mk.v], "expected_uv": uv_exp.tolist() if np.all(np.isfinite(uv_exp)) else None,
+               "expected_error_px": float(np.hypot(*(uv_exp - [mk.u, mk.v]))) if np.all(np.isfinite(uv_exp)) else None,
+               "expected_error_true_pose_px": (float(np.hypot(*(uv_true_pose - [mk.u, mk.v])))
+                                               if uv_true_pose is not None and np.all(np.isfinite(uv_true_pose)) else None),
+               "render_pose": "true" if tr is not None else "downlinked",
+               "coverage": view.coverage, "ncc": None, "shift_px": None}
+        inner = view.image[search_px:search_px + 2 * half + 1, search_px:search_px + 2 * half + 1]
+        if view.coverage > 0.1 and np.isfinite(actual).all():
+            big = np.where(np.isfinite(view.image), view.image, np.nanmean(view.image)).astype(np.float32)
+            m = cv2.matchTemplate(big, actual.astype(np.float32), cv2.TM_CCOEFF_NORMED)
+            _, best, _, loc = cv2.minMaxLoc(m)
+            row["ncc"] = float(best)
+            row["shift_px"] = [float(loc[0] - search_px), float(loc[1] - search_px)]  # rendered content offset
+            inner = view.image[loc[1]:loc[1] + 2 * half + 1, loc[0]:loc[0] + 2 * half + 1]  # aligned for display
+        rows.append(row)
+        marks = [ChipMarker("true", "true (mark)", (mk.u, mk.v))]
+        if row["expected_uv"] is not None:
+            marks.append(ChipMarker("expected", "expected (designated 3-D, downlinked pose)", tuple(row["expected_uv"])))
+        chips.append(Chip(record["id"], im.product_id, im.camera, im.position, f"{im.product_id}: actual",
+                          _norm(actual), origin, marks))
+        sh = row["shift_px"] or [0.0, 0.0]
+        chips.append(Chip(record["id"], im.product_id, im.camera, im.position,
+                          f"{im.product_id}: expected from today's stereo (aligned, shift {sh[0]:+.0f}, {sh[1]:+.0f} px)",
+                          _norm(inner), (origin[0] + sh[0], origin[1] + sh[1]), []))
+    return rows, chips
+
+
 # ============================================================================ the whole report
 def _all_target_ids(dl: Downlink, targets_doc) -> list:
     ids = [t.id for t in dl.targets]
@@ -453,8 +519,11 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
         err3d = None
         if rec is not None and tt is not None and rec.get("xyz_site_m") is not None:
             err3d = float(np.linalg.norm(np.asarray(rec["xyz_site_m"]) - np.asarray(tt.xyz_site_m)))
+        pr = predictions.get(tid)
+        check_rows, check_chips = ([], []) if pr is None else prediction_check(dl, rec, pr, p.chip_half_px)
         data["targets"].append({
             "id": tid, "record": rec, "designation_error_m": err3d,
+            "prediction_check": check_rows, "prediction_check_chips": check_chips,
             "chain": steps, "handoff": hrecs,
             "chips": chips_for_target(dl, tid, rec, steps, hrecs, p.chip_half_px),
             "prediction": predictions.get(tid),
