@@ -33,7 +33,7 @@ from typing import Optional
 
 import numpy as np
 
-from .noise import FractalNoise, LatticeNoise
+from .noise import FractalNoise, LatticeNoise, lod_weight
 
 MAT_SKY, MAT_TERRAIN, MAT_ROCK, MAT_PEBBLE = -1, 0, 1, 2
 GEOM_TERRAIN, GEOM_ROCKS, GEOM_PEBBLES = 0, 1, 2
@@ -343,11 +343,18 @@ class Appearance:
                 tex[soil] = self.soil.eval_T(np.ascontiguousarray(PT[:, soil]), sub(f, soil))
             sel = np.flatnonzero(ws > 0)
             if len(sel):
-                tex[sel] = (1 - ws[sel]) * tex[sel] + ws[sel] * self.sand.eval_T(np.ascontiguousarray(PT[:, sel]), sub(f, sel))
+                sand = self.sand.eval_T(np.ascontiguousarray(PT[:, sel]), sub(f, sel))
+                # wind ripples: ~9 cm crests across the prevailing wind, a little wavy (faded below the footprint)
+                x, y = PT[0, sel], PT[1, sel]
+                ph = f32(2 * np.pi / 0.09) * (f32(0.8) * x + f32(0.6) * y) + f32(1.5) * np.sin(f32(2 * np.pi / 0.7) * (f32(-0.6) * x + f32(0.8) * y))
+                rip = f32(0.07) * np.sin(ph)
+                if f is not None:
+                    rip *= lod_weight(0.09 / 4, f[sel])
+                tex[sel] = (1 - ws[sel]) * tex[sel] + ws[sel] * (sand + rip)
             a = base * (f32(1.0) + tex)
             s = self.spots.eval_T(PT, f)  # ~[-0.5, 0.5]
-            dark = np.clip((s - f32(0.2)) / f32(0.06), 0, 1) * (1 - ws)
-            bright = np.clip((-s - f32(0.22)) / f32(0.06), 0, 1) * (1 - ws)
+            dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
+            bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
             a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
             out[ter] = a
         rk = np.flatnonzero((material == MAT_ROCK) | (material == MAT_PEBBLE))
@@ -500,9 +507,13 @@ class Scene:
         uvb = ans["primitive_uvs"].numpy()
         ng = ans["primitive_normals"].numpy().astype(np.float64)
         N = len(t)
-        P = np.full((N, 3), np.nan)
-        hi = np.flatnonzero(hit)
-        P[hi] = origins[hi] + t[hi, None] * dirs[hi]
+        if hit.all():
+            P = dirs * t[:, None]
+            P += origins
+        else:
+            P = np.full((N, 3), np.nan)
+            hi = np.flatnonzero(hit)
+            P[hi] = origins[hi] + t[hi, None] * dirs[hi]
         mat = np.full(N, MAT_SKY, np.int8)
         scale = np.ones(N, np.float32)
         nsh = ng.copy()
@@ -513,7 +524,10 @@ class Scene:
             vn = self.terrain_normals()
             u = uvb[ter, 0:1].astype(np.float64)
             v = uvb[ter, 1:2].astype(np.float64)
-            n = (1 - u - v) * vn[tri[:, 0]] + u * vn[tri[:, 1]] + v * vn[tri[:, 2]]
+            n = vn[tri[:, 0]]
+            n *= 1 - u - v
+            n += u * vn[tri[:, 1]]
+            n += v * vn[tri[:, 2]]
             n /= np.sqrt(_rowdot(n, n))[:, None]
             nsh[ter] = n
         rk = np.flatnonzero(gid == GEOM_ROCKS)
