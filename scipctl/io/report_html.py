@@ -238,8 +238,6 @@ def _chip_html(chip, palette) -> str:
 
 def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: dict) -> str:
     """The report HTML. ``sequences``: target id -> {"checks": [RuleCheck dicts], "text": SeqN or None}."""
-    from ..pipeline.report_data import expected_view_chips
-
     palette: dict = {}
     P = []
     add = P.append
@@ -335,7 +333,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
                         for r in t["handoff"]]))
         pred = t["prediction"]
         if pred is not None:
-            add(_prediction_html(pred, palette))
+            add(_prediction_html(pred, t.get("expected_chips", []), palette))
         if t.get("prediction_check"):
             add("<h3>Prediction against the later images of this downlink</h3>")
             add("<p class=\"small\">Expected pixel: the designated 3-D target through each later image's model and "
@@ -414,9 +412,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
     return "\n".join(P) + "\n"
 
 
-def _prediction_html(pred, palette) -> str:
-    from ..pipeline.report_data import expected_view_chips
-
+def _prediction_html(pred, chips, palette) -> str:
     out = ["<h3>Pre-uplink prediction (from today's downlink only)</h3>"]
     plan = pred.plan
     acc = pred.accuracy or {}
@@ -453,7 +449,6 @@ def _prediction_html(pred, palette) -> str:
     png = plot_prediction(pred)
     if png:
         out.append(_img(png, f"prediction {pred.target_id}"))
-    chips = expected_view_chips(pred)
     if chips:
         out.append("<details open><summary>Expected views rendered from today's stereo terrain (orange: expected target)"
                    "</summary><div class=\"chips\">" + "".join(_chip_html(c, palette) for c in chips) + "</div></details>")

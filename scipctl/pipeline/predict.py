@@ -1453,7 +1453,8 @@ class Risk:
 def assess_risks(plan: ApproachPlan, mc: Optional[McResult], chain: Optional[ChainResult],
                  params: PredictParams) -> list:
     """Stops and handoffs at risk, each with the reasons (occlusion, out of field of view, outside the
-    search region, low texture, no terrain data, too oblique, viewpoint change, tracking failed)."""
+    search region, low texture, no terrain data, too oblique, tracking loses the target, drift, arm workspace;
+    :func:`run_prediction` adds the foreshortening changes)."""
     risks = []
     mcv = {(v.stop, v.camera): v for v in (mc.views if mc else [])}
     chv = {(v["stop"], v["camera"]): v for v in (chain.per_view if chain else [])}
@@ -1542,6 +1543,7 @@ class Prediction:
     notes: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     accuracy: dict = field(default_factory=dict)  # predicted final placement error (m): nominal, mean, max over kept samples
+    terrain: Optional[Terrain] = field(default=None, repr=False)  # today's terrain the views were rendered from
 
     def to_dict(self) -> dict:
         return {
@@ -1619,7 +1621,7 @@ def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_c
                "max_final_error_m": float(np.max(kept)) if kept else None, "samples_kept": len(kept),
                "goal_m": SUCCESS_M["hazcam"]}
     return Prediction(target_id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigma_source, notes, secs,
-                      acc)
+                      acc, terrain)
 
 
 # ============================================================================ from a downlink
@@ -1755,5 +1757,4 @@ def predict_target(dl, record: dict, params: Optional[PredictParams] = None, des
                           ctx.product.camera_model.transformed(ctx.start.T_site_rover), record["pixel_uv"],
                           ctx.target_site_m, sp, sy, src, float(record.get("range_sigma_m") or 0.0), params)
     pred.seconds.update({"terrain": t_terrain, "plan": t_plan})
-    pred.terrain = terrain
     return pred

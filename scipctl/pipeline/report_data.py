@@ -347,7 +347,7 @@ def prediction_check(dl: Downlink, record: dict, pred, half: int = 40, search_px
     """
     import cv2
 
-    terrain = getattr(pred, "terrain", None)
+    terrain = pred.terrain
     tm = next((t for t in dl.targets if t.id == record["id"]), None)
     if terrain is None or tm is None:
         return [], []
@@ -523,6 +523,7 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
         check_rows, check_chips = ([], []) if pr is None else prediction_check(dl, rec, pr, p.chip_half_px)
         data["targets"].append({
             "id": tid, "record": rec, "designation_error_m": err3d,
+            "expected_chips": [] if pr is None else expected_view_chips(pr),
             "prediction_check": check_rows, "prediction_check_chips": check_chips,
             "chain": steps, "handoff": hrecs,
             "chips": chips_for_target(dl, tid, rec, steps, hrecs, p.chip_half_px),
