@@ -87,7 +87,6 @@ def run(src, out, json_out):
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None)
     try:
         atomic_write_text(out, html)
-        _share(out)
     except OSError as e:
         raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
     summary["report"] = str(out)
@@ -98,7 +97,6 @@ def run(src, out, json_out):
     mc = out.with_suffix(".annotations.mcap")  # the same annotations for Foxglove
     try:
         write_annotations(source.downlink, data, mc)
-        _share(mc)
         summary["annotations_mcap"] = str(mc)
     except OSError as e:
         summary["notes"].append(f"annotations MCAP not written: {e}")
@@ -137,15 +135,3 @@ def _print(con, s):
         con.print(f"{s['flagged_images']} image(s) flagged for gain/saturation")
     for n in s["notes"]:
         con.print(f"note: {n}")
-
-
-def _share(path) -> None:
-    """Atomic writes create private (0600) files; give the output the usual permissions (0666 minus the umask)."""
-    import os
-
-    mask = os.umask(0)
-    os.umask(mask)
-    try:
-        os.chmod(path, 0o666 & ~mask)
-    except OSError:
-        pass

@@ -83,7 +83,6 @@ def run(src, target, out, fmt, json_out):
     if out is not None:
         try:
             atomic_write_text(out, text)
-            _share(out)
         except OSError as e:
             raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
         summary["written_to"] = str(out)
@@ -113,15 +112,3 @@ def _print(checks, pred, target):
         for k in pred.risks:
             r.add_row(str(k.stop), k.camera, k.what, "-" if k.probability is None else f"{k.probability:.2f}", "; ".join(k.reasons))
         con.print(r)
-
-
-def _share(path) -> None:
-    """Atomic writes create private (0600) files; give the output the usual permissions (0666 minus the umask)."""
-    import os
-
-    mask = os.umask(0)
-    os.umask(mask)
-    try:
-        os.chmod(path, 0o666 & ~mask)
-    except OSError:
-        pass
