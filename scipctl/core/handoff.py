@@ -88,7 +88,7 @@ class StereoView:
     height: int
     min_range_m: float = 0.4
     max_range_m: float = 30.0
-    dense_downsample: int = 1
+    dense_downsample: int = 2
     _dense: object = field(default=None, repr=False)
     dense_seconds: float = 0.0
 
@@ -181,9 +181,12 @@ class HandoffCase:
             nav_pts, _ = self.nav.cloud()
             haz_pts = self.haz_cloud()
             C = self.haz.left_model.C
-            haz_pts = haz_pts[np.linalg.norm(haz_pts - C, axis=1) < self.params.registration_max_range_m]
+            r = self.params.registration_max_range_m
+            haz_pts = haz_pts[np.linalg.norm(haz_pts - C, axis=1) < r]
+            # the navcam cloud where it can overlap the hazcam's (seeded into the hazcam frame)
+            nav_pts = nav_pts[np.linalg.norm(self.T_haz_nav.apply(nav_pts) - C, axis=1) < r + 1.0]
             try:
-                self._cache["whole_reg"] = register_clouds(nav_pts, haz_pts, self.T_haz_nav)
+                self._cache["whole_reg"] = register_clouds(nav_pts, haz_pts, self.T_haz_nav, scales_m=(0.08, 0.04, 0.02))
             except ValueError as e:
                 self._cache["whole_reg"] = e
         return self._cache["whole_reg"]
@@ -194,6 +197,8 @@ class HandoffCase:
         key = ("local_reg", tuple(np.round(centre_haz_m, 4)))
         if key not in self._cache:
             nav_pts, _ = self.nav.cloud()
+            nav_pts = nav_pts[np.linalg.norm(self.T_haz_nav.apply(nav_pts) - centre_haz_m, axis=1)
+                              < 2 * self.params.local_radius_m]
             try:
                 self._cache[key] = register_clouds(
                     nav_pts, self.haz_cloud(), self.T_haz_nav, scales_m=(0.02, 0.01, 0.005),

@@ -74,14 +74,14 @@ def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str
 def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=None, near=None, far=None) -> HandoffSetup:
     params = params or HandoffParams()
     haz, nr, fr = find_products(dl, hazcam, near, far)
-    haz_view = _view(dl, haz, 0.3, 6.0)
+    haz_view = _view(dl, haz, 0.3, 6.0)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m
     setup = HandoffSetup(haz, nr, fr)
     if nr is not None:
         T = T_roverB_roverA(haz.pose, nr.pose) if nr.position != haz.position else RigidTransform.identity()
-        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.5, 30.0), haz_view, T, params)
+        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.8, 30.0), haz_view, T, params)
     if fr is not None:
         T = T_roverB_roverA(haz.pose, fr.pose)
-        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.5, 30.0), haz_view, T, params)
+        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.8, 30.0), haz_view, T, params)
     return setup
 
 
