@@ -93,6 +93,7 @@ class StopPlan:
     bearing_rad: float = 0.0  # from the rock towards the reference cameras
     path_length_m: float = 0.0  # drive from the previous stop
     turn_rad: float = 0.0
+    arc_leg: bool = False  # the drive from the previous stop is an arc (5 % longer than the chord)
 
 
 @dataclass
@@ -127,7 +128,8 @@ def _place(ref_x_m: float, dist_m: float, bearing_rad: float, jitter=(0.0, 0.0, 
 def _finish_legs(stops: list, arc_legs: set = frozenset()) -> list:
     for i in range(1, len(stops)):
         d = float(np.linalg.norm(stops[i].xy_m - stops[i - 1].xy_m))
-        stops[i].path_length_m = d * (1.05 if i in arc_legs else 1.0)
+        stops[i].arc_leg = i in arc_legs
+        stops[i].path_length_m = d * (1.05 if stops[i].arc_leg else 1.0)
         stops[i].turn_rad = _wrap(stops[i].yaw_rad - stops[i - 1].yaw_rad)
     return stops
 
@@ -314,6 +316,7 @@ class ProductPlan:
     width: int
     height: int
     vibration_rotvec: Optional[list] = None
+    cumulative_path_m: float = 0.0  # driven since the first stop
 
     @property
     def model_true_site(self) -> CameraModel:
@@ -527,9 +530,8 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
     aim_site = scene.target_rock.aim_point_site()
     T_true = [place_on_terrain(scene, s, calibrated, true_cfg, aim_site) for s in plan.stops]
     for k in range(1, len(plan.stops)):  # the drive between the placed stops
-        s0, s1 = plan.stops[k - 1], plan.stops[k]
-        arc = s1.path_length_m > 1.0001 * np.linalg.norm(s1.xy_m - s0.xy_m)
-        s1.path_length_m = float(np.linalg.norm(T_true[k].t[:2] - T_true[k - 1].t[:2])) * (1.05 if arc else 1.0)
+        s1 = plan.stops[k]
+        s1.path_length_m = float(np.linalg.norm(T_true[k].t[:2] - T_true[k - 1].t[:2])) * (1.05 if s1.arc_leg else 1.0)
     r_odo = _rng(plan.seed, plan.scenario, plan.run, "odometry")
     T_est, odo_rec = estimate_poses(T_true, [s.path_length_m for s in plan.stops], [s.turn_rad for s in plan.stops], errors, r_odo)
     r_point = _rng(plan.seed, plan.scenario, plan.run, "pointing")
@@ -566,7 +568,7 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
                     m_true = m_true.transformed(T_vib)
                 pid = f"{plan.run}-{s.label}-{cam}-{eye[0].upper()}"
                 products.append(ProductPlan(pid, s.label, k, cam, eye, round(t, 3), pan, tilt, m_cal, m_true, Tt, Te,
-                                            spec.width, spec.height, rv.tolist() if eye == "right" else None))
+                                            spec.width, spec.height, rv.tolist() if eye == "right" else None, cum))
                 t += STEREO_GAP_S if eye == "left" else 0.0
             t += PAIR_GAP_S
             srec["pairs"].append(prec)
@@ -590,6 +592,21 @@ def compute_marks(scene: Scene, products: list, targets: list) -> list[TargetMar
         marks = [Mark(pid, float(uv[j, 0]), float(uv[j, 1]), 0.0) for pid, uv, vis in vis_all if vis[j]]
         out.append(TargetMarks(t.id, t.kind, t.description, marks))
     return out
+
+
+def estimated_pose(T_est: RigidTransform, cumulative_path_m: float, n_legs: int, errors: ErrorSettings) -> RoverPose:
+    """The product pose: the odometry estimate with the rover's own 1-sigma claims (None when exact).
+
+    ``sigma_position_m = 5 mm + sqrt(scale^2 + leg^2) L + drift L^2 / 2`` (distance error, and the lateral
+    error a heading drift builds up), ``sigma_yaw_rad = 0.1 deg + drift L + noise sqrt(legs)``, L = path driven.
+    """
+    if errors.odometry_is_exact:
+        return RoverPose(T_est, "truth")
+    L = float(cumulative_path_m)
+    sp = 0.005 + np.hypot(errors.odometry_scale_sigma, errors.odometry_scale_leg_sigma) * L \
+        + 0.5 * errors.heading_drift_sigma_rad_per_m * L * L
+    sy = 0.1 * DEG + errors.heading_drift_sigma_rad_per_m * L + errors.heading_noise_sigma_rad * np.sqrt(n_legs)
+    return RoverPose(T_est, "wheel_odometry", float(sp), float(sy))
 
 
 def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings] = None, image_scale: float = 1.0,
@@ -636,7 +653,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
         png = encode_png(px)
         exposure_ms = round(exposure * EXPOSURE_MS_PER_UNIT.get(p.camera, 25.0), 3)
         mast = MastAngles(p.pan_rad, p.tilt_rad) if p.pan_rad is not None else None
-        est = RoverPose(p.T_est, "wheel_odometry" if not errors.odometry_is_exact else "truth")
+        est = estimated_pose(p.T_est, p.cumulative_path_m, p.stop_index, errors)
         images.append(ImageProduct(p.product_id, p.camera, p.eye, float(p.time_s), 1, p.stop_index, est, p.model_cal,
                                    p.width, p.height, png, mast=mast, exposure_ms=exposure_ms, gain=1.0))
         truths.append(ImageTruth(p.product_id, RoverPose(p.T_true, "truth"), p.model_true))

@@ -4,9 +4,7 @@ import numpy as np
 import pytest
 
 from scipctl.sim.errors import ErrorSettings
-from scipctl.sim.scenarios import (
-    HAZCAM_REF_X_M, KINDS, NAVCAM_REF_X_M, build_run, list_runs, plan_run, project_visible, scene_for,
-)
+from scipctl.sim.scenarios import KINDS, build_run, list_runs, plan_run, project_visible, scene_for
 
 from .conftest import SMALL
 
@@ -227,3 +225,19 @@ def test_scene_is_shared_by_the_runs_of_a_scene():
         for s in plan.stops:
             for r in a.rocks[1:]:
                 assert np.linalg.norm(r.centre_xy_m - s.xy_m) > r.radius_m + 0.6
+
+
+def test_drive_legs_and_pose_sigmas(run_errors, run_exact):
+    # straight run: every leg is its chord; the arc run's last leg (far -> near) is an arc
+    for sim, arcs in ((run_errors, set()), (run_exact, {"near"})):
+        by_stop = {p.stop: p.T_true for p in sim.products}
+        labels = [s.label for s in sim.plan.stops]
+        for a, b in zip(labels, labels[1:]):
+            chord = np.linalg.norm(by_stop[b].t[:2] - by_stop[a].t[:2])
+            L = next(s["path_length_m"] for s in sim.record["stops"] if s["label"] == b)
+            assert L == pytest.approx(chord * (1.05 if b in arcs else 1.0), rel=1e-12)
+    # the odometry poses carry growing 1-sigma claims; exact poses carry none
+    sig = [im.pose.sigma_position_m for im in run_errors.downlink.images]
+    assert all(s is not None and s > 0 for s in sig) and sig[-1] > sig[0]
+    assert all(im.pose.source == "wheel_odometry" for im in run_errors.downlink.images)
+    assert all(im.pose.sigma_position_m is None for im in run_exact.downlink.images)
