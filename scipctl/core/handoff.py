@@ -27,14 +27,16 @@ Paper methods (names used on the command line and in JSON):
 
 Methods beyond the paper (see docs/handoff.md):
 
-``local-registration``  ICP restricted to a patch around the target (the paper's
-                        suggestion of "a small mesh only around the navcam"
-                        target), then kinematic handoff.
-``registered-refined``  the refined-geometric expected window built through the
-                        locally registered transform, tracked in a small radius
-                        around the local-registration point, with a consistency
-                        check that falls back to that point when the track is
-                        not trustworthy.
+``coarse-fine-geometric`` the paper's suggestion for refinement failures: track a
+                        large draped window (more context) first, then the
+                        small one within a few pixels of that answer.
+``consensus``           of coarse-fine-geometric, refined-geometric and
+                        refined-kinematic, those with NCC peak above
+                        ``consensus_min_score`` that agree within
+                        ``consensus_agree_px`` (two or more): their mean, flagged
+                        confident; otherwise the pure-geometric answer, flagged
+                        not confident. Failure detection from expected images
+                        built in different ways.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ PAPER_METHODS = (
     "refined-geometric",
     "mesh-registration",
 )
-EXTRA_METHODS = ("local-registration", "registered-refined")
+EXTRA_METHODS = ("coarse-fine-geometric", "consensus")
 ALL_METHODS = PAPER_METHODS + EXTRA_METHODS
 
 
@@ -70,10 +72,10 @@ class HandoffParams:
     point_stereo_window_px: int = 21
     nav_cloud_radius_m: float = 0.6  # navcam points used for the expected window (around the target)
     registration_max_range_m: float = 5.0  # whole-cloud ICP uses points within this range of the hazcam
-    local_radius_m: float = 0.45  # local-registration patch radius around the target
-    registered_search_px: float = 8.0
-    registered_agree_px: float = 4.0
-    registered_min_score: float = 0.6
+    coarse_template_half_px: int = 40
+    fine_search_px: float = 4.0
+    consensus_agree_px: float = 3.0
+    consensus_min_score: float = 0.5
 
 
 @dataclass
@@ -186,27 +188,13 @@ class HandoffCase:
             # the navcam cloud where it can overlap the hazcam's (seeded into the hazcam frame)
             nav_pts = nav_pts[np.linalg.norm(self.T_haz_nav.apply(nav_pts) - C, axis=1) < r + 1.0]
             try:
-                self._cache["whole_reg"] = register_clouds(nav_pts, haz_pts, self.T_haz_nav, scales_m=(0.08, 0.04, 0.02))
+                self._cache["whole_reg"] = register_clouds(
+                    nav_pts, haz_pts, self.T_haz_nav,
+                    # far seeds carry the pose-estimate error (decimetres): start coarser
+                    scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02))
             except ValueError as e:
                 self._cache["whole_reg"] = e
         return self._cache["whole_reg"]
-
-    def local_registration(self, centre_haz_m: np.ndarray):
-        from .registration import register_clouds
-
-        key = ("local_reg", tuple(np.round(centre_haz_m, 4)))
-        if key not in self._cache:
-            nav_pts, _ = self.nav.cloud()
-            nav_pts = nav_pts[np.linalg.norm(self.T_haz_nav.apply(nav_pts) - centre_haz_m, axis=1)
-                              < 2 * self.params.local_radius_m]
-            try:
-                self._cache[key] = register_clouds(
-                    nav_pts, self.haz_cloud(), self.T_haz_nav, scales_m=(0.02, 0.01, 0.005),
-                    crop_center_m=centre_haz_m, crop_radius_m=self.params.local_radius_m,
-                )
-            except ValueError as e:
-                self._cache[key] = e
-        return self._cache[key]
 
     # ----------------------------------------------------------- helpers
     def _project_haz(self, X_haz) -> np.ndarray:
@@ -249,8 +237,8 @@ class HandoffCase:
             "pure-geometric": self._pure_geometric,
             "refined-geometric": self._refined_geometric,
             "mesh-registration": self._mesh_registration,
-            "local-registration": self._local_registration,
-            "registered-refined": self._registered_refined,
+            "coarse-fine-geometric": self._coarse_fine_geometric,
+            "consensus": self._consensus,
         }.get(method)
         if fn is None:
             raise ValueError(f"unknown handoff method {method!r} (known: {', '.join(ALL_METHODS)})")
@@ -325,8 +313,8 @@ class HandoffCase:
                 X_haz = np.asarray(near_pk.diagnostics["xyz_haz_rover_m"])
             from .tracking import extract_window, scale_window, window_scale_for_handoff
 
-            ifov_nav = 1.0 / self.nav.left_model.hs
-            ifov_haz = 1.0 / self.haz.left_model.hs
+            ifov_nav = local_ifov_rad(self.nav.left_model, nav_uv)
+            ifov_haz = local_ifov_rad(self.haz.left_model, start)
             range_haz = float(np.linalg.norm(X_haz - self.haz.left_model.C))
             scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
             src_half = int(np.ceil(k / scale))
@@ -378,35 +366,53 @@ class HandoffCase:
         uv = self._project_haz(X)
         return MethodResult("", "", bool(np.all(np.isfinite(uv))), uv, diagnostics=_reg_diag(reg))
 
-    def _local_registration(self, nav_uv):
-        ps = self._nav_point(nav_uv)
-        X0 = self.T_haz_nav.apply(ps.xyz)
-        reg = self.local_registration(X0)
-        if isinstance(reg, Exception):
-            raise _NoAnswer(f"registration failed: {reg}")
-        X = reg.T_target_source.apply(ps.xyz)
-        uv = self._project_haz(X)
-        d = _reg_diag(reg)
-        d["xyz_haz_rover_m"] = X.tolist()
-        return MethodResult("", "", bool(np.all(np.isfinite(uv))), uv, diagnostics=d)
-
-    def _registered_refined(self, nav_uv):
+    def _coarse_fine_geometric(self, nav_uv):
         p = self.params
-        lr = self._local_registration(nav_uv)
-        ps = self._nav_point(nav_uv)
-        reg = self.local_registration(self.T_haz_nav.apply(ps.xyz))
-        tpl, frac, c = self._draped_window(lr.uv, reg.T_target_source, p.template_half_px)
-        diag = {"local_registration_uv": lr.uv.tolist(), "draped_fraction": frac}
-        if tpl is None:
-            diag["fallback"] = "no hazcam stereo around the target"
-            return MethodResult("", "", True, lr.uv, diagnostics=diag)
-        tc = np.asarray(lr.uv) - (c - p.template_half_px)
-        tr = self._track(tpl, lr.uv, p.registered_search_px, p.registered_min_score, template_center_uv=tc)
-        diag.update(_track_diag(tr))
-        if tr.ok and np.linalg.norm(tr.uv - lr.uv) <= p.registered_agree_px:
-            return MethodResult("", "", True, tr.uv, diagnostics=diag)
-        diag["fallback"] = tr.reason or "track disagrees with the registered prediction"
-        return MethodResult("", "", True, lr.uv, diagnostics=diag)
+        pg = self._pure_geometric(nav_uv)
+        big, frac_big, cb = self._draped_window(pg.uv, self.T_haz_nav, p.coarse_template_half_px)
+        small, frac, cs = self._draped_window(pg.uv, self.T_haz_nav, p.template_half_px)
+        if big is None or small is None:
+            raise _NoAnswer("expected hazcam window is empty (no hazcam stereo around the target)")
+        tr1 = self._track(big, pg.uv, p.search_radius_px, p.refined_min_score,
+                          template_center_uv=np.asarray(pg.uv) - (cb - p.coarse_template_half_px))
+        if not np.all(np.isfinite(tr1.uv)):
+            raise _NoAnswer(f"coarse NCC track failed: {tr1.reason}")
+        tr2 = self._track(small, tr1.uv, p.fine_search_px, p.refined_min_score,
+                          template_center_uv=np.asarray(pg.uv) - (cs - p.template_half_px))
+        diag = {"draped_fraction": frac_big, "start_uv": pg.uv.tolist(), "coarse_uv": tr1.uv.tolist(),
+                "coarse_ncc_peak": _f(tr1.score), "coarse_ncc_ratio": _f(tr1.ratio)}
+        if not np.all(np.isfinite(tr2.uv)):
+            diag["fallback"] = f"fine track failed: {tr2.reason}"
+            return MethodResult("", "", True, tr1.uv, diagnostics=diag)
+        diag.update(_track_diag(tr2))
+        return MethodResult("", "", True, tr2.uv, diagnostics=diag)
+
+    def _consensus(self, nav_uv):
+        p = self.params
+        hint = getattr(self, "_near_hint", None)
+        cands = {}
+        for m in ("coarse-fine-geometric", "refined-geometric", "refined-kinematic"):
+            r = self.run(m, nav_uv, near_hint=hint)
+            if r.ok and r.uv is not None and np.all(np.isfinite(r.uv)):
+                score = r.diagnostics.get("ncc_peak") or r.diagnostics.get("coarse_ncc_peak") or 0.0
+                if score >= p.consensus_min_score:
+                    cands[m] = np.asarray(r.uv, float)
+        self._near_hint = hint
+        diag = {"candidates": {k: v.tolist() for k, v in cands.items()}}
+        best = None
+        names = list(cands)
+        for i in range(len(names)):
+            group = [n for n in names if np.linalg.norm(cands[n] - cands[names[i]]) <= p.consensus_agree_px]
+            if len(group) >= 2 and (best is None or len(group) > len(best)):
+                best = group
+        if best:
+            diag["agreeing"] = best
+            diag["confident"] = True
+            return MethodResult("", "", True, np.mean([cands[n] for n in best], axis=0), diagnostics=diag)
+        pg = self._pure_geometric(nav_uv)
+        diag["confident"] = False
+        diag["fallback"] = "refined answers disagree or are weak: pure-geometric"
+        return MethodResult("", "", True, pg.uv, diagnostics=diag)
 
 
 class _NoAnswer(Exception):
@@ -453,6 +459,20 @@ def _fill_nan(img: Optional[np.ndarray]) -> Optional[np.ndarray]:
         a[grow] = num[grow] / den[grow]
         valid = valid | grow
     return a
+
+
+def local_ifov_rad(model: CameraModel, uv) -> float:
+    """Angle subtended by one pixel at ``uv`` (geometric mean of the u and v directions), rad.
+
+    At the image centre this is ``~1/hs``; off-centre in a fish-eye it differs,
+    which matters when a window is scaled from one camera to another.
+    """
+    uv = np.asarray(uv, float).reshape(2)
+    pts = np.array([uv - [0.5, 0], uv + [0.5, 0], uv - [0, 0.5], uv + [0, 0.5]])
+    _, d = model.unproject(pts)
+    a_u = np.arccos(np.clip(np.dot(d[0], d[1]), -1, 1))
+    a_v = np.arccos(np.clip(np.dot(d[2], d[3]), -1, 1))
+    return float(np.sqrt(a_u * a_v))
 
 
 def _interp_xyz(xyz: np.ndarray, uv) -> Optional[np.ndarray]:

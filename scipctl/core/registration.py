@@ -38,11 +38,14 @@ def register_clouds(
     crop_center_m: Optional[np.ndarray] = None,
     crop_radius_m: Optional[float] = None,
     max_iterations: int = 40,
+    max_corr_voxels: float = 1.5,
 ) -> RegistrationResult:
     """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_init`` (``T_target_source``).
 
     Coarse-to-fine ICP over voxel sizes ``scales_m``; the correspondence
-    distance at each scale is 3 voxels. ``method`` is ``point-to-plane`` or
+    distance at each scale is ``max_corr_voxels`` voxels (1.5: wider lets
+    differently-sampled stereo surfaces pull the alignment off, measured on
+    simulated sols in docs/handoff.md). ``method`` is ``point-to-plane`` or
     ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
     frame) only points near the centre are used (both clouds, the source after
     applying ``T_init``).
@@ -74,7 +77,7 @@ def register_clouds(
         n_s, n_t = len(s.points), len(t.points)
         if n_s < 20 or n_t < 20:
             continue
-        radius = voxel * 3
+        radius = voxel * max_corr_voxels
         crit = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=max_iterations)
         if method == "generalized":
             for pc in (s, t):
