@@ -18,7 +18,8 @@ import numpy as np
 from ..model import Downlink, ImageProduct, InputError
 
 TEMPLATE_HALF_PX = {"pancam": 20, "navcam": 15, "hazcam": 15}
-SEARCH_RADIUS_PX = {"pancam": 120.0, "navcam": 60.0, "hazcam": 60.0}
+# pointing error from the pose estimate: pancam IFOV is 1/3 of navcam's, so it needs 3x the radius in pixels
+SEARCH_RADIUS_PX = {"pancam": 300.0, "navcam": 100.0, "hazcam": 80.0}
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
@@ -37,7 +38,7 @@ class ChainStep:
     range_m: Optional[float]
     xyz_site_m: Optional[list]
     truth_xyz_site_m: Optional[list]
-    error_3d_m: Optional[float]
+    error_3d_m: Optional[float]  # stereo point vs the true target, both in the true rover frame
     ok: bool
     reason: str = ""
     extra: dict = field(default_factory=dict)
@@ -67,13 +68,66 @@ def _stereo(dl: Downlink, left: ImageProduct, uv):
                         window_px=STEREO_WINDOW_PX.get(left.camera, 11))
 
 
+def _local_normal_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, range_m: float):
+    """Surface normal (site frame) at ``X_rover`` from half-resolution dense stereo of ``prod``'s pair; None if unknown."""
+    from ..core.stereo import dense_stereo
+    from .designate import surface_normal
+
+    right = dl.stereo_pair(prod)
+    if right is None:
+        return None
+    try:
+        ds = dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
+                          min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
+    except Exception:
+        return None
+    n, npts = surface_normal(ds.xyz.reshape(-1, 3), X_rover, radius_m=max(0.05, 0.025 * range_m))
+    if n is None:
+        return None
+    return prod.pose.T_site_rover.rotate(n)
+
+
+def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int):
+    """The window of ``prod`` around ``centre_uv`` as ``prev`` saw it, through the local plane (X_site, n_site).
+
+    Each template pixel's ray (new camera, new pose estimate) meets the plane;
+    the point is projected into the previous image and sampled. Returns
+    ``(template (2h+1, 2h+1) float32 or None, template_center_uv (2,))``.
+    """
+    from ..core.expected import bilinear_sample
+
+    c = np.round(np.asarray(centre_uv, float))
+    us, vs = np.meshgrid(np.arange(c[0] - half, c[0] + half + 1), np.arange(c[1] - half, c[1] + half + 1))
+    o, d = prod.camera_model.unproject(np.stack([us, vs], -1).reshape(-1, 2))
+    T_new = prod.pose.T_site_rover
+    o_s, d_s = T_new.apply(o), T_new.rotate(d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
+    P_s = o_s + t[:, None] * d_s
+    P_s[~(t > 0)] = np.nan
+    P_prev = prev.pose.T_site_rover.inverse().apply(P_s)
+    uv_prev = prev.camera_model.project(P_prev)
+    vals = bilinear_sample(prev.pixels_float(), uv_prev).reshape(2 * half + 1, 2 * half + 1)
+    if np.isfinite(vals).mean() < 0.9:
+        return None, None
+    vals = np.where(np.isfinite(vals), vals, np.nanmean(vals)).astype(np.float32)
+    return vals, np.asarray(centre_uv, float) - (c - half)
+
+
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
-              handoff_method: str = "pure-geometric") -> list:
+              handoff_method: str = "consensus", template_mode: str = "plane") -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
-    Returns the list of :class:`ChainStep`; the last step is the navcam->hazcam
-    handoff by ``handoff_method`` (near navcams) when a hazcam pair exists.
+    ``template_mode``: ``"plane"`` warps the previous stop's window into the new
+    view through the local surface plane (from dense stereo); ``"scale"`` scales
+    it uniformly by the IFOV and range ratios (the paper's way). The
+    pancam->navcam handoff always scales the pancam window by the IFOV ratio, as
+    the paper does. Returns the list of :class:`ChainStep`; the last step is the
+    navcam->hazcam handoff by ``handoff_method`` (near navcams) when a hazcam
+    pair exists.
     """
+    if template_mode not in ("plane", "scale"):
+        raise ValueError(f"template_mode must be 'plane' or 'scale', got {template_mode!r}")
     from ..core.tracking import extract_window, scale_window, track, window_scale_for_handoff
 
     tgt = None
@@ -101,8 +155,11 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         if ps is not None and ps.ok:
             xyz_site = prod.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
             rng = _f(ps.range_m)
-            if truth_xyz is not None:
-                e3 = float(np.linalg.norm(xyz_site - truth_xyz))
+            tp = dl.truth_for(prod.product_id)
+            if truth_xyz is not None and tp is not None:
+                # in the rover frame, where stereo measures it (the site-frame error is mostly pose-estimate error)
+                X_true_rover = tp.pose.T_site_rover.inverse().apply(truth_xyz)
+                e3 = float(np.linalg.norm(np.asarray(ps.xyz, float) - X_true_rover))
         return ChainStep(prod.position, prod.camera, prod.product_id, kind,
                          None if pred is None else [float(x) for x in pred],
                          None if uv is None else [float(x) for x in uv], mk, err, _f(ncc), rng,
@@ -119,6 +176,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     X_site = start.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
+    normal, normal_from = None, None
 
     positions = [p for p in dl.positions() if p != start.position]
     positions = [p for p in positions if min(im.time_s for im in dl.images_at(p)) > start.time_s]
@@ -139,11 +197,30 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 continue
             scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, prev_range, 1.0 / prod.camera_model.hs, rng_new)
             half = TEMPLATE_HALF_PX.get(c, 15)
-            src_half = max(3, int(np.ceil(half / scale)))
-            win = extract_window(prev.pixels_float(), prev_uv, src_half)
-            tpl = scale_window(win, scale)
-            tr = track(tpl, prod.pixels_float(), pred, SEARCH_RADIUS_PX.get(c, 60.0), min_score=0.3)
             kind = "handoff" if c != prev.camera else "track"
+            tpl, tc, mode = None, None, "scale"
+            if template_mode == "plane" and kind == "track":
+                if normal is None or normal_from is not prev:
+                    X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
+                    normal, normal_from = _local_normal_site(dl, prev, X_prev, prev_range), prev
+                if normal is not None:
+                    # the template shows the previous view of the plane around the target, centred where it is predicted
+                    tpl, tc = plane_warped_template(prev, prod, X_site, normal, pred, half)
+                    mode = "plane"
+            if tpl is None:
+                src_half = max(3, int(np.ceil(half / scale)))
+                win = extract_window(prev.pixels_float(), prev_uv, src_half)
+                tpl = scale_window(win, scale)
+                tc = None
+            img = prod.pixels_float()
+            radius = SEARCH_RADIUS_PX.get(c, 60.0)
+            tr = track(tpl, img, pred, radius, template_center_uv=tc, min_score=0.3)
+            # a pointed mast camera was aimed at the target by the rover: its image centre is a second guess
+            centre = np.array([(prod.width - 1) / 2, (prod.height - 1) / 2])
+            if prod.mast is not None and np.linalg.norm(centre - pred) > radius / 2:
+                tr2 = track(tpl, img, centre, radius, template_center_uv=tc, min_score=0.3)
+                if np.all(np.isfinite(tr2.uv)) and (not np.all(np.isfinite(tr.uv)) or tr2.score > tr.score):
+                    tr = tr2
             if not tr.ok or not np.all(np.isfinite(tr.uv)):
                 steps.append(step(prod, kind, pred, None, None, tr.score, ok=False, reason=f"track: {tr.reason}"))
                 continue
@@ -151,7 +228,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             ok = ps is not None and ps.ok
             steps.append(step(prod, kind, pred, tr.uv, ps, tr.score, ok=ok,
                               reason="" if ok else ("no right eye" if ps is None else f"stereo: {ps.reason}"),
-                              extra={"scale": scale, "ncc_ratio": _f(tr.ratio)}))
+                              extra={"scale": scale, "template": mode, "ncc_ratio": _f(tr.ratio)}))
             if ok:
                 X_site = prod.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
                 prev_range = float(ps.range_m)
