@@ -33,6 +33,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..core.transforms import axis_angle_to_matrix
 from .noise import FractalNoise, LatticeNoise, lod_weight
 
 MAT_SKY, MAT_TERRAIN, MAT_ROCK, MAT_PEBBLE = -1, 0, 1, 2
@@ -252,6 +253,12 @@ class Rock:
 
 def make_rock(name, rng, lattice, field: HeightField, centre_xy, size_m, n_points, subdiv, rough_frac,
               albedo_scale, is_target=False, sink_frac=0.3) -> Rock:
+    """A rock of visible extents ``size_m`` (length, width, height) at ``centre_xy`` on ``field``.
+
+    Hull of ``n_points`` random points, ``subdiv`` midpoint subdivisions, normal displacement of
+    ``rough_frac`` x size by fractal noise, random yaw and a small lean; ``sink_frac`` of the total
+    height is buried.
+    """
     V, F, corners, sharp = hull_mesh(rng, n_points, subdiv)
     size_m = np.asarray(size_m, float)
     # unit hull spans about [-1, 1]; scale to the semi-axes (x: length, y: width, z: height incl. buried part)
@@ -267,8 +274,6 @@ def make_rock(name, rng, lattice, field: HeightField, centre_xy, size_m, n_point
     # V: x forward, y right, z UP (local). yaw about the vertical and a little lean
     yaw = rng.uniform(0, 2 * np.pi)
     lean = rng.normal(0, 0.06, size=2)
-    from ..core.transforms import axis_angle_to_matrix
-
     Rl = axis_angle_to_matrix([0, 0, 1], yaw) @ axis_angle_to_matrix([1, 0, 0], lean[0]) @ axis_angle_to_matrix([0, 1, 0], lean[1])
     V = V @ Rl.T
     V[:, 2] -= V[:, 2].min()  # bottom at 0 (local up)
