@@ -142,6 +142,15 @@ def drape(points: np.ndarray, model: CameraModel, image: np.ndarray) -> np.ndarr
     return out.reshape(shape)
 
 
+def project_map(xyz_map: np.ndarray, model: CameraModel) -> np.ndarray:
+    """Project a point map ``(h, w, 3)`` (NaN invalid) through ``model`` -> ``(h, w, 2)`` (NaN invalid)."""
+    flat = xyz_map.reshape(-1, 3)
+    ok = np.all(np.isfinite(flat), axis=-1)
+    proj = np.full((len(flat), 2), np.nan)
+    proj[ok] = model.project(flat[ok])
+    return proj.reshape(xyz_map.shape[:-1] + (2,))
+
+
 @dataclass
 class NearestProjection:
     uv: np.ndarray  # (2,) sub-pixel position in the point map's image
@@ -155,6 +164,7 @@ def nearest_projection(
     origin_uv: tuple,
     model: CameraModel,
     goal_uv,
+    proj: Optional[np.ndarray] = None,
 ) -> Optional[NearestProjection]:
     """Among the pixels of a point map ``xyz_map`` (h, w, 3) (NaN invalid), find where the projection through
     ``model`` lands nearest ``goal_uv``; ``origin_uv`` is the full-image pixel of ``xyz_map[0, 0]``.
@@ -162,6 +172,8 @@ def nearest_projection(
     Sub-pixel: the projection is locally affine in the pixel position, so the
     best pixel is refined by solving ``J dp = goal - uv(p0)`` with ``J`` from
     valid neighbours (kept only if it moves less than one pixel).
+    ``proj`` (h, w, 2): the projections of ``xyz_map`` through ``model`` if
+    already computed (see :func:`project_map`); NaN where invalid.
     """
     goal = np.asarray(goal_uv, dtype=float).reshape(2)
     h, w, _ = xyz_map.shape
@@ -169,8 +181,9 @@ def nearest_projection(
     ok = np.all(np.isfinite(flat), axis=-1)
     if not np.any(ok):
         return None
-    proj = np.full((len(flat), 2), np.nan)
-    proj[ok] = model.project(flat[ok])
+    if proj is None:
+        proj = project_map(xyz_map, model)
+    proj = proj.reshape(-1, 2)
     d2 = np.sum((proj - goal) ** 2, axis=-1)
     d2[~np.isfinite(d2)] = np.inf
     k = int(np.argmin(d2))

@@ -48,7 +48,7 @@ from typing import Optional
 import numpy as np
 
 from .camera import CameraModel
-from .expected import bilinear_sample, drape, nearest_projection, splat_points
+from .expected import bilinear_sample, drape, nearest_projection, project_map, splat_points
 from .transforms import RigidTransform
 
 PAPER_METHODS = (
@@ -331,7 +331,9 @@ class HandoffCase:
         d = self.haz.dense
         xyz = d.xyz  # rectified-left grid of the hazcam, hazcam rover frame
         nav_in_haz = self.nav_model_in_haz()
-        res = nearest_projection(xyz, (0, 0), nav_in_haz, nav_uv)
+        if "haz_in_nav" not in self._cache:  # every hazcam point through the navcam, once per case
+            self._cache["haz_in_nav"] = project_map(xyz, nav_in_haz)
+        res = nearest_projection(xyz, (0, 0), nav_in_haz, nav_uv, proj=self._cache["haz_in_nav"])
         if res is None:
             raise _NoAnswer("no hazcam stereo projects into the navcam")
         # sub-pixel point on the rectified grid -> 3-D -> original hazcam pixel

@@ -37,7 +37,7 @@ def register_clouds(
     scales_m: tuple = (0.04, 0.02, 0.01),
     crop_center_m: Optional[np.ndarray] = None,
     crop_radius_m: Optional[float] = None,
-    max_iterations: int = 40,
+    max_iterations: int = 25,
     max_corr_voxels: float = 1.5,
 ) -> RegistrationResult:
     """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_init`` (``T_target_source``).
