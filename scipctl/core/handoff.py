@@ -90,20 +90,33 @@ class StereoView:
     height: int
     min_range_m: float = 0.4
     max_range_m: float = 30.0
-    dense_downsample: int = 2
+    dense_downsample: int = 1
     _dense: object = field(default=None, repr=False)
     dense_seconds: float = 0.0
 
     @property
     def dense(self):
-        """Dense stereo of the pair (computed once)."""
+        """Dense stereo of the pair (computed once).
+
+        Two passes: a quarter-area pass over the whole range interval finds the
+        ranges actually in view (2nd-98th percentile, with a margin); the final
+        pass at ``dense_downsample`` searches only that disparity interval.
+        """
         if self._dense is None:
             from .stereo import dense_stereo
 
             t0 = time.perf_counter()
+            lo, hi = self.min_range_m, self.max_range_m
+            if self.dense_downsample < 2:
+                coarse = dense_stereo(self.left_img, self.right_img, self.left_model, self.right_model,
+                                      min_range_m=lo, max_range_m=hi, downsample=2)
+                r = coarse.range_m[np.isfinite(coarse.range_m)]
+                if r.size > 1000:
+                    lo = max(lo, 0.85 * float(np.percentile(r, 2)))
+                    hi = min(hi, 1.25 * float(np.percentile(r, 98)))
             self._dense = dense_stereo(
                 self.left_img, self.right_img, self.left_model, self.right_model,
-                min_range_m=self.min_range_m, max_range_m=self.max_range_m, downsample=self.dense_downsample,
+                min_range_m=lo, max_range_m=hi, downsample=self.dense_downsample,
             )
             self.dense_seconds = time.perf_counter() - t0
         return self._dense
