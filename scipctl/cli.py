@@ -21,6 +21,7 @@ from typing import List, Optional
 import typer
 
 from . import __version__
+from .errors import CommandFailed  # noqa: F401  (re-exported for the commands)
 
 app = typer.Typer(
     name="scipctl",
@@ -35,13 +36,6 @@ app = typer.Typer(
 
 EXIT_OK, EXIT_NO, EXIT_BAD_INPUT = 0, 1, 2
 
-
-class CommandFailed(Exception):
-    """The command ran, and the answer is "no" (exit code 1)."""
-
-    def __init__(self, message: str, payload: Optional[dict] = None):
-        super().__init__(message)
-        self.payload = payload
 
 
 def _err(msg: str) -> None:
