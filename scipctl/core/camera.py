@@ -365,10 +365,9 @@ class CameraModel:
             raise ValueError(f"uv: expected shape (..., 2), got {uv.shape}")
         x = uv[..., 0:1]
         y = uv[..., 1:2]
-        f = self.V - y * self.A
-        g = self.H - x * self.A
-        rr = np.cross(f, g)
-        rr = rr / np.linalg.norm(rr, axis=-1, keepdims=True)
+        # (V - y A) x (H - x A) = V x H - x (V x A) - y (A x H): linear in (u, v)
+        rr = np.cross(self.V, self.H) - x * np.cross(self.V, self.A) - y * np.cross(self.A, self.H)
+        rr = rr / np.sqrt(_dot(rr, rr))[..., None]
         sgn = np.sign(_dot(rr, self.A))
         sgn = np.where(sgn == 0, 1.0, sgn)
         rr = rr * sgn[..., None]

@@ -86,7 +86,7 @@ class RoverConfig:
         target_rover_m,
         eye: str = "left",
         pixel_uv: Optional[tuple[float, float]] = None,
-        initial: tuple[float, float] = (0.0, 0.0),
+        initial: Optional[tuple[float, float]] = None,
     ) -> tuple[float, float]:
         """(pan_rad, tilt_rad) that put ``target_rover_m`` (3,) at ``pixel_uv`` (default: image centre) of a mast camera.
 
@@ -100,27 +100,45 @@ class RoverConfig:
         goal = np.array(pixel_uv if pixel_uv is not None else ((spec.width - 1) / 2, (spec.height - 1) / 2), float)
         X = np.asarray(target_rover_m, dtype=float).reshape(3)
         # initial guess from the pan axis geometry: azimuth/elevation of the target seen from the head
-        x = np.array(initial, dtype=float)
-        if initial == (0.0, 0.0):
-            x = self._pointing_guess(spec.model, X)
+        x = self._pointing_guess(spec.model, X) if initial is None else np.array(initial, dtype=float).reshape(2)
+        if not np.all(np.isfinite(x)):
+            x = np.zeros(2)
 
         def resid(q):
             uv = self.camera_model(camera, eye, q[0], q[1]).project(X[None])[0]
             return uv - goal
 
-        for _ in range(50):
+        def solve(x):
+            for _ in range(60):
+                r = resid(x)
+                if not np.all(np.isfinite(r)):  # target behind the camera from here: nudge and retry
+                    x = x + np.array([0.05, -0.1])
+                    continue
+                if np.linalg.norm(r) < 1e-9:
+                    break
+                h = 1e-6
+                J = np.stack([(resid(x + np.array([h, 0])) - r) / h, (resid(x + np.array([0, h])) - r) / h], axis=1)
+                if not np.all(np.isfinite(J)):
+                    break
+                step = np.linalg.lstsq(J, -r, rcond=None)[0]
+                n = np.linalg.norm(step)
+                if n > 0.5:  # keep Gauss-Newton steps inside the region where it is a good model
+                    step *= 0.5 / n
+                x = x + step
+                if n < 1e-13:
+                    break
             r = resid(x)
-            if not np.all(np.isfinite(r)):
-                x = x + np.array([0.0, 0.1])
-                continue
-            if np.linalg.norm(r) < 1e-9:
-                break
-            h = 1e-6
-            J = np.stack([(resid(x + np.array([h, 0])) - r) / h, (resid(x + np.array([0, h])) - r) / h], axis=1)
-            step = np.linalg.lstsq(J, -r, rcond=None)[0]
-            x = x + step
-            if np.linalg.norm(step) < 1e-13:
-                break
+            return x, (float(np.linalg.norm(r)) if np.all(np.isfinite(r)) else np.inf)
+
+        x, err = solve(x)
+        if err > 1e-3:  # near the singular straight-down direction the first guess can fail: try a few others
+            for p0 in (0.0, np.pi / 2, -np.pi / 2, np.pi):
+                for t0 in (-1.4, -0.8, 0.0):
+                    x, err = solve(np.array([p0, t0]))
+                    if err <= 1e-3:
+                        break
+                if err <= 1e-3:
+                    break
         r = resid(x)
         if not np.all(np.isfinite(r)) or np.linalg.norm(r) > 1e-3:
             raise ValueError(f"cannot point {camera} at {X.tolist()} (residual {np.linalg.norm(r):.3g} px)")

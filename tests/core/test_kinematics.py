@@ -111,3 +111,20 @@ def test_rover_pose_from_wxyz():
     pose = RoverPose.from_wxyz([1, 2, 3], -q, "odometry", 0.05)
     assert np.allclose(pose.yaw_pitch_roll_rad, (1.0, 0.0, 0.0))
     assert np.allclose(pose.T_site_rover.apply([1.0, 0, 0]), [1 + np.cos(1.0), 2 + np.sin(1.0), 3])
+
+
+def test_point_at_straight_below_the_head_and_array_initial():
+    cfg = _config()
+    target = [0.9, 0.2, 0.0]  # steep: ~74 deg below the horizon
+    pan, tilt = cfg.point_at("navcam", target)
+    uv = cfg.camera_model("navcam", "left", pan, tilt).project(np.array([target], float))[0]
+    assert np.allclose(uv, [511.5, 511.5], atol=1e-6)
+    # straight under the head (out of reach of this offset camera): a clear error, never NaN angles
+    try:
+        p2, t2 = cfg.point_at("navcam", [0.5, 0.0, 0.0])
+        assert np.isfinite(p2) and np.isfinite(t2)
+    except ValueError as e:
+        assert "cannot point" in str(e)
+    pan2, tilt2 = cfg.point_at("navcam", [4.0, 1.0, 0.0], initial=np.array([0.2, -0.2]))
+    uv2 = cfg.camera_model("navcam", "left", pan2, tilt2).project(np.array([[4.0, 1.0, 0.0]]))[0]
+    assert np.allclose(uv2, [511.5, 511.5], atol=1e-6)
