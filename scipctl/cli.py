@@ -190,12 +190,16 @@ def sequence(
     target: str = typer.Option(..., "--target", help="Target id."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Output file (default: stdout)."),
     fmt: str = typer.Option("seqn", "--format", help="seqn | json | text"),
+    sigma_position_m: Optional[float] = typer.Option(
+        None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the Monte Carlo (default: from the downlink)."),
+    sigma_yaw_deg: Optional[float] = typer.Option(
+        None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
     """Emit the uplink command sequence for the single-cycle approach."""
     from .commands.sequence import run
 
-    run(src, target, out, fmt, json_out)
+    run(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg)
 
 
 @app.command()
@@ -203,12 +207,16 @@ def sequence(
 def report(
     src: Path = typer.Argument(..., help="Workspace or downlink."),
     out: Path = typer.Option(Path("report.html"), "-o", "--out", help="HTML report to write."),
+    sigma_position_m: Optional[float] = typer.Option(
+        None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the prediction (default: from the downlink)."),
+    sigma_yaw_deg: Optional[float] = typer.Option(
+        None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
 ):
     """Write a self-contained HTML diagnostic report."""
     from .commands.report import run
 
-    run(src, out, json_out)
+    run(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg)
 
 
 def main() -> None:

@@ -72,7 +72,7 @@ def _summary(data, sequences) -> dict:
     }
 
 
-def run(src, out, json_out):
+def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None):
     from rich.console import Console
 
     from ..io.atomic import atomic_write_text
@@ -81,10 +81,16 @@ def run(src, out, json_out):
     out = Path(out)
     if out.exists() and out.is_dir():
         raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
+    from ..pipeline.report_data import ReportParams
+    from .sequence import uncertainty_params
+
+    unc = uncertainty_params(sigma_position_m, sigma_yaw_deg).uncertainty
+    params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad)
     source = open_source(src)
     con = Console(stderr=True)
     with con.status("report", spinner="dots") as st:
-        html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None)
+        html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
+                                    params=params)
     try:
         atomic_write_text(out, html)
     except OSError as e:

@@ -54,7 +54,23 @@ def document_for(dl, record, pred, table1_rows=None, rules=None):
     return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol), checks
 
 
-def run(src, target, out, fmt, json_out):
+def uncertainty_params(sigma_position_m=None, sigma_yaw_deg=None):
+    """PredictParams with the operator's pose-error sigmas (None: from the downlink); InputError if not > 0."""
+    import math
+    from dataclasses import replace
+
+    from ..pipeline.predict import PredictParams
+
+    for name, v in (("--sigma-position-m", sigma_position_m), ("--sigma-yaw-deg", sigma_yaw_deg)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise InputError(name, name.lstrip("-").replace("-", "_"), f"must be a positive number, got {v}")
+    p = PredictParams()
+    u = replace(p.uncertainty, sigma_position_m=sigma_position_m,
+                sigma_yaw_rad=None if sigma_yaw_deg is None else math.radians(sigma_yaw_deg))
+    return replace(p, uncertainty=u)
+
+
+def run(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None):
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, broken
@@ -62,8 +78,9 @@ def run(src, target, out, fmt, json_out):
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
+    params = uncertainty_params(sigma_position_m, sigma_yaw_deg)
     source = open_source(src)
-    doc, checks, pred, record = make_sequence(source, target)
+    doc, checks, pred, record = make_sequence(source, target, params=params)
     summary = {
         "target": target, "designated_now": bool(record.get("designated_from") == "mark"),
         "confidence": pred.confidence, "rules": [c.to_dict() for c in checks],

@@ -38,6 +38,8 @@ class ReportParams:
     n_track_samples: int = 4
     n_mc_samples: int = 500
     calib_points_per_pair: int = 5
+    sigma_position_m: Optional[float] = None  # pose-error sigmas for the prediction (None: from the downlink)
+    sigma_yaw_rad: Optional[float] = None
 
 
 @dataclass
@@ -490,7 +492,8 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
     t0 = time.perf_counter()
     predictions = {}
     if p.run_prediction:
-        pp = PredictParams(uncertainty=UncertaintyParams(n_track_samples=p.n_track_samples, n_samples=p.n_mc_samples))
+        pp = PredictParams(uncertainty=UncertaintyParams(n_track_samples=p.n_track_samples, n_samples=p.n_mc_samples,
+                                                         sigma_position_m=p.sigma_position_m, sigma_yaw_rad=p.sigma_yaw_rad))
         terrains = {}
         for tid, rec in records.items():
             if not rec.get("ok", True) or rec.get("xyz_site_m") is None:
