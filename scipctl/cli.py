@@ -22,6 +22,7 @@ import typer
 
 from . import __version__
 from .errors import CommandFailed  # noqa: F401  (re-exported for the commands)
+from .jsonutil import json_default
 
 app = typer.Typer(
     name="scipctl",
@@ -74,16 +75,7 @@ def guarded(fn):
     return wrapper
 
 
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+_json_default = json_default
 
 
 def emit_json(doc) -> None:

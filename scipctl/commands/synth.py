@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Optional
 
 from ..model import InputError
+from ..jsonutil import json_default
 
 
 def regenerate_command(scenario: str, seed: int, container: str, run: str, no_errors: bool,
@@ -33,16 +34,7 @@ def record_json(record: dict) -> str:
     return json.dumps(record, indent=1, sort_keys=True, allow_nan=False, default=_plain) + "\n"
 
 
-def _plain(o):
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, tuple):
-        return list(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+_plain = json_default
 
 
 def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool) -> None:

@@ -49,6 +49,7 @@ import numpy as np
 
 from .camera import CameraModel
 from .expected import bilinear_sample, drape, nearest_projection, project_map, splat_points
+from ..jsonutil import finite_or_none
 from .transforms import RigidTransform
 
 PAPER_METHODS = (
@@ -436,12 +437,7 @@ class _NoAnswer(Exception):
         self.diagnostics = diagnostics or {}
 
 
-def _f(x) -> Optional[float]:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return None
-    return x if np.isfinite(x) else None
+_f = finite_or_none
 
 
 def _track_diag(tr) -> dict:

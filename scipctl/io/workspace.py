@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from ..model import Downlink, InputError
+from ..jsonutil import json_default
 
 WORKSPACE_FORMAT = 1
 PRODUCTS_DIR = "scipctl"
@@ -41,16 +42,7 @@ def is_workspace(path) -> bool:
     return p.is_dir() and (p / PRODUCTS_DIR / MARKER).is_file()
 
 
-def _json_default(o):
-    import numpy as np
-
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, (np.floating, np.integer, np.bool_)):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+_json_default = json_default
 
 
 def dumps(obj) -> str:

@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 
 from ..model import Downlink, ImageProduct, InputError
+from ..jsonutil import finite_or_none
 
 TEMPLATE_HALF_PX = {"pancam": 20, "navcam": 15, "hazcam": 15}
 # pointing error from the pose estimate: pancam IFOV is 1/3 of navcam's, so it needs 3x the radius in pixels
@@ -49,12 +50,7 @@ class ChainStep:
         return d
 
 
-def _f(x):
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return None
-    return x if np.isfinite(x) else None
+_f = finite_or_none
 
 
 def _stereo(dl: Downlink, left: ImageProduct, uv):

@@ -6,6 +6,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..jsonutil import finite_or_none
 from ..model import Downlink, ImageProduct, InputError
 
 # epipolar search band half-width per camera (px): wide enough for the ~4 px pancam misalignment
@@ -129,9 +130,4 @@ def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = N
     return rec
 
 
-def _f(x):
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return None
-    return x if np.isfinite(x) else None
+_f = finite_or_none
