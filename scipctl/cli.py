@@ -167,12 +167,13 @@ def simulate_handoff(
     far: Optional[str] = typer.Option(None, "--far", help="Left far-navcam product id."),
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
     chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation."),
+    fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
     """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline."""
     from .commands.handoff import run
 
-    run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out)
+    run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast)
 
 
 @app.command()

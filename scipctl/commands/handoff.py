@@ -52,14 +52,17 @@ def _fmt_stats(s):
     return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
 
 
-def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out):
+def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=False):
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.designate import parse_pixel
+    from ..core.handoff import HandoffParams
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
+
+    params = HandoffParams(dense_downsample=2 if fast else 1)
 
     if not success_px > 0:
         raise InputError("--success-px", "success_px", "must be > 0")
@@ -76,7 +79,7 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
         for src, source in zip(srcs, sources):
             dl = source.downlink
             name = Path(src).name
-            setup = build_setup(dl, hazcam=hazcam, near=near, far=far)
+            setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far)
             if from_product is not None:
                 p = dl.product(from_product)
                 if p.camera != "navcam" or p.eye != "left":
@@ -84,7 +87,7 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
                 nc = "near" if setup.near is not None and p.product_id == setup.near.product_id else (
                     "far" if setup.far is not None and p.product_id == setup.far.product_id else None)
                 if nc is None:
-                    setup = build_setup(dl, hazcam=hazcam, near=p.product_id if p.position == setup.hazcam.position else near,
+                    setup = build_setup(dl, params, hazcam=hazcam, near=p.product_id if p.position == setup.hazcam.position else near,
                                         far=p.product_id if p.position != setup.hazcam.position else far)
                     nc = "near" if p.position == setup.hazcam.position else "far"
                 uv = parse_pixel(pixel)

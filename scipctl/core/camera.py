@@ -45,7 +45,9 @@ def _v3(x, name):
 
 
 def _dot(a, b):
-    return np.sum(a * b, axis=-1)
+    """Row-wise dot product over the last axis (einsum: no temporary product array)."""
+    a, b = np.broadcast_arrays(a, b)
+    return np.einsum("...i,...i->...", a, b)
 
 
 class CameraModelError(ValueError):

@@ -183,14 +183,38 @@ def nearest_projection(
         return None
     if proj is None:
         proj = project_map(xyz_map, model)
-    proj = proj.reshape(-1, 2)
-    d2 = np.sum((proj - goal) ** 2, axis=-1)
-    d2[~np.isfinite(d2)] = np.inf
-    k = int(np.argmin(d2))
-    if not np.isfinite(d2[k]):
-        return None
-    j, i = divmod(k, w)
     P = proj.reshape(h, w, 2)
+    # coarse-to-fine: the best node of an 8-pixel lattice, then every pixel within 3 lattice steps of it
+    # (exact unless the nearest point sits in a sliver narrower than the lattice, e.g. at a silhouette,
+    # so the whole map is searched as well whenever the lattice answer is not already within 1 px)
+    step = 8
+    sub = P[::step, ::step]
+    ds = np.einsum("...i,...i->...", sub - goal, sub - goal)
+    ds[~np.isfinite(ds)] = np.inf
+    ks = int(np.argmin(ds))
+    if not np.isfinite(ds.flat[ks]):
+        return None
+    js, is_ = divmod(ks, sub.shape[1])
+    j0, j1 = max(0, js * step - 3 * step), min(h, js * step + 3 * step + 1)
+    i0, i1 = max(0, is_ * step - 3 * step), min(w, is_ * step + 3 * step + 1)
+    win = P[j0:j1, i0:i1]
+    dw = np.einsum("...i,...i->...", win - goal, win - goal)
+    dw[~np.isfinite(dw)] = np.inf
+    kw = int(np.argmin(dw))
+    jw, iw = divmod(kw, win.shape[1])
+    j, i = j0 + jw, i0 + iw
+    nb = [P[jj, ii] for jj, ii in ((j, i + 1), (j, i - 1), (j + 1, i), (j - 1, i)) if 0 <= jj < h and 0 <= ii < w]
+    spacing = max([float(np.linalg.norm(q - P[j, i])) for q in nb if np.all(np.isfinite(q))] or [0.0])
+    # the lattice answer is trusted when it is within one local pixel spacing of the goal; otherwise
+    # (a silhouette, a hole, the goal outside the map) search the whole map
+    if not np.sqrt(dw[jw, iw]) <= max(spacing, 1e-9):
+        d2 = np.einsum("...i,...i->...", P - goal, P - goal)
+        d2[~np.isfinite(d2)] = np.inf
+        k = int(np.argmin(d2))
+        if not np.isfinite(d2.flat[k]):
+            return None
+        j, i = divmod(k, w)
+    d2_best = float(np.sum((P[j, i] - goal) ** 2))
     uv_int = np.array([origin_uv[0] + i, origin_uv[1] + j], float)
     uv = uv_int.copy()
     if 0 < i < w - 1 and 0 < j < h - 1:
@@ -201,4 +225,4 @@ def nearest_projection(
             step = np.linalg.solve(J, goal - P[j, i])
             if np.all(np.abs(step) <= 1.0):
                 uv = uv_int + step
-    return NearestProjection(uv, uv_int, float(np.sqrt(d2[k])), flat[k].copy())
+    return NearestProjection(uv, uv_int, float(np.sqrt(d2_best)), xyz_map[j, i].copy())

@@ -73,6 +73,7 @@ class HandoffParams:
     point_stereo_window_px: int = 21
     nav_cloud_radius_m: float = 0.6  # navcam points used for the expected window (around the target)
     registration_max_range_m: float = 5.0  # whole-cloud ICP uses points within this range of the hazcam
+    dense_downsample: int = 1  # shared dense stereo: 1 full resolution (accurate), 2 half (fast)
     coarse_template_half_px: int = 40
     fine_search_px: float = 4.0
     consensus_agree_px: float = 3.0

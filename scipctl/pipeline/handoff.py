@@ -30,7 +30,7 @@ class HandoffSetup:
     cases: dict = field(default_factory=dict)  # "near"/"far" -> HandoffCase
 
 
-def _view(dl: Downlink, left: ImageProduct, min_range_m: float, max_range_m: float) -> StereoView:
+def _view(dl: Downlink, left: ImageProduct, min_range_m: float, max_range_m: float, downsample: int = 1) -> StereoView:
     right = dl.stereo_pair(left)
     if right is None:
         raise InputError(left.product_id, "eye", f"no right-eye {left.camera} image at position {left.position}")
@@ -38,6 +38,7 @@ def _view(dl: Downlink, left: ImageProduct, min_range_m: float, max_range_m: flo
         left_img=left.pixels_float(), right_img=right.pixels_float(),
         left_model=left.camera_model, right_model=right.camera_model,
         width=left.width, height=left.height, min_range_m=min_range_m, max_range_m=max_range_m,
+        dense_downsample=downsample,
     )
 
 
@@ -74,14 +75,15 @@ def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str
 def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=None, near=None, far=None) -> HandoffSetup:
     params = params or HandoffParams()
     haz, nr, fr = find_products(dl, hazcam, near, far)
-    haz_view = _view(dl, haz, 0.3, 6.0)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m
+    ds = params.dense_downsample
+    haz_view = _view(dl, haz, 0.3, 6.0, ds)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m
     setup = HandoffSetup(haz, nr, fr)
     if nr is not None:
         T = T_roverB_roverA(haz.pose, nr.pose) if nr.position != haz.position else RigidTransform.identity()
-        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.8, 30.0), haz_view, T, params)
+        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.8, 30.0, ds), haz_view, T, params)
     if fr is not None:
         T = T_roverB_roverA(haz.pose, fr.pose)
-        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.8, 30.0), haz_view, T, params)
+        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.8, 30.0, ds), haz_view, T, params)
     return setup
 
 

@@ -15,8 +15,9 @@ from scipctl.pipeline.handoff import build_setup, marked_targets, run_targets
 SAMPLE = Path(__file__).resolve().parents[2] / "sample_sols/mcap/paper-s1-straight.mcap"
 
 
+@pytest.mark.parametrize("fast", [False, True], ids=["full-res-stereo", "fast"])
 @pytest.mark.parametrize("methods", ["paper", "all"])
-def test_bench_handoff_one_downlink(benchmark, methods):
+def test_bench_handoff_one_downlink(benchmark, methods, fast):
     if not benchmark.enabled:
         pytest.skip("measured with --benchmark-enable only")
     import open3d  # noqa: F401  (import cost is paid once per process, not per downlink)
@@ -24,8 +25,12 @@ def test_bench_handoff_one_downlink(benchmark, methods):
     dl = read_downlink(SAMPLE)
     names = PAPER_METHODS if methods == "paper" else None
 
+    from scipctl.core.handoff import HandoffParams
+
+    params = HandoffParams(dense_downsample=2 if fast else 1)
+
     def run():
-        setup = build_setup(dl)  # fresh shared products every round
+        setup = build_setup(dl, params)  # fresh shared products every round
         kw = {} if names is None else {"methods": names}
         return run_targets(dl, setup, marked_targets(dl, setup), **kw)
 
