@@ -78,6 +78,17 @@ def guarded(fn):
 _json_default = json_default
 
 
+def stderr_console():
+    """The rich console for tables and progress: stderr; wide (160 columns) when stderr is not a terminal,
+    so that logs of operations scripts keep whole table rows."""
+    from rich.console import Console
+
+    con = Console(stderr=True)
+    if not con.is_terminal:
+        con = Console(stderr=True, width=160)
+    return con
+
+
 def emit_json(doc) -> None:
     sys.stdout.write(json.dumps(doc, indent=2, sort_keys=True, default=_json_default) + "\n")
 

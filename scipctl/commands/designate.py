@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from ..cli import CommandFailed, emit_json
+from ..cli import CommandFailed, emit_json, stderr_console
 from ..model import InputError
 
 
@@ -41,10 +41,9 @@ def run(src, product, camera, pixel, target_id, band_px, json_out):
 
 
 def _print(rec):
-    from rich.console import Console
     from rich.table import Table
 
-    con = Console(stderr=True)
+    con = stderr_console()
     t = Table(title=f"target {rec['id']} from {rec['product_id']}", show_header=False)
     t.add_row("pixel (u, v)", f"{rec['pixel_uv'][0]:.2f}, {rec['pixel_uv'][1]:.2f}")
     t.add_row("rover xyz (m)", ", ".join(f"{x:.3f}" for x in rec["xyz_rover_m"]))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..cli import emit_json
+from ..cli import emit_json, stderr_console
 from ..model import InputError
 
 # the paper's Table 1 (Rocky8, 18 targets): mean +- std (range), px; refined: successes / failures
@@ -53,7 +53,6 @@ def _fmt_stats(s):
 
 
 def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=False):
-    from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.provenance import provenance
@@ -69,7 +68,7 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
     names, navcams = _parse_methods(methods)
-    con = Console(stderr=True)
+    con = stderr_console()
     records, chains, per_dl = [], [], []
     sources = [open_source(s) for s in srcs]  # validate every input before any work
     n_work = sum(1 for _ in sources) * max(1, len(names) * len(navcams))

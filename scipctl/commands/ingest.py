@@ -101,11 +101,12 @@ def _fmt(x, spec=".3f"):
 
 def print_summary(s: dict, title: str) -> None:
     """Rich tables on stderr (user strings are escaped, never read as markup)."""
-    from rich.console import Console
     from rich.markup import escape as esc
     from rich.table import Table
 
-    con = Console(stderr=True)
+    from ..cli import stderr_console
+
+    con = stderr_console()
     con.print(f"[bold]{esc(title)}[/bold]: mission {esc(str(s['mission']))}, sol {s['sol']}, "
               f"{s['counts']['images']} images, {s['counts']['positions']} positions, {s['counts']['targets']} targets")
     eye = {"left": "L", "right": "R"}

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..cli import emit_json
+from ..cli import emit_json, stderr_console
 from ..model import InputError
 
 
@@ -73,7 +73,6 @@ def _summary(data, sequences) -> dict:
 
 
 def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None):
-    from rich.console import Console
 
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
@@ -87,7 +86,7 @@ def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None):
     unc = uncertainty_params(sigma_position_m, sigma_yaw_deg).uncertainty
     params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad)
     source = open_source(src)
-    con = Console(stderr=True)
+    con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
                                     params=params)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from ..cli import CommandFailed, emit_json
+from ..cli import CommandFailed, emit_json, stderr_console
 from ..model import InputError
 
 FORMATS = ("seqn", "json", "text")
@@ -112,10 +112,9 @@ def run(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=No
 
 
 def _print(checks, pred, target):
-    from rich.console import Console
     from rich.table import Table
 
-    con = Console(stderr=True)
+    con = stderr_console()
     t = Table(title=f"flight rules for target {target} (predicted P(success) {pred.confidence:.2f})")
     for c in ("rule", "ok", "detail"):
         t.add_column(c)

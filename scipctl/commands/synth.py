@@ -92,7 +92,6 @@ def _env_quality() -> tuple[float, int]:
 def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, no_errors: bool,
                image_scale: float = 1.0, supersample: int = 2, show_progress: bool = True) -> list[dict]:
     """Build and write each run; returns one summary per run (path, counts, sha256)."""
-    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.atomic import atomic_write_text
@@ -102,7 +101,9 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
     from ..sim.scenarios import build_run, default_errors
 
     out.mkdir(parents=True, exist_ok=True)
-    console = Console(stderr=True)
+    from ..cli import stderr_console
+
+    console = stderr_console()
     written = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=console, disable=not show_progress, transient=False) as bar:
