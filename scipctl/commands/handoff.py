@@ -25,25 +25,32 @@ PAPER_TABLE1 = {
 
 
 def _parse_methods(methods):
+    """``--methods`` -> (method names in order, navcams in use, the (method, navcam) pairs to run).
+
+    Each item is a method name (both navcams) or ``NAME-near`` / ``NAME-far``.
+    """
     from ..core.handoff import ALL_METHODS
 
     if not methods:
-        return list(ALL_METHODS), ["near", "far"]
-    names, navcams = [], set()
+        pairs = {(m, n) for m in ALL_METHODS for n in ("near", "far")}
+        return list(ALL_METHODS), ["near", "far"], pairs
+    names, pairs = [], set()
     for item in methods.split(","):
         item = item.strip()
         if not item:
             continue
-        base, nc = item, None
+        base, ncs = item, ("near", "far")
         for suffix in ("-near", "-far", ":near", ":far"):
             if item.endswith(suffix):
-                base, nc = item[: -len(suffix)], suffix[1:]
+                base, ncs = item[: -len(suffix)], (suffix[1:],)
         if base not in ALL_METHODS:
             raise InputError("--methods", "methods", f"unknown method {item!r} (known: {', '.join(ALL_METHODS)}, optionally -near/-far)")
         if base not in names:
             names.append(base)
-        navcams.update([nc] if nc else ["near", "far"])
-    return names, [n for n in ("near", "far") if n in navcams]
+        pairs.update((base, n) for n in ncs)
+    if not pairs:
+        raise InputError("--methods", "methods", "no method named")
+    return names, [n for n in ("near", "far") if any(p[1] == n for p in pairs)], pairs
 
 
 def _fmt_stats(s):
@@ -67,7 +74,7 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
         raise InputError("--success-px", "success_px", "must be > 0")
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
-    names, navcams = _parse_methods(methods)
+    names, navcams, pairs = _parse_methods(methods)
     con = stderr_console()
     records, chains, per_dl = [], [], []
     sources = [open_source(s) for s in srcs]  # validate every input before any work
@@ -103,7 +110,7 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
                 prog.update(_t, description=desc)
 
             recs = run_targets(dl, setup, tlist, methods=names, navcams=use_navcams, success_px=success_px,
-                               progress=progress, downlink_name=name)
+                               progress=progress, downlink_name=name, only=pairs)
             prog.advance(task, len(names) * len(navcams))
             records.extend(recs)
             source.save_json("handoff.json", {

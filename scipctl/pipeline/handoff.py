@@ -117,7 +117,9 @@ def run_targets(
     success_px: float = 4.0,
     progress: Optional[Callable[[str], None]] = None,
     downlink_name: str = "",
+    only: Optional[set] = None,
 ) -> list:
+    """Run ``methods`` x ``navcams`` (restricted to the (method, navcam) pairs in ``only``, if given) on ``targets``."""
     records = []
     for target_id, src, truth in targets:
         near_pk = None
@@ -131,6 +133,8 @@ def run_targets(
             nav_uv = src.get(nc)
             product = setup.near if nc == "near" else setup.far
             for m in methods:
+                if only is not None and (m, nc) not in only:
+                    continue
                 if progress:
                     progress(f"{downlink_name} {target_id} {m} {nc}")
                 if nav_uv is None:

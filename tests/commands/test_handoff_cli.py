@@ -1,0 +1,84 @@
+"""`scipctl simulate-handoff` from the command line: JSON contract, Table 1, bad input."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from scipctl.cli import app
+
+ROOT = Path(__file__).resolve().parents[2]
+SAMPLE = ROOT / "sample_sols/mcap/paper-s1-straight.mcap"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def sol(tmp_path_factory):
+    p = tmp_path_factory.mktemp("sol") / SAMPLE.name
+    shutil.copy(SAMPLE, p)
+    return p
+
+
+def test_json_results_carry_the_contract_fields(sol):
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--methods", "pure-kinematic,pure-geometric-near", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    recs = doc["results"]
+    # pure-kinematic near+far and pure-geometric near only, for the 3 marked targets
+    assert {(x["method"], x["navcam"]) for x in recs} == {("pure-kinematic", "near"), ("pure-kinematic", "far"),
+                                                          ("pure-geometric", "near")}
+    assert len(recs) == 9
+    for x in recs:
+        for k in ("downlink", "target", "method", "navcam", "predicted_uv", "truth_uv", "error_px", "success"):
+            assert k in x
+        if x["predicted_uv"] is not None and x["truth_uv"] is not None:
+            dx = x["predicted_uv"][0] - x["truth_uv"][0]
+            dy = x["predicted_uv"][1] - x["truth_uv"][1]
+            assert abs((dx * dx + dy * dy) ** 0.5 - x["error_px"]) < 1e-9
+            assert x["success"] == (x["error_px"] <= 4.0)
+    assert {row["method"] for row in doc["table1"]} == {"pure-kinematic", "pure-geometric"}
+    assert doc["provenance"]["inputs"]["downlink0"]["sha256"]
+    # the Table-1 rendering goes to stderr, beside the paper's figures
+    assert "Table 1" in r.stderr and "13±3" in r.stderr
+    saved = json.loads((sol.parent / (sol.name + ".scipctl") / "handoff.json").read_text())
+    assert len(saved["results"]) == 9
+
+
+def test_from_pixel_runs_one_source_pixel(sol):
+    from scipctl.io.downlink import read_downlink
+    from scipctl.pipeline.handoff import find_products
+
+    dl = read_downlink(sol)
+    _, near, _ = find_products(dl)
+    mk = dl.targets[0].mark_in(near.product_id)
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--from", near.product_id, "--pixel", f"{mk.u},{mk.v}",
+                            "--methods", "pure-kinematic", "--json"])
+    assert r.exit_code == 0, r.stderr
+    recs = json.loads(r.stdout)["results"]
+    assert len(recs) == 1 and recs[0]["navcam"] == "near" and recs[0]["truth_uv"] is None
+    assert recs[0]["predicted_uv"] is not None
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--methods", "telepathy"], "telepathy"),
+    (["--success-px", "0"], "success_px"),
+    (["--from", "s1-straight-pan10-pancam-L", "--pixel", "10,10"], "navcam"),
+    (["--pixel", "10,10"], "--from"),
+    (["--target", "nope"], "nope"),
+])
+def test_bad_input_exits_2_with_one_line(sol, args, needle):
+    r = runner.invoke(app, ["simulate-handoff", str(sol)] + args)
+    assert r.exit_code == 2, r.output
+    assert needle in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
+def test_missing_and_corrupt_inputs_exit_2(tmp_path):
+    r = runner.invoke(app, ["simulate-handoff", str(tmp_path / "absent.mcap")])
+    assert r.exit_code == 2
+    bad = tmp_path / "half.mcap"
+    bad.write_bytes(SAMPLE.read_bytes()[:100000])
+    r = runner.invoke(app, ["simulate-handoff", str(bad)])
+    assert r.exit_code == 2 and "half.mcap" in r.stderr
