@@ -155,7 +155,7 @@ def designate(
     product: Optional[str] = typer.Option(None, "--product", help="Left-eye product id."),
     camera: Optional[str] = typer.Option(None, "--camera", help="Use this camera's left image at the latest position."),
     pixel: str = typer.Option(..., "--pixel", help="U,V (column,row; sub-pixel allowed)."),
-    target_id: Optional[str] = typer.Option(None, "--id", help="Target name (default: t<N>)."),
+    target_id: Optional[str] = typer.Option(None, "--id", help="Target name (default: d<N>, the first free one)."),
     band_px: Optional[float] = typer.Option(None, "--band-px", help="Half-width of the epipolar search band."),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
 ):

@@ -21,9 +21,9 @@ def run(src, product, camera, pixel, target_id, band_px, json_out):
     existing = {t["id"] for t in targets.get("targets", [])}
     if target_id is None:
         n = 1
-        while f"t{n}" in existing:
+        while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
             n += 1
-        target_id = f"t{n}"
+        target_id = f"d{n}"
     if band_px is not None and not band_px > 0:
         raise InputError("--band-px", "band_px", "must be > 0")
     rec = designate(dl, left, uv, band_px=band_px, target_id=target_id)
