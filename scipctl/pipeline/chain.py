@@ -21,6 +21,9 @@ from ..jsonutil import finite_or_none
 TEMPLATE_HALF_PX = {"pancam": 20, "navcam": 15, "hazcam": 15}
 # pointing error from the pose estimate: pancam IFOV is 1/3 of navcam's, so it needs 3x the radius in pixels
 SEARCH_RADIUS_PX = {"pancam": 300.0, "navcam": 100.0, "hazcam": 80.0}
+# half-size of the context window that first finds the pose error, and the target search radius after it
+CONTEXT_HALF_PX = {"pancam": 100, "navcam": 60, "hazcam": 60}
+FINE_RADIUS_PX = 20.0
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
@@ -195,21 +198,34 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             half = TEMPLATE_HALF_PX.get(c, 15)
             kind = "handoff" if c != prev.camera else "track"
             tpl, tc, mode = None, None, "scale"
+            radius_override = None
             if template_mode == "plane" and kind == "track":
                 if normal is None or normal_from is not prev:
                     X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
                     normal, normal_from = _local_normal_site(dl, prev, X_prev, prev_range), prev
                 if normal is not None:
-                    # the template shows the previous view of the plane around the target, centred where it is predicted
+                    # first the pose error: a large window of the previous view, warped through the local plane,
+                    # found over the whole search region (many features: robust); then the target window near it
+                    big_half = CONTEXT_HALF_PX.get(c, 100)
+                    tpl_big, tc_big = plane_warped_template(prev, prod, X_site, normal, pred, big_half)
+                    if tpl_big is not None:
+                        tr_big = track(tpl_big, prod.pixels_float(), pred, SEARCH_RADIUS_PX.get(c, 60.0),
+                                       template_center_uv=tc_big, min_score=0.3)
+                    # the template shows the previous view of the plane around the target, built around the
+                    # pose-estimate prediction (where the warp puts the target at the template's centre)
                     tpl, tc = plane_warped_template(prev, prod, X_site, normal, pred, half)
                     mode = "plane"
+                    if tpl_big is not None and tr_big.ok and np.all(np.isfinite(tr_big.uv)):
+                        pred = tr_big.uv  # searched for near the prediction corrected for the pose error
+                        radius_override = FINE_RADIUS_PX
+                        mode = "plane, context-corrected"
             if tpl is None:
                 src_half = max(3, int(np.ceil(half / scale)))
                 win = extract_window(prev.pixels_float(), prev_uv, src_half)
                 tpl = scale_window(win, scale)
                 tc = None
             img = prod.pixels_float()
-            radius = SEARCH_RADIUS_PX.get(c, 60.0)
+            radius = radius_override or SEARCH_RADIUS_PX.get(c, 60.0)
             tr = track(tpl, img, pred, radius, template_center_uv=tc, min_score=0.3)
             # a pointed mast camera was aimed at the target by the rover: its image centre is a second guess
             centre = np.array([(prod.width - 1) / 2, (prod.height - 1) / 2])
