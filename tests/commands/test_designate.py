@@ -73,8 +73,6 @@ def test_designate_a_marked_target(sol, dl):
 def test_epipolar_offset_reports_the_injected_vibration(sol, dl):
     """The right pancam's true orientation is perturbed by the simulator: the measured offset from the epipolar
     line is the offset of the true right mark from the epipolar curve of the calibrated models."""
-    from scipctl.core.stereo import epipolar_curve  # noqa: F401  (the API exists)
-
     left = _first_pancam(dl)
     right = dl.stereo_pair(left)
     t = next(t for t in dl.targets if t.kind == "point")
