@@ -448,7 +448,8 @@ def _track_diag(tr) -> dict:
 
 def _reg_diag(reg) -> dict:
     return {"icp_fitness": reg.fitness, "icp_rmse_m": reg.inlier_rmse_m, "icp_points": reg.n_source,
-            "icp_correction_deg": float(np.degrees(reg.correction_rad)), "icp_correction_m": reg.correction_m}
+            "icp_correction_deg": float(np.degrees(reg.correction_rad)), "icp_correction_m": reg.correction_m,
+            "icp_kept_seed": reg.kept_seed}
 
 
 def _fill_nan(img: Optional[np.ndarray]) -> Optional[np.ndarray]:

@@ -19,6 +19,7 @@ class RegistrationResult:
     n_target: int
     correction_rad: float  # rotation of the refinement relative to the seed
     correction_m: float  # translation of the refinement relative to the seed (at the crop centre)
+    kept_seed: bool = False  # ICP did not fit the clouds better than the seed at the finest scale: the seed stands
 
 
 def _to_o3d(points: np.ndarray):
@@ -39,6 +40,8 @@ def register_clouds(
     crop_radius_m: Optional[float] = None,
     max_iterations: int = 25,
     max_corr_voxels: float = 1.5,
+    min_fitness_gain: float = 0.01,
+    min_rmse_gain: float = 0.05,
 ) -> RegistrationResult:
     """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_init`` (``T_target_source``).
 
@@ -48,7 +51,9 @@ def register_clouds(
     simulated sols in docs/handoff.md). ``method`` is ``point-to-plane`` or
     ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
     frame) only points near the centre are used (both clouds, the source after
-    applying ``T_init``).
+    applying ``T_init``). The result replaces the seed only if, at the finest
+    scale, it raises the fitness by ``min_fitness_gain`` or lowers the inlier
+    RMS by the fraction ``min_rmse_gain`` (``kept_seed`` says which).
     """
     import open3d as o3d
 
@@ -93,6 +98,13 @@ def register_clouds(
         T = np.asarray(reg.transformation)
     if reg is None:
         raise ValueError("registration had too few points at every scale")
+    # keep the seed unless ICP fits the clouds measurably better at the finest scale: on noisy stereo clouds
+    # ICP otherwise drifts along weakly constrained directions from an already good seed
+    seed_eval = o3d.pipelines.registration.evaluate_registration(s, t, radius, np.eye(4))
+    kept_seed = not (reg.fitness > seed_eval.fitness + min_fitness_gain
+                     or reg.inlier_rmse < (1.0 - min_rmse_gain) * seed_eval.inlier_rmse)
+    if kept_seed:
+        T, reg = np.eye(4), seed_eval
     T_corr = RigidTransform.from_matrix(T)
     centre = np.asarray(crop_center_m, float) if crop_center_m is not None else tgt.mean(axis=0)
     return RegistrationResult(
@@ -103,4 +115,5 @@ def register_clouds(
         n_target=n_t,
         correction_rad=T_corr.rotation_angle_rad(),
         correction_m=float(np.linalg.norm(T_corr.apply(centre) - centre)),
+        kept_seed=kept_seed,
     )

@@ -39,3 +39,15 @@ def test_icp_uses_the_seed_and_crop():
     assert np.linalg.norm(res.T_target_source.apply(P) - T_true.apply(P)) < 0.003
     with pytest.raises(ValueError):
         register_clouds(src[:10], tgt, seed)
+
+
+def test_a_perfect_seed_is_kept():
+    """ICP on two samplings of one surface, seeded with the truth: it must not walk away (it cannot fit better)."""
+    tgt = _terrain(0)
+    T_true = RigidTransform(rotvec_to_matrix([0.01, -0.015, 0.02]), [0.03, -0.02, 0.015])
+    src = T_true.inverse().apply(_terrain(1))
+    res = register_clouds(src, tgt, T_true, scales_m=(0.32, 0.16, 0.08, 0.04, 0.02))
+    P = np.array([[1.5, 0.3, -0.2], [2.0, 0.0, 0.0]])
+    assert np.linalg.norm(res.T_target_source.apply(P) - T_true.apply(P), axis=1).max() < 0.002
+    if res.kept_seed:
+        assert res.correction_m == 0.0

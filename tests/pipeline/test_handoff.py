@@ -59,7 +59,6 @@ NOT_MET = {
     ("refined-geometric", "near"): "navcam draped over hazcam stereo at the corner: 1.8 px",
     ("coarse-fine-geometric", "near"): "same draped window as refined-geometric: 1.8 px",
     ("consensus", "near"): "mean of agreeing draped/splatted answers: 1.3 px at the corner",
-    ("mesh-registration", "far"): "ICP of noisy stereo clouds walks 2.2 px from a perfect seed",
 }
 
 
