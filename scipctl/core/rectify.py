@@ -14,6 +14,7 @@ the camera (as JPL's warp routines take an approximate distance).
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Optional
 
@@ -164,6 +165,31 @@ def _remap(img, maps, interpolation):
 
     interp = cv2.INTER_LINEAR if interpolation is None else interpolation
     return cv2.remap(img, maps[0], maps[1], interp, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+_CACHE: "OrderedDict[tuple, RectifiedPair]" = OrderedDict()
+_CACHE_SIZE = 6  # a 1024^2 pair's maps are 16 MB
+
+
+def _model_key(m: CameraModel) -> tuple:
+    return tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in sorted(m.to_dict().items()))
+
+
+def rectify_pair_cached(left: CameraModel, right: CameraModel, width: int, height: int, **kw) -> RectifiedPair:
+    """:func:`rectify_pair`, remembered for the last few model pairs (maps depend only on the models and sizes).
+
+    Callers must not modify the returned maps.
+    """
+    key = (_model_key(left), _model_key(right), width, height, tuple(sorted(kw.items())))
+    rp = _CACHE.get(key)
+    if rp is None:
+        rp = rectify_pair(left, right, width, height, **kw)
+        _CACHE[key] = rp
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    else:
+        _CACHE.move_to_end(key)
+    return rp
 
 
 def rectify_pair(

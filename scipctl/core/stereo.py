@@ -670,7 +670,7 @@ def dense_stereo(
     """
     import cv2
 
-    from .rectify import rectify_pair
+    from .rectify import rectify_pair_cached
 
     _check_model(left_model, "left_model")
     _check_model(right_model, "right_model")
@@ -685,7 +685,7 @@ def dense_stereo(
     if lr_check not in ("flip", "none"):
         raise ValueError(f"lr_check: must be 'flip' or 'none', got {lr_check!r}")
     H, W = L.shape
-    rp = rectified if rectified is not None else rectify_pair(left_model, right_model, W, H, scale=1.0 / downsample)
+    rp = rectified if rectified is not None else rectify_pair_cached(left_model, right_model, W, H, scale=1.0 / downsample)
     lm, rm = rp.left_model, rp.right_model
     f = float(lm.hs)
     b = rm.C - lm.C

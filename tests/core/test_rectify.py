@@ -117,3 +117,17 @@ def test_interpolated_maps_match_exact_maps_everywhere(kind):
     inside = np.all((exact > 0) & (exact < WIDTH - 1), axis=-1) & (got[:, 0] > -1e5)
     assert inside.mean() > 0.95
     assert np.abs(got[inside] - exact[inside]).max() < 1e-3
+
+
+def test_cached_rectification_is_the_same_and_keyed_on_the_models():
+    from scipctl.core.rectify import rectify_pair_cached
+
+    left, right = stereo_pair("CAHVOR")
+    a = rectify_pair_cached(left, right, WIDTH, HEIGHT, scale=0.5)
+    b = rectify_pair_cached(left, right, WIDTH, HEIGHT, scale=0.5)
+    assert a is b
+    fresh = rectify_pair(left, right, WIDTH, HEIGHT, scale=0.5)
+    assert fresh.left_model.almost_equal(a.left_model) and np.array_equal(fresh.map_left[0], a.map_left[0])
+    _, right2 = stereo_pair("CAHVOR", baseline_m=0.25)
+    c = rectify_pair_cached(left, right2, WIDTH, HEIGHT, scale=0.5)
+    assert c is not a and abs(c.baseline_m - 0.25) < 1e-12
