@@ -39,6 +39,7 @@ def splat_points(
     roi: Optional[tuple] = None,
     see_through_ratio: float = 0.05,
     fill_holes_px: int = 2,
+    soft_depth_ratio: float = 0.01,
 ) -> SplatResult:
     """Render points ``(N, 3)`` (the model's frame) with ``intensities`` ``(N,)`` into ``model``.
 
@@ -47,6 +48,9 @@ def splat_points(
     A pixel whose depth exceeds the minimum depth of its 5x5 neighbourhood by
     more than ``see_through_ratio`` (relative) is treated as seen through a hole
     and cleared; holes up to ``fill_holes_px`` wide are filled from neighbours.
+    With ``soft_depth_ratio`` > 0, each pixel blends (bilinear weights) the points
+    within that relative depth of its nearest point; 0 keeps only the nearest
+    point, as the paper describes.
     """
     import cv2
 
@@ -66,7 +70,8 @@ def splat_points(
     x, y, depth, I = x[keep], y[keep], depth[keep], I[keep]
     xf = np.floor(x).astype(np.int64)
     yf = np.floor(y).astype(np.int64)
-    cand_idx, cand_depth, cand_val = [], [], []
+    fx, fy = x - xf, y - yf
+    cand_idx, cand_depth, cand_val, cand_w = [], [], [], []
     for dx in (0, 1):
         for dy in (0, 1):
             xi, yi = xf + dx, yf + dy
@@ -74,9 +79,14 @@ def splat_points(
             cand_idx.append(yi[inside] * w + xi[inside])
             cand_depth.append(depth[inside])
             cand_val.append(I[inside])
+            # bilinear weight of this pixel for the point (how close the point falls to its centre)
+            wx = fx if dx else 1.0 - fx
+            wy = fy if dy else 1.0 - fy
+            cand_w.append((wx * wy)[inside])
     idx = np.concatenate(cand_idx)
     dep = np.concatenate(cand_depth)
     val = np.concatenate(cand_val)
+    wgt = np.concatenate(cand_w)
     img = np.full(w * h, np.nan, np.float32)
     zbuf = np.full(w * h, np.nan, np.float32)
     if len(idx):
@@ -85,8 +95,16 @@ def splat_points(
         first = np.ones(len(idx_s), bool)
         first[1:] = idx_s[1:] != idx_s[:-1]
         sel = order[first]
-        img[idx[sel]] = val[sel]
         zbuf[idx[sel]] = dep[sel]
+        img[idx[sel]] = val[sel]  # the nearest point (the paper's rule)
+        if soft_depth_ratio > 0:
+            # soft z-buffer: the points on the nearest surface (depth within soft_depth_ratio of the nearest)
+            # are blended with their bilinear weights
+            keep = dep <= zbuf[idx] * (1.0 + soft_depth_ratio)
+            num = np.bincount(idx[keep], weights=(wgt * val)[keep], minlength=w * h)
+            den = np.bincount(idx[keep], weights=wgt[keep], minlength=w * h)
+            has = den > 1e-9
+            img[has] = (num[has] / den[has]).astype(np.float32)
     img = img.reshape(h, w)
     zbuf = zbuf.reshape(h, w)
     filled = float(np.isfinite(img).mean()) if img.size else 0.0

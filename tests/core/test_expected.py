@@ -101,3 +101,22 @@ def test_nearest_projection_is_subpixel_exact_on_a_plane():
     X = ray_ground(haz, np.array([[100.3, 90.7]]))[0]
     res = nearest_projection(xyz[60:130, 50:150], (50, 60), nav, nav.project(X[None])[0])
     assert np.linalg.norm(res.uv - [100.3, 90.7]) < 0.01
+
+
+def test_soft_zbuffer_blends_the_nearest_surface_and_beats_nearest_only():
+    m = cam(np.radians(45), [0.5, 0.0, -0.5])
+    P = ground_points(step=0.003)
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    truth = texture(ray_ground(m, np.stack([u, v], -1)))
+    c = (slice(60, 140), slice(60, 140))
+    errs = {}
+    for soft in (0.0, 0.01):
+        res = splat_points(P, texture(P), m, W, H, soft_depth_ratio=soft)
+        errs[soft] = float(np.nanmedian(np.abs(res.image[c] - truth[c])))
+    assert errs[0.01] < 0.7 * errs[0.0], errs
+    # a far surface behind the near one does not leak into the blend
+    back = P + np.array([0.0, 0.0, 0.3])  # 30 cm below the ground, hidden
+    both = np.concatenate([P, back])
+    vals = np.concatenate([texture(P), np.full(len(back), 5.0)])
+    res = splat_points(both, vals, m, W, H, soft_depth_ratio=0.01)
+    assert np.nanmax(res.image[c]) < 1.5
