@@ -148,7 +148,7 @@ def _unproject1(model: CameraModel, uv) -> tuple[np.ndarray, np.ndarray]:
     return o[0], d[0]
 
 
-def _polyline_foot(curve: np.ndarray, p: np.ndarray):
+def polyline_foot(curve: np.ndarray, p: np.ndarray):
     """Nearest point of polyline ``curve`` (N, 2) to ``p`` (2,): ``(foot, unit tangent, segment index, t)``."""
     a = curve[:-1]
     b = curve[1:]
@@ -376,7 +376,7 @@ def point_stereo(
             uv_r, score, _ = aff
     ratio = score / second if second > 0 else float("inf")
 
-    foot, tan, _, _ = _polyline_foot(curve, uv_r)
+    foot, tan, _, _ = polyline_foot(curve, uv_r)
     if tan[0] < 0 or (tan[0] == 0 and tan[1] < 0):
         tan = -tan
     normal = np.array([-tan[1], tan[0]])
@@ -471,7 +471,7 @@ def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.
 
 
 def _along_curve(curve: np.ndarray, p: np.ndarray) -> np.ndarray:
-    _, tan, _, _ = _polyline_foot(curve, p)
+    _, tan, _, _ = polyline_foot(curve, p)
     return tan
 
 

@@ -103,7 +103,7 @@ def image_stats(dl: Downlink) -> list:
 # ============================================================================ calibration health
 def _epipolar_offset(left_model, right_model, uv_left, uv_right) -> Optional[float]:
     """Signed distance (px) of ``uv_right`` from the epipolar curve of ``uv_left`` (+: below/right of its direction)."""
-    from ..core.stereo import epipolar_curve
+    from ..core.stereo import epipolar_curve, polyline_foot
 
     try:
         c, _ = epipolar_curve(left_model, right_model, uv_left, 0.3, 200.0)
@@ -112,16 +112,10 @@ def _epipolar_offset(left_model, right_model, uv_left, uv_right) -> Optional[flo
     if len(c) < 2:
         return None
     p = np.asarray(uv_right, float)
-    a, b = c[:-1], c[1:]
-    ab = b - a
-    L2 = np.sum(ab * ab, 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.clip(np.sum((p - a) * ab, 1) / L2, 0, 1)
-    t = np.where(L2 > 0, t, 0)
-    q = a + t[:, None] * ab
-    k = int(np.argmin(np.linalg.norm(q - p, axis=1)))
-    tan = ab[k] / max(math.sqrt(L2[k]), 1e-12)
-    d = p - q[k]
+    foot, _, k, _ = polyline_foot(c, p)
+    seg = c[k + 1] - c[k]  # the tangent of the foot's own segment
+    tan = seg / max(math.sqrt(float(seg @ seg)), 1e-12)
+    d = p - foot
     return float(tan[0] * d[1] - tan[1] * d[0])
 
 

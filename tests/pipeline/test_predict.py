@@ -40,16 +40,6 @@ def box_fn(boxes):
     return h
 
 
-@pytest.fixture(scope="module")
-def rc():
-    return S.rover_config()
-
-
-@pytest.fixture(scope="module")
-def flat_terrain():
-    return P.Terrain([heightfield_source(flat)], smooth_sigma_px=0)
-
-
 def start_pose(x=0.0, y=0.0, yaw=0.0):
     return RoverPose(RigidTransform(euler_zyx_to_matrix(yaw, 0.0, 0.0), np.array([x, y, 0.0])), "test", 0.03, 0.005)
 

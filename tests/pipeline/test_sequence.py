@@ -9,22 +9,11 @@ import pytest
 
 from scipctl.pipeline import predict as P
 from scipctl.pipeline import sequence as Q
-from tests.pipeline import scene as S
 from tests.pipeline.test_predict import box_fn, flat, heightfield_source, start_pose
 
 TARGET = np.array([9.0, 0.0, 0.0])
 RECORD = {"id": "t1", "ok": True, "product_id": "pancam_left_1_0", "camera": "pancam", "pixel_uv": [127.5, 127.5],
           "xyz_site_m": TARGET.tolist(), "range_m": 9.1}
-
-
-@pytest.fixture(scope="module")
-def rc():
-    return S.rover_config()
-
-
-@pytest.fixture(scope="module")
-def flat_terrain():
-    return P.Terrain([heightfield_source(flat)], smooth_sigma_px=0)
 
 
 def prediction(rc, terrain, target=TARGET, confidence=0.95, approach=None):
