@@ -243,6 +243,9 @@ def camera_model_to_plain(m: CameraModel) -> dict:
 def model_slot_from_plain(fs: Fields, resolve_file: ModelFileResolver) -> tuple[CameraModel, Optional[tuple]]:
     """Read ``camera_model`` or (directory container) ``camera_model_file`` from ``fs`` -> (model, dims from file or None)."""
     has_m, has_f = fs.has("camera_model"), fs.has("camera_model_file")
+    if resolve_file is None and has_m:
+        # the MCAP container knows no camera_model_file: beside a camera_model it is an extra key, ignored
+        has_f = False
     if has_m and has_f:
         raise fs.err("camera_model_file", "both camera_model and camera_model_file given (give one)")
     if has_f:

@@ -343,6 +343,18 @@ def test_camera_model_file_not_allowed_in_mcap(tmp_path):
     expect_error(mcap_with(tmp_path, mutate), NAV, "camera_model_file", "only allowed in a directory")
 
 
+def test_camera_model_file_beside_a_model_in_mcap_is_an_ignored_extra_key(tmp_path):
+    """The MCAP container has no camera_model_file; next to a camera_model it is just an extra key."""
+    ref = read_downlink(mcap_with(tmp_path, lambda t: None)).product(NAV).camera_model
+    (tmp_path / "x.mcap").unlink()
+
+    def mutate(t):
+        rec(t, NAV)["camera_model_file"] = "no/such/file.cahvor"
+
+    m = read_downlink(mcap_with(tmp_path, mutate)).product(NAV).camera_model
+    assert m.to_dict() == ref.to_dict()
+
+
 # --------------------------------------------------------------------------- MCAP container
 def test_missing_metadata(tmp_path):
     p = mcap_with(tmp_path, lambda t: None, meta=None)
