@@ -9,12 +9,16 @@
 * :func:`nearest_projection` — the pixel of a per-pixel point map whose point
   projects nearest a given pixel of another camera (pure geometric handoff),
   refined to sub-pixel by a local affine fit.
+* :func:`match_projection` — Gauss-Newton on a pixel of one camera so that
+  its 3-D point (from any per-pixel range source, e.g. point stereo) projects
+  onto a given pixel of another camera (sub-pixel pure geometric handoff that
+  does not inherit the dense map's per-pixel range noise).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -244,3 +248,123 @@ def nearest_projection(
             if np.all(np.abs(step) <= 1.0):
                 uv = uv_int + step
     return NearestProjection(uv, uv_int, float(np.sqrt(d2_best)), xyz_map[j, i].copy())
+
+
+@dataclass
+class ProjectionMatch:
+    uv: np.ndarray  # (2,) pixel of the first camera
+    xyz: np.ndarray  # (3,) its 3-D point (the second camera's model frame)
+    residual_px: float  # |projection - goal| at ``uv`` (second camera's pixels)
+    iterations: int  # Gauss-Newton steps taken
+    converged: bool  # the last step was below ``tol_px``
+
+
+def match_projection(
+    xyz_of_pixel: Callable[[np.ndarray], Optional[np.ndarray]],
+    model: CameraModel,
+    goal_uv,
+    uv0,
+    jacobian: np.ndarray,
+    max_iterations: int = 6,
+    tol_px: float = 0.01,
+    max_step_px: float = 3.0,
+) -> Optional[ProjectionMatch]:
+    """The pixel ``uv`` of a first camera whose 3-D point ``xyz_of_pixel(uv)`` projects through ``model`` onto
+    ``goal_uv`` (2,), by Gauss-Newton from ``uv0`` (2,).
+
+    ``xyz_of_pixel``: ``(2,)`` pixel -> ``(3,)`` point in ``model``'s frame, or
+    None where no range is available. ``jacobian`` ``(2, 2)``: an approximation
+    of d(projection)/d(uv) near the answer (e.g. from a dense point map), kept
+    fixed: the iteration converges whenever it is within a few tens of percent
+    of the true one. Steps are clipped to ``max_step_px``. Returns None when no
+    point is available at ``uv0``; otherwise the best pixel visited (smallest
+    residual).
+    """
+    J = np.asarray(jacobian, dtype=float)
+    if J.shape != (2, 2) or not np.all(np.isfinite(J)) or abs(np.linalg.det(J)) < 1e-12:
+        raise ValueError(f"jacobian: expected a finite, invertible (2, 2) matrix, got {J!r}")
+    goal = np.asarray(goal_uv, dtype=float).reshape(2)
+    uv = np.asarray(uv0, dtype=float).reshape(2).copy()
+    best = None
+    converged = False
+    it = 0
+    for it in range(max_iterations + 1):
+        X = xyz_of_pixel(uv)
+        if X is None or not np.all(np.isfinite(X)):
+            break
+        X = np.asarray(X, dtype=float).reshape(3)
+        q = model.project(X[None])[0]
+        if not np.all(np.isfinite(q)):
+            break
+        r = goal - q
+        res = float(np.hypot(*r))
+        if best is None or res < best.residual_px:
+            best = ProjectionMatch(uv.copy(), X, res, it, False)
+        if converged or it == max_iterations:
+            break
+        step = np.linalg.solve(J, r)
+        n = float(np.hypot(*step))
+        if n > max_step_px:
+            step *= max_step_px / n
+        uv = uv + step
+        converged = n < tol_px
+    if best is not None:
+        best.converged = converged
+    return best
+
+
+def footprint_blur_cov(A: np.ndarray) -> np.ndarray:
+    """Extra blur ``(2, 2)`` covariance (source px^2) that turns source pixels into destination pixels.
+
+    ``A`` ``(2, 2)``: d(source pixel)/d(destination pixel). A destination pixel
+    (unit box, variance 1/12 per axis) covers ``A A^T / 12`` in the source; the
+    source pixel already integrates ``I / 12``; the difference (clipped to
+    positive semi-definite) is what the source image must be blurred by before
+    it is sampled at destination pixels. Zero where the source is coarser.
+    """
+    A = np.asarray(A, dtype=float)
+    if A.shape != (2, 2) or not np.all(np.isfinite(A)):
+        raise ValueError(f"A: expected a finite (2, 2) matrix, got {A!r}")
+    w, V = np.linalg.eigh((A @ A.T - np.eye(2)) / 12.0)
+    return (V * np.clip(w, 0.0, None)) @ V.T
+
+
+def gaussian_blur_cov(image: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``image`` (H, W) convolved with the Gaussian of covariance ``cov`` ``(2, 2)`` (px^2, (u, v) order).
+
+    Returned as float32; the input itself when the covariance is negligible.
+    Borders replicate.
+    """
+    import cv2
+
+    img = np.asarray(image, dtype=np.float32)
+    S = np.asarray(cov, dtype=float)
+    if S.shape != (2, 2) or not np.all(np.isfinite(S)):
+        raise ValueError(f"cov: expected a finite (2, 2) matrix, got {S!r}")
+    if np.max(np.linalg.eigvalsh(S)) < 0.05**2:
+        return img
+    r = int(np.ceil(3.0 * np.sqrt(max(S[0, 0], S[1, 1])))) + 1
+    x, y = np.meshgrid(np.arange(-r, r + 1, dtype=float), np.arange(-r, r + 1, dtype=float))
+    # tiny floor keeps a rank-deficient covariance (blur along one direction only) invertible
+    Si = np.linalg.inv(S + 1e-4 * np.eye(2))
+    k = np.exp(-0.5 * (Si[0, 0] * x * x + 2 * Si[0, 1] * x * y + Si[1, 1] * y * y))
+    k /= k.sum()
+    return cv2.filter2D(img, -1, k.astype(np.float32), borderType=cv2.BORDER_REPLICATE)
+
+
+def plane_points(model: CameraModel, uv: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Where the rays of pixels ``uv`` (..., 2) of ``model`` meet the plane through ``point`` (3,) with ``normal``
+    (3,) -> (..., 3) in the model's frame; NaN where a ray misses it (parallel or behind the camera)."""
+    uv = np.asarray(uv, dtype=float)
+    if uv.shape[-1] != 2:
+        raise ValueError(f"uv: expected (..., 2), got {uv.shape}")
+    X0 = np.asarray(point, dtype=float).reshape(3)
+    n = np.asarray(normal, dtype=float).reshape(3)
+    o, d = model.unproject(uv.reshape(-1, 2))
+    o = np.broadcast_to(o, d.shape)
+    den = d @ n
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((X0 - o) @ n) / den
+    P = o + t[:, None] * d
+    P[~(np.isfinite(t) & (t > 0))] = np.nan
+    return P.reshape(uv.shape[:-1] + (3,))

@@ -15,12 +15,23 @@ Paper methods (names used on the command line and in JSON):
 ``refined-kinematic``   near: expected hazcam window splatted from the navcam
                         dense cloud, centred on the alt-pure-kinematic point,
                         NCC-tracked into the hazcam image; far: the far navcam
-                        window scaled by IFOV and range ratios, tracked around the
-                        near pure-kinematic point (as in the paper).
+                        window brought into the hazcam view, tracked around the
+                        near pure-kinematic point (as in the paper). Beyond the
+                        paper, the window is warped through the local plane (fitted
+                        to the far navcam's dense points around the target) instead
+                        of scaled uniformly by the IFOV and range ratios — the
+                        "affine warping" the paper left unexplored; the uniform
+                        scale (``far_window_warp="scale"``) misses by ~4 px off the
+                        fish-eye hazcam's axis even with no error.
 ``pure-geometric``      hazcam dense cloud -> navcam image; the hazcam point whose
-                        projection lands nearest the navcam target.
+                        projection lands nearest the navcam target. Beyond the
+                        paper, refined by Gauss-Newton on the hazcam pixel with
+                        hazcam point stereo for the range (the dense range's
+                        few-mm error at one pixel is ~1 px of handoff error).
 ``refined-geometric``   the navcam image draped over the hazcam stereo surface as
-                        the expected hazcam window, NCC-tracked.
+                        the expected hazcam window (anti-aliased to the hazcam
+                        pixel footprint), centred on the pure-geometric point,
+                        NCC-tracked.
 ``mesh-registration``   ICP between the navcam and hazcam clouds (seeded with the
                         mast kinematics for near, the pose estimate for far), then
                         kinematic handoff through the recovered transform.
@@ -48,7 +59,17 @@ from typing import Optional
 import numpy as np
 
 from .camera import CameraModel
-from .expected import bilinear_sample, drape, nearest_projection, project_map, splat_points
+from .expected import (
+    bilinear_sample,
+    drape,
+    footprint_blur_cov,
+    gaussian_blur_cov,
+    match_projection,
+    nearest_projection,
+    plane_points,
+    project_map,
+    splat_points,
+)
 from ..jsonutil import finite_or_none
 from .transforms import RigidTransform
 
@@ -78,6 +99,13 @@ class HandoffParams:
     fine_search_px: float = 4.0
     consensus_agree_px: float = 3.0
     consensus_min_score: float = 0.5
+    haz_point_stereo_window_px: int = 11  # pure geometric refinement (0: the paper's dense-only answer)
+    haz_point_stereo_range_frac: float = 0.15  # its range search: +-15 % around the dense range
+    geometric_iterations: int = 6
+    geometric_max_residual_px: float = 0.5  # navcam px; a refinement that does not converge is not used
+    far_window_warp: str = "plane"  # refined-kinematic far: "plane" (local plane warp) or "scale" (the paper's)
+    drape_antialias: bool = True  # draped windows: navcam blurred to the hazcam pixel footprint
+    far_plane_radius_m: float = 0.05  # its plane fit: navcam dense points within this distance of the target
 
 
 @dataclass
@@ -224,7 +252,15 @@ class HandoffCase:
         )
 
     def _draped_window(self, centre_uv, T_haz_nav: RigidTransform, half: int):
-        """Expected hazcam window (2 half + 1)^2 around ``centre_uv``: navcam image draped over hazcam stereo."""
+        """Expected hazcam window (2 half + 1)^2 around ``centre_uv``: navcam image draped over hazcam stereo.
+
+        Beyond the paper: the navcam image is low-pass filtered before it is
+        sampled (:func:`~scipctl.core.expected.footprint_blur_cov` of the local
+        navcam-per-hazcam pixel Jacobian at the window centre), so that a
+        navcam finer than the hazcam at the target (near navcams, ~1.5 navcam px
+        per hazcam px) is integrated over the hazcam pixel's footprint as the
+        hazcam itself does, instead of point-sampled (aliased).
+        """
         k = half
         c = np.round(np.asarray(centre_uv, float))
         us, vs = np.meshgrid(np.arange(c[0] - k, c[0] + k + 1), np.arange(c[1] - k, c[1] + k + 1))
@@ -232,10 +268,93 @@ class HandoffCase:
         X_haz = self.haz.xyz_at(uv)
         X_nav = T_haz_nav.inverse().apply(np.where(np.isfinite(X_haz), X_haz, 0.0))
         X_nav[~np.all(np.isfinite(X_haz), axis=1)] = np.nan
-        vals = drape(X_nav, self.nav.left_model, self.nav.left_img).reshape(2 * k + 1, 2 * k + 1)
+        if self.params.drape_antialias:
+            q = project_map(X_nav.reshape(2 * k + 1, 2 * k + 1, 3), self.nav.left_model)
+            A = _map_jacobian(q)
+            vals = self._sample_nav(q, A) if A is not None else drape(X_nav, self.nav.left_model, self.nav.left_img)
+        else:
+            vals = drape(X_nav, self.nav.left_model, self.nav.left_img)
+        vals = np.asarray(vals, np.float32).reshape(2 * k + 1, 2 * k + 1)
         frac = float(np.isfinite(vals).mean())
         return _fill_nan(vals), frac, c
 
+    def _nav_plane_normal(self, nav_uv, X_nav, half_px: Optional[int] = None) -> Optional[np.ndarray]:
+        """Unit normal ``(3,)`` (navcam rover frame) of a plane fitted to the navcam dense points around the target.
+
+        Points on a ``(2 h + 1)^2`` pixel grid around ``nav_uv`` (``h``: the
+        hazcam template's size in navcam pixels, from ``far_plane_radius_m``),
+        within ``far_plane_radius_m`` of the target ``X_nav``; least squares
+        (SVD), refitted once without the points beyond 3x the median residual.
+        None with fewer than 30 points.
+        """
+        p = self.params
+        r = p.far_plane_radius_m
+        if half_px is None:
+            rng = float(np.linalg.norm(X_nav - self.nav.left_model.C))
+            half_px = int(np.clip(np.ceil(r / (rng * local_ifov_rad(self.nav.left_model, nav_uv))), 3, 60))
+        c = np.asarray(nav_uv, float)
+        us, vs = np.meshgrid(np.arange(-half_px, half_px + 1), np.arange(-half_px, half_px + 1))
+        uv = c + np.stack([us, vs], -1).reshape(-1, 2)
+        P = self.nav.xyz_at(uv)
+        P = P[np.all(np.isfinite(P), axis=1)]
+        P = P[np.linalg.norm(P - X_nav, axis=1) < r]
+        for _ in range(2):
+            if len(P) < 30:
+                return None
+            m = P.mean(axis=0)
+            _, _, Vt = np.linalg.svd(P - m, full_matrices=False)
+            n = Vt[2]
+            res = np.abs((P - m) @ n)
+            P = P[res <= max(3.0 * float(np.median(res)), 1e-4)]
+        return n / np.linalg.norm(n)
+
+    def _plane_window(self, X_haz, n_haz, half: int):
+        """Expected hazcam window from the navcam image through the local plane (beyond the paper).
+
+        The ``(2 half + 1)^2`` hazcam pixels around the projection of the target
+        ``X_haz`` (3,) are cast onto the plane through it with normal ``n_haz``
+        (both in the hazcam rover frame), the plane points projected into the
+        navcam (through ``T_haz_nav``), and the navcam image sampled there after
+        the anti-alias blur of :func:`~scipctl.core.expected.footprint_blur_cov`.
+        Returns ``(template, template centre uv (2,), A (2, 2) navcam px per hazcam px)``
+        or ``(None, None, None)``.
+        """
+        centre = self._project_haz(X_haz)
+        if not np.all(np.isfinite(centre)):
+            return None, None, None
+        k = half
+        c = np.round(centre)
+        us, vs = np.meshgrid(np.arange(c[0] - k, c[0] + k + 1), np.arange(c[1] - k, c[1] + k + 1))
+        grid = np.stack([us, vs], -1)
+        P = plane_points(self.haz.left_model, grid, X_haz, n_haz)
+        q = self.nav.left_model.project(self.T_haz_nav.inverse().apply(P.reshape(-1, 3))).reshape(grid.shape)
+        A = np.stack([(q[k, k + 1] - q[k, k - 1]) / 2, (q[k + 1, k] - q[k - 1, k]) / 2], axis=1)
+        if not (np.all(np.isfinite(A)) and np.isfinite(q).mean() > 0.9):
+            return None, None, None
+        vals = self._sample_nav(q, A)
+        tpl = _fill_nan(vals)
+        if tpl is None:
+            return None, None, None
+        return tpl, centre - (c - k), A
+
+    def _sample_nav(self, q: np.ndarray, A: np.ndarray) -> np.ndarray:
+        """The navcam-left image at navcam pixels ``q`` (h, w, 2), anti-aliased for ``A`` = d(navcam px)/d(hazcam px)."""
+        ok = np.all(np.isfinite(q), axis=-1)
+        out = np.full(q.shape[:-1], np.nan, np.float32)
+        if not ok.any():
+            return out
+        cov = footprint_blur_cov(A)
+        pad = int(np.ceil(3 * np.sqrt(max(cov[0, 0], cov[1, 1])))) + 2
+        H, W = self.nav.left_img.shape
+        u0 = int(max(np.floor(q[ok][:, 0].min()) - pad, 0))
+        v0 = int(max(np.floor(q[ok][:, 1].min()) - pad, 0))
+        u1 = int(min(np.ceil(q[ok][:, 0].max()) + pad + 1, W))
+        v1 = int(min(np.ceil(q[ok][:, 1].max()) + pad + 1, H))
+        if u1 - u0 < 2 or v1 - v0 < 2:
+            return out
+        crop = gaussian_blur_cov(self.nav.left_img[v0:v1, u0:u1], cov)
+        out[ok] = bilinear_sample(crop, q[ok] - [u0, v0])
+        return out
 
     # ----------------------------------------------------------- methods
     def run(self, method: str, nav_uv, near_hint: Optional[MethodResult] = None) -> MethodResult:
@@ -319,30 +438,108 @@ class HandoffCase:
         else:
             ps = self._nav_point(nav_uv)
             near_pk = getattr(self, "_near_hint", None)
+            X_far = self.T_haz_nav.apply(ps.xyz)
             if near_pk is None or not near_pk.ok:
                 # fall back to the far kinematic point when the near one is not available
-                start = self._project_haz(self.T_haz_nav.apply(ps.xyz))
-                X_haz = self.T_haz_nav.apply(ps.xyz)
+                start = self._project_haz(X_far)
+                X_haz = X_far
             else:
                 start = near_pk.uv
                 X_haz = np.asarray(near_pk.diagnostics["xyz_haz_rover_m"])
-            from .tracking import extract_window, scale_window, window_scale_for_handoff
+            tpl = None
+            if p.far_window_warp == "plane":
+                n_nav = self._nav_plane_normal(nav_uv, ps.xyz)
+                if n_nav is not None:
+                    tpl, tc, A = self._plane_window(X_far, self.T_haz_nav.rotate(n_nav), k)
+                    if tpl is not None:
+                        tr = self._track(tpl, start, p.search_radius_px, p.refined_min_score, template_center_uv=tc)
+                        diag = {"warp": "local plane", "nav_px_per_haz_px": A.tolist(),
+                                "start_uv": np.asarray(start).tolist()}
+            if tpl is None:  # the paper's uniformly scaled window
+                from .tracking import extract_window, scale_window, window_scale_for_handoff
 
-            ifov_nav = local_ifov_rad(self.nav.left_model, nav_uv)
-            ifov_haz = local_ifov_rad(self.haz.left_model, start)
-            range_haz = float(np.linalg.norm(X_haz - self.haz.left_model.C))
-            scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
-            src_half = int(np.ceil(k / scale))
-            win = extract_window(self.nav.left_img, nav_uv, src_half)
-            tpl = scale_window(win, scale)
-            tr = self._track(tpl, start, p.search_radius_px, p.refined_min_score)
-            diag = {"scale": scale, "start_uv": np.asarray(start).tolist()}
+                ifov_nav = local_ifov_rad(self.nav.left_model, nav_uv)
+                ifov_haz = local_ifov_rad(self.haz.left_model, start)
+                range_haz = float(np.linalg.norm(X_haz - self.haz.left_model.C))
+                scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
+                src_half = int(np.ceil(k / scale))
+                win = extract_window(self.nav.left_img, nav_uv, src_half)
+                tpl = scale_window(win, scale)
+                tr = self._track(tpl, start, p.search_radius_px, p.refined_min_score)
+                diag = {"warp": "uniform scale", "scale": scale, "start_uv": np.asarray(start).tolist()}
         if not np.all(np.isfinite(tr.uv)):
             raise _NoAnswer(f"NCC track failed: {tr.reason}", diag)
         diag.update(_track_diag(tr))
         return MethodResult("", "", True, tr.uv, diagnostics=diag)
 
+    def haz_point(self, haz_uv, range_hint_m: Optional[float] = None):
+        """Point stereo on the hazcam pair at the left-hazcam pixel ``haz_uv`` (2,) (cached).
+
+        The small correlation window (``haz_point_stereo_window_px``) with the
+        affine-refined NCC keeps sharp relief (corners) that the dense
+        stereo's smoothing rounds; ``range_hint_m`` bounds the search to
+        +-``haz_point_stereo_range_frac`` of it. Returns the 3-D point ``(3,)``
+        (hazcam rover frame) or None.
+        """
+        p = self.params
+        uv = np.asarray(haz_uv, float).reshape(2)
+        key = ("hps", tuple(np.round(uv, 4)))
+        if key not in self._cache:
+            from .stereo import point_stereo
+
+            lo, hi = self.haz.min_range_m, self.haz.max_range_m
+            if range_hint_m is not None and np.isfinite(range_hint_m):
+                f = p.haz_point_stereo_range_frac
+                lo, hi = max(lo, (1 - f) * range_hint_m), min(hi, (1 + f) * range_hint_m)
+            ps = point_stereo(
+                self.haz.left_img, self.haz.right_img, self.haz.left_model, self.haz.right_model, uv,
+                band_px=p.point_stereo_band_px, window_px=p.haz_point_stereo_window_px,
+                min_range_m=lo, max_range_m=hi,
+            )
+            self._cache[key] = ps.xyz.copy() if ps.ok else None
+        return self._cache[key]
+
+    def _haz_to_nav_jacobian(self, haz_uv, nav_in_haz: CameraModel, step_px: float = 2.0) -> Optional[np.ndarray]:
+        """d(navcam pixel)/d(hazcam pixel) ``(2, 2)`` at ``haz_uv`` by central differences of the dense surface."""
+        uv = np.asarray(haz_uv, float).reshape(2)
+        offs = np.array([[step_px, 0], [-step_px, 0], [0, step_px], [0, -step_px]])
+        X = self.haz.xyz_at(uv + offs)
+        if not np.all(np.isfinite(X)):
+            return None
+        q = nav_in_haz.project(X)
+        J = np.stack([(q[0] - q[1]), (q[2] - q[3])], axis=1) / (2 * step_px)
+        if not np.all(np.isfinite(J)) or abs(np.linalg.det(J)) < 1e-6:
+            return None
+        return J
+
     def _pure_geometric(self, nav_uv):
+        """The paper's pure geometric handoff, then (beyond the paper) a sub-pixel refinement.
+
+        Paper: the hazcam dense point whose navcam projection lands nearest the
+        navcam target (here refined to sub-pixel by the local affine fit of the
+        projection). Its error is the dense range error at that one pixel times
+        the hazcam-navcam parallax (~0.2 hazcam px per mm of range at 1 m from
+        near navcams: SGBM's few-mm noise and corner rounding is ~1 px).
+        Refinement: Gauss-Newton on the hazcam pixel, with each pixel's 3-D
+        point from hazcam point stereo (small window, affine NCC) and the
+        Jacobian from the dense surface, until that point projects onto the
+        navcam target. The dense answer is kept when point stereo fails.
+        """
+        key = ("pg", tuple(np.round(np.asarray(nav_uv, float), 6)))
+        if key in self._cache:
+            r = self._cache[key]
+            if isinstance(r, _NoAnswer):
+                raise r
+            return MethodResult(r.method, r.navcam, r.ok, r.uv.copy(), r.reason, dict(r.diagnostics))
+        try:
+            r = self._pure_geometric_uncached(nav_uv)
+        except _NoAnswer as e:
+            self._cache[key] = e
+            raise
+        self._cache[key] = r
+        return MethodResult(r.method, r.navcam, r.ok, r.uv.copy(), r.reason, dict(r.diagnostics))
+
+    def _pure_geometric_uncached(self, nav_uv):
         d = self.haz.dense
         xyz = d.xyz  # rectified-left grid of the hazcam, hazcam rover frame
         nav_in_haz = self.nav_model_in_haz()
@@ -356,9 +553,24 @@ class HandoffCase:
         if X is None:
             X = res.xyz
         uv = self._project_haz(X)
-        return MethodResult("", "", True, uv, diagnostics={
-            "nearest_distance_navcam_px": res.distance_px, "xyz_haz_rover_m": X.tolist(),
-        })
+        diag = {"nearest_distance_navcam_px": res.distance_px, "dense_uv": uv.tolist()}
+        refined = None
+        if self.params.haz_point_stereo_window_px > 0 and np.all(np.isfinite(uv)):
+            J = self._haz_to_nav_jacobian(uv, nav_in_haz)
+            C = self.haz.left_model.C
+            r_hint = float(np.linalg.norm(X - C))
+            if J is not None:
+                refined = match_projection(lambda p: self.haz_point(p, r_hint), nav_in_haz, nav_uv, uv, J,
+                                           max_iterations=self.params.geometric_iterations)
+        if refined is not None and refined.residual_px <= self.params.geometric_max_residual_px:
+            diag.update({"refined_by": "hazcam point stereo", "refinement_px": float(np.hypot(*(refined.uv - uv))),
+                         "refinement_residual_navcam_px": refined.residual_px,
+                         "refinement_iterations": refined.iterations})
+            uv, X = refined.uv, refined.xyz
+        else:
+            diag["refined_by"] = None
+        diag["xyz_haz_rover_m"] = X.tolist()
+        return MethodResult("", "", True, uv, diagnostics=diag)
 
     def _refined_geometric(self, nav_uv):
         p = self.params
@@ -491,3 +703,13 @@ def local_ifov_rad(model: CameraModel, uv) -> float:
 def _interp_xyz(xyz: np.ndarray, uv) -> Optional[np.ndarray]:
     out = np.array([bilinear_sample(xyz[..., k], np.asarray(uv, float)[None])[0] for k in range(3)])
     return out if np.all(np.isfinite(out)) else None
+
+
+def _map_jacobian(q: np.ndarray) -> Optional[np.ndarray]:
+    """Median d(q)/d(pixel) ``(2, 2)`` of a pixel map ``q`` (h, w, 2) (NaN invalid) by neighbour differences."""
+    du = (q[:, 2:] - q[:, :-2])[1:-1] / 2
+    dv = (q[2:] - q[:-2])[:, 1:-1] / 2
+    ok = np.all(np.isfinite(du), axis=-1) & np.all(np.isfinite(dv), axis=-1)
+    if ok.sum() < 9:
+        return None
+    return np.stack([np.median(du[ok], axis=0), np.median(dv[ok], axis=0)], axis=1)

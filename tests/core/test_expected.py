@@ -1,7 +1,18 @@
 import numpy as np
 
 from scipctl.core.camera import cahv_from_intrinsics
-from scipctl.core.expected import bilinear_sample, drape, nearest_projection, splat_points
+import pytest
+
+from scipctl.core.expected import (
+    bilinear_sample,
+    drape,
+    footprint_blur_cov,
+    gaussian_blur_cov,
+    match_projection,
+    nearest_projection,
+    plane_points,
+    splat_points,
+)
 from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix
 
 W = H = 200
@@ -120,3 +131,78 @@ def test_soft_zbuffer_blends_the_nearest_surface_and_beats_nearest_only():
     vals = np.concatenate([texture(P), np.full(len(back), 5.0)])
     res = splat_points(both, vals, m, W, H, soft_depth_ratio=0.01)
     assert np.nanmax(res.image[c]) < 1.5
+
+
+def _fd_jacobian(haz, nav, uv, h=1.0):
+    cols = []
+    for d in (np.array([h, 0.0]), np.array([0.0, h])):
+        a = nav.project(ray_ground(haz, (uv + d)[None]))[0]
+        b = nav.project(ray_ground(haz, (uv - d)[None]))[0]
+        cols.append((a - b) / (2 * h))
+    return np.stack(cols, axis=1)
+
+
+def test_match_projection_converges_to_the_exact_pixel_with_an_approximate_jacobian():
+    haz = cam(np.radians(45), [0.5, 0.0, -0.5])
+    nav = cam(np.radians(60), [0.3, 0.1, -1.5], f=250.0)
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        uv_true = rng.uniform(50, 150, 2)
+        goal = nav.project(ray_ground(haz, uv_true[None]))[0]
+        J = _fd_jacobian(haz, nav, uv_true)
+        J_approx = J @ np.array([[1.2, 0.1], [-0.1, 0.85]])  # 10-20 % wrong, as a noisy dense map gives
+        uv0 = uv_true + rng.uniform(-2.5, 2.5, 2)
+        m = match_projection(lambda p: ray_ground(haz, p[None])[0], nav, goal, uv0, J_approx, max_iterations=12,
+                             tol_px=1e-4)
+        assert m is not None and m.converged
+        assert np.linalg.norm(m.uv - uv_true) < 1e-3
+        assert m.residual_px < 1e-3
+        # the returned point is the map's point at the returned pixel
+        assert np.allclose(m.xyz, ray_ground(haz, m.uv[None])[0])
+
+
+def test_match_projection_without_a_point_and_bad_jacobian():
+    haz = cam(np.radians(45), [0.5, 0.0, -0.5])
+    nav = cam(np.radians(60), [0.3, 0.1, -1.5], f=250.0)
+    assert match_projection(lambda p: None, nav, [100.0, 100.0], [100.0, 100.0], np.eye(2)) is None
+    with pytest.raises(ValueError):
+        match_projection(lambda p: ray_ground(haz, p[None])[0], nav, [100.0, 100.0], [100.0, 100.0],
+                         np.zeros((2, 2)))
+
+
+def test_footprint_blur_cov():
+    # source twice as fine as the destination: (4 - 1) / 12 px^2 per axis
+    assert np.allclose(footprint_blur_cov(2 * np.eye(2)), 0.25 * np.eye(2))
+    # source coarser: nothing to blur
+    assert np.allclose(footprint_blur_cov(0.5 * np.eye(2)), 0.0)
+    # one axis finer, one coarser, rotated: blur only along the finer axis, rotated with it
+    a = np.radians(30)
+    R = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    cov = footprint_blur_cov(R @ np.diag([2.0, 0.5]))
+    assert np.allclose(cov, R @ np.diag([0.25, 0.0]) @ R.T)
+
+
+def test_gaussian_blur_cov_has_the_requested_moments():
+    img = np.zeros((61, 61), np.float32)
+    img[30, 30] = 1.0
+    cov = np.array([[4.0, 1.5], [1.5, 2.0]])
+    out = gaussian_blur_cov(img, cov)
+    assert out.sum() == pytest.approx(1.0, rel=1e-4)
+    v, u = np.mgrid[0:61, 0:61] - 30.0
+    m = np.array([[np.sum(out * u * u), np.sum(out * u * v)], [np.sum(out * u * v), np.sum(out * v * v)]])
+    assert np.allclose(m, cov, atol=0.05)
+    assert gaussian_blur_cov(img, np.zeros((2, 2))) is not None
+    assert np.array_equal(gaussian_blur_cov(img, np.zeros((2, 2))), img)
+
+
+def test_plane_points_lie_on_the_plane_and_project_back():
+    haz = cam(np.radians(45), [0.5, 0.0, -0.5])
+    X0 = np.array([1.2, 0.1, -0.05])
+    n = np.array([0.2, -0.1, 1.0])
+    n /= np.linalg.norm(n)
+    uv = np.array([[100.0, 100.0], [30.5, 170.25], [150.0, 60.0]])
+    P = plane_points(haz, uv, X0, n)
+    assert np.allclose((P - X0) @ n, 0.0, atol=1e-9)
+    assert np.allclose(haz.project(P), uv, atol=1e-6)
+    # a plane behind the camera is never hit
+    assert np.all(np.isnan(plane_points(haz, uv, haz.C - 5 * haz.A, haz.A)))
