@@ -619,6 +619,95 @@ def _map_valid(maps, shape_src) -> np.ndarray:
     return (mu >= -0.5) & (mu <= Ws - 0.5) & (mv >= -0.5) & (mv <= Hs - 0.5)
 
 
+def _sgbm_disparity(ref8: np.ndarray, oth8: np.ndarray, d_lo: int, nd: int, params: dict) -> np.ndarray:
+    """SGBM disparity ``d`` in ``[d_lo, d_lo + nd)`` of reference ``ref8`` (h, w) uint8 against ``oth8``:
+    ``ref(u) ~ oth(u - d)``. Returns (h, w) float32, NaN where invalid.
+
+    The pair is cropped instead of padded: reference columns ``u < d_lo`` can never match (``u - d < 0``),
+    so the matcher sees ``ref[:, d_lo:]`` against ``oth[:, :w - d_lo]`` with disparities ``0 .. nd - 1``,
+    both padded on the left by ``nd`` columns (SGBM leaves the first ``numDisparities`` columns unmatched).
+    """
+    import cv2
+
+    h, w = ref8.shape
+    out = np.full((h, w), np.nan, np.float32)
+    if d_lo >= w:
+        return out
+    p = dict(params, minDisparity=0, numDisparities=int(nd))
+    A = cv2.copyMakeBorder(ref8[:, d_lo:], 0, 0, nd, 0, cv2.BORDER_REPLICATE)
+    B = cv2.copyMakeBorder(oth8[:, : w - d_lo], 0, 0, nd, 0, cv2.BORDER_REPLICATE)
+    raw = cv2.StereoSGBM_create(**p).compute(A, B)[:, nd:]
+    sub = out[:, d_lo:]
+    ok = raw >= 0
+    sub[ok] = raw[ok].astype(np.float32) * np.float32(1.0 / 16.0) + np.float32(d_lo)
+    return out
+
+
+def _lr_disparity(L8, R8, d_lo, nd, params, lr_check, lr_max_diff_px) -> np.ndarray:
+    """Left-view disparity (h, w) float32 (NaN invalid) in ``[d_lo, d_lo + nd)``, left-right checked if asked."""
+    h, w = L8.shape
+    disp = _sgbm_disparity(L8, R8, d_lo, nd, params)
+    if lr_check == "flip":
+        # right-view disparity: the mirrored right image matched against the mirrored left image
+        dR = _sgbm_disparity(np.ascontiguousarray(R8[:, ::-1]), np.ascontiguousarray(L8[:, ::-1]), d_lo, nd,
+                             params)[:, ::-1]
+        fin = np.isfinite(disp)
+        ur = np.round(np.arange(w, dtype=np.float32)[None, :] - np.where(fin, disp, 0.0)).astype(np.intp)
+        np.clip(ur, 0, w - 1, out=ur)
+        dr = np.take_along_axis(dR, ur, axis=1)
+        with np.errstate(invalid="ignore"):
+            bad = ~(np.abs(dr - disp) <= lr_max_diff_px)
+        disp[bad] = np.nan
+    return disp
+
+
+#: Coarse-to-fine bands: the coarse min..max disparity of a band is widened by this much (fine px) ...
+_BAND_MARGIN_PX = 8.0
+#: ... and searched with a uniqueness ratio raised by this much: a narrowed interval holds fewer competing
+#: disparities, so the plain ratio let more ambiguous (wrong) matches through. Measured on the synthetic scenes
+#: of tests/core/test_stereo.py and the 1024^2 benchmark pair: with +15, gross errors and wrong occluded pixels
+#: are fewer than with the single full-interval pass, at 0.1-0.3 % less coverage (docs/stereo-and-tracking.md).
+_BAND_UNIQUENESS_EXTRA = 15
+
+
+def _row_map(src_model, dst_model, rows) -> np.ndarray:
+    """Rows of rectified model ``dst_model`` seeing the same image-plane ``y`` as rows ``rows`` of ``src_model``."""
+    y = (np.asarray(rows, float) - src_model.vc) / src_model.vs
+    return dst_model.vc + dst_model.vs * y
+
+
+def _band_intervals(coarse: "DenseStereo", lm, fb: float, h: int, d_min: int, d_max: int, band_rows: int,
+                    overlap_rows: int, margin_px: float, min_points: int) -> list:
+    """Per horizontal band of the fine rectified grid, the disparity interval to search.
+
+    ``coarse``: dense stereo of the same pair on a coarser rectified grid. For fine rows ``[r0, r1)`` the
+    coarse rows covering ``[r0 - overlap_rows, r1 + overlap_rows)`` (plus one) give the valid coarse
+    disparities, scaled to the fine grid; the interval is their min .. max widened by ``margin_px``, clipped
+    to ``[d_min, d_max]``. Bands with fewer than ``min_points`` valid coarse disparities search the whole
+    ``[d_min, d_max]``. Returns ``[(r0, r1, lo, hi)]`` (integers, ``lo <= hi``).
+    """
+    cm = coarse.rectified.left_model
+    cfb = coarse._fb()
+    s = fb / cfb
+    Dc = coarse.disparity_px
+    hc = Dc.shape[0]
+    out = []
+    for r0 in range(0, h, band_rows):
+        r1 = min(h, r0 + band_rows)
+        c0, c1 = _row_map(lm, cm, [r0 - overlap_rows, r1 - 1 + overlap_rows])
+        c0 = int(np.clip(np.floor(c0) - 1, 0, hc))
+        c1 = int(np.clip(np.ceil(c1) + 2, 0, hc))
+        vals = Dc[c0:c1]
+        vals = vals[np.isfinite(vals)]
+        if vals.size < min_points:
+            lo, hi = d_min, d_max
+        else:
+            lo = max(d_min, int(math.floor(s * float(vals.min()) - margin_px)))
+            hi = min(d_max, int(math.ceil(s * float(vals.max()) + margin_px)))
+        out.append((r0, r1, lo, max(lo, hi)))
+    return out
+
+
 def dense_stereo(
     left_img,
     right_img,
@@ -634,6 +723,10 @@ def dense_stereo(
     lr_check: str = "flip",
     lr_max_diff_px: float = 1.0,
     rectified=None,
+    coarse_to_fine: Optional[bool] = None,
+    coarse=None,
+    band_rows: int = 128,
+    overlap_rows: int = 16,
 ) -> DenseStereo:
     """Dense disparity and 3-D for a stereo pair (rectify + ``cv2.StereoSGBM``).
 
@@ -718,53 +811,65 @@ def dense_stereo(
     d_max = min(d_max, d_min + w - 1)
     nd = max(16, int(math.ceil((d_max - d_min + 1) / 16.0)) * 16)
     params = sgbm_parameters(nd, d_min, block_size, uniqueness_ratio, speckle_window, speckle_range_px)
-    sgbm = cv2.StereoSGBM_create(**params)
-    # pad on the left so that pixels near the left border are searched too (SGBM skips the first
-    # minDisparity + numDisparities columns)
-    pad = d_min + nd
-    Lp = cv2.copyMakeBorder(L8, 0, 0, pad, 0, cv2.BORDER_REPLICATE)
-    Rp = cv2.copyMakeBorder(R8, 0, 0, pad, 0, cv2.BORDER_REPLICATE)
-    raw = sgbm.compute(Lp, Rp)[:, pad:]
-    valid = raw >= d_min * 16
-    disp = raw.astype(np.float32) / 16.0
 
-    if lr_check == "flip":
-        # right-view disparity: match the mirrored right image against the mirrored left image
-        Lf = cv2.copyMakeBorder(np.ascontiguousarray(R8[:, ::-1]), 0, 0, pad, 0, cv2.BORDER_REPLICATE)
-        Rf = cv2.copyMakeBorder(np.ascontiguousarray(L8[:, ::-1]), 0, 0, pad, 0, cv2.BORDER_REPLICATE)
-        sg2 = cv2.StereoSGBM_create(**params)
-        raw2 = sg2.compute(Lf, Rf)[:, pad:][:, ::-1]
-        dR = np.where(raw2 >= d_min * 16, raw2.astype(np.float32) / 16.0, np.nan)
-        ur = np.round(np.arange(w)[None, :] - disp).astype(int)
-        inside = (ur >= 0) & (ur < w)
-        rows = np.broadcast_to(np.arange(h)[:, None], (h, w))
-        dr = np.full((h, w), np.nan, np.float32)
-        dr[inside] = dR[rows[inside], ur[inside]]
-        with np.errstate(invalid="ignore"):
-            valid &= np.abs(dr - disp) <= lr_max_diff_px
+    if coarse_to_fine is None:
+        coarse_to_fine = coarse is not None or (downsample <= 2 and min(h, w) >= 256)
+    if not coarse_to_fine:
+        disp = _lr_disparity(L8, R8, d_min, nd, params, lr_check, lr_max_diff_px)
+    else:
+        if coarse is None:
+            coarse = dense_stereo(left_img, right_img, left_model, right_model, min_range_m=min_range_m,
+                                  max_range_m=max_range_m, downsample=min(4, 2 * downsample),
+                                  block_size=block_size, uniqueness_ratio=uniqueness_ratio,
+                                  speckle_window=max(1, speckle_window // 4), speckle_range_px=speckle_range_px,
+                                  lr_check=lr_check, lr_max_diff_px=lr_max_diff_px, coarse_to_fine=False)
+        elif not isinstance(coarse, DenseStereo):
+            raise ValueError(f"coarse: expected a DenseStereo, got {type(coarse).__name__}")
+        bands = _band_intervals(coarse, lm, fb, h, d_min, d_min + nd - 1, band_rows, overlap_rows,
+                                margin_px=_BAND_MARGIN_PX, min_points=20)
+        disp = np.full((h, w), np.nan, np.float32)
+        for r0, r1, lo, hi in bands:
+            n_b = min(nd, max(16, int(math.ceil((hi - lo + 1) / 16.0)) * 16))
+            lo_b = max(d_min, lo - (n_b - (hi - lo + 1)) // 2)  # centre the interval in the 16-multiple
+            lo_b = min(lo_b, max(d_min, d_min + nd - n_b))
+            a0, a1 = max(0, r0 - overlap_rows), min(h, r1 + overlap_rows)
+            pb = params if n_b >= nd else dict(params, uniquenessRatio=params["uniquenessRatio"] + _BAND_UNIQUENESS_EXTRA)
+            db = _lr_disparity(L8[a0:a1], R8[a0:a1], lo_b, n_b, pb, lr_check, lr_max_diff_px)[r0 - a0 : r1 - a0]
+            # a disparity at the edge of a narrowed interval may be the truth's clamped stand-in: reject it
+            with np.errstate(invalid="ignore"):
+                if lo_b > d_min:
+                    db[db < lo_b + 1] = np.nan
+                if lo_b + n_b < d_min + nd:
+                    db[db > lo_b + n_b - 2] = np.nan
+            disp[r0:r1] = db
+    valid = np.isfinite(disp)
 
     # both rectified pixels must come from inside the original images
     valid &= vL
-    us = np.arange(w, dtype=np.float32)[None, :] - disp
-    ur_n = np.clip(np.round(us).astype(int), 0, w - 1)
-    valid &= (us >= -0.5) & vR[np.arange(h)[:, None], ur_n]
-    valid &= disp > 0
+    us = np.arange(w, dtype=np.float32)[None, :] - np.where(valid, disp, np.float32(0))
+    ur_n = np.clip(np.round(us).astype(np.intp), 0, w - 1)
+    valid &= (us >= -0.5) & np.take_along_axis(vR, ur_n, axis=1)
+    with np.errstate(invalid="ignore"):
+        valid &= disp > 0
 
-    disp = np.where(valid, disp, np.nan).astype(np.float32)
     with np.errstate(divide="ignore", invalid="ignore"):
-        Z = fb / disp.astype(np.float64)
+        Z = fb / np.where(valid, disp, np.float32(np.nan)).astype(np.float64)
     # rectified CAHV: P = C + Z (A + xn h' + yn v'), xn = (u - hc)/hs by column, yn = (v - vc)/vs by row
     xn = (np.arange(w, dtype=float) - lm.hc) / lm.hs
     yn = (np.arange(h, dtype=float) - lm.vc) / lm.vs
-    ray = lm.A + xn[None, :, None] * lm.h_axis + yn[:, None, None] * lm.v_axis  # (h, w, 3)
-    xyz = ray * Z[..., None]
-    xyz += lm.C
     rng = Z * np.sqrt(1.0 + xn[None, :] ** 2 + yn[:, None] ** 2)  # |P - C| (h', v', A orthonormal)
     with np.errstate(invalid="ignore"):
         valid &= (rng >= min_range_m) & (rng <= max_range_m)
-    disp[~valid] = np.nan
-    xyz[~valid] = np.nan
+    Z[~valid] = np.nan
     rng[~valid] = np.nan
+    disp[~valid] = np.nan
+    xyz = np.empty((h, w, 3))
+    comp = np.empty((h, w))
+    for k in range(3):  # one component at a time: no (h, w, 3) temporaries
+        np.add(lm.A[k] + yn[:, None] * lm.v_axis[k], xn[None, :] * lm.h_axis[k], out=comp)
+        comp *= Z
+        comp += lm.C[k]
+        xyz[..., k] = comp
     return DenseStereo(
         rectified=rp, disparity_px=disp, xyz=xyz, valid=valid, range_m=rng, left_rect=Lr,
         downsample=downsample, num_disparities=nd, min_disparity=d_min,
