@@ -52,6 +52,7 @@ __all__ = [
     "point_stereo",
     "DenseStereo",
     "dense_stereo",
+    "dense_stereo_coarse",
     "sgbm_parameters",
 ]
 
@@ -644,9 +645,16 @@ def _sgbm_disparity(ref8: np.ndarray, oth8: np.ndarray, d_lo: int, nd: int, para
 
 
 def _lr_disparity(L8, R8, d_lo, nd, params, lr_check, lr_max_diff_px) -> np.ndarray:
-    """Left-view disparity (h, w) float32 (NaN invalid) in ``[d_lo, d_lo + nd)``, left-right checked if asked."""
+    """Left-view disparity (h, w) float32 (NaN invalid) in ``[d_lo + 1, d_lo + nd - 2]``, left-right checked if asked.
+
+    Disparities at the ends of the searched interval are rejected: SGBM puts a pixel whose true disparity lies
+    beyond the interval at its end (hazcam ground nearer than ``min_range_m`` along the rectified axis).
+    """
     h, w = L8.shape
     disp = _sgbm_disparity(L8, R8, d_lo, nd, params)
+    # a disparity within 1 px of the searched interval's ends may be the stand-in of a truth beyond it
+    with np.errstate(invalid="ignore"):
+        disp[(disp < d_lo + 1) | (disp > d_lo + nd - 2)] = np.nan
     if lr_check == "flip":
         # right-view disparity: the mirrored right image matched against the mirrored left image
         dR = _sgbm_disparity(np.ascontiguousarray(R8[:, ::-1]), np.ascontiguousarray(L8[:, ::-1]), d_lo, nd,
@@ -674,6 +682,22 @@ def _row_map(src_model, dst_model, rows) -> np.ndarray:
     """Rows of rectified model ``dst_model`` seeing the same image-plane ``y`` as rows ``rows`` of ``src_model``."""
     y = (np.asarray(rows, float) - src_model.vc) / src_model.vs
     return dst_model.vc + dst_model.vs * y
+
+
+def _coarse_on_grid(coarse: "DenseStereo", lm, fb: float, h: int, w: int) -> np.ndarray:
+    """Coarse disparities (nearest coarse pixel) on the fine rectified grid of model ``lm`` (h, w), scaled to
+    fine pixels; NaN where the coarse pass has none."""
+    import cv2
+
+    cm = coarse.rectified.left_model
+    rows = _row_map(lm, cm, np.arange(h)).astype(np.float32)
+    cols = (cm.hc + cm.hs * (np.arange(w) - lm.hc) / lm.hs).astype(np.float32)
+    mu = np.broadcast_to(cols[None, :], (h, w))
+    mv = np.broadcast_to(rows[:, None], (h, w))
+    out = cv2.remap(coarse.disparity_px, np.ascontiguousarray(mu), np.ascontiguousarray(mv), cv2.INTER_NEAREST,
+                    borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+    out *= np.float32(fb / coarse._fb())
+    return out
 
 
 def _band_intervals(coarse: "DenseStereo", lm, fb: float, h: int, d_min: int, d_max: int, band_rows: int,
@@ -818,16 +842,17 @@ def dense_stereo(
         disp = _lr_disparity(L8, R8, d_min, nd, params, lr_check, lr_max_diff_px)
     else:
         if coarse is None:
-            coarse = dense_stereo(left_img, right_img, left_model, right_model, min_range_m=min_range_m,
-                                  max_range_m=max_range_m, downsample=min(4, 2 * downsample),
-                                  block_size=block_size, uniqueness_ratio=uniqueness_ratio,
-                                  speckle_window=max(1, speckle_window // 4), speckle_range_px=speckle_range_px,
-                                  lr_check=lr_check, lr_max_diff_px=lr_max_diff_px, coarse_to_fine=False)
+            coarse = dense_stereo_coarse(left_img, right_img, left_model, right_model, min_range_m=min_range_m,
+                                         max_range_m=max_range_m, downsample=downsample, block_size=block_size,
+                                         uniqueness_ratio=uniqueness_ratio, speckle_window=speckle_window,
+                                         speckle_range_px=speckle_range_px, lr_check=lr_check,
+                                         lr_max_diff_px=lr_max_diff_px)
         elif not isinstance(coarse, DenseStereo):
             raise ValueError(f"coarse: expected a DenseStereo, got {type(coarse).__name__}")
         bands = _band_intervals(coarse, lm, fb, h, d_min, d_min + nd - 1, band_rows, overlap_rows,
                                 margin_px=_BAND_MARGIN_PX, min_points=20)
         disp = np.full((h, w), np.nan, np.float32)
+        coarse_d = _coarse_on_grid(coarse, lm, fb, h, w)
         for r0, r1, lo, hi in bands:
             n_b = min(nd, max(16, int(math.ceil((hi - lo + 1) / 16.0)) * 16))
             lo_b = max(d_min, lo - (n_b - (hi - lo + 1)) // 2)  # centre the interval in the 16-multiple
@@ -835,12 +860,11 @@ def dense_stereo(
             a0, a1 = max(0, r0 - overlap_rows), min(h, r1 + overlap_rows)
             pb = params if n_b >= nd else dict(params, uniquenessRatio=params["uniquenessRatio"] + _BAND_UNIQUENESS_EXTRA)
             db = _lr_disparity(L8[a0:a1], R8[a0:a1], lo_b, n_b, pb, lr_check, lr_max_diff_px)[r0 - a0 : r1 - a0]
-            # a disparity at the edge of a narrowed interval may be the truth's clamped stand-in: reject it
+            # where the coarse pass saw a disparity outside the band's interval (e.g. ground nearer along the
+            # rectified axis than min_range_m: SGBM would put it at the interval's end), the fine one is not trusted
+            cb = coarse_d[r0:r1]
             with np.errstate(invalid="ignore"):
-                if lo_b > d_min:
-                    db[db < lo_b + 1] = np.nan
-                if lo_b + n_b < d_min + nd:
-                    db[db > lo_b + n_b - 2] = np.nan
+                db[(cb < lo_b) | (cb > lo_b + n_b - 1)] = np.nan
             disp[r0:r1] = db
     valid = np.isfinite(disp)
 
@@ -874,3 +898,31 @@ def dense_stereo(
         rectified=rp, disparity_px=disp, xyz=xyz, valid=valid, range_m=rng, left_rect=Lr,
         downsample=downsample, num_disparities=nd, min_disparity=d_min,
     )
+
+
+def dense_stereo_coarse(
+    left_img,
+    right_img,
+    left_model: CameraModel,
+    right_model: CameraModel,
+    min_range_m: float = 0.5,
+    max_range_m: float = 30.0,
+    downsample: int = 1,
+    block_size: int = 5,
+    uniqueness_ratio: int = 10,
+    speckle_window: int = 100,
+    speckle_range_px: int = 2,
+    lr_check: str = "flip",
+    lr_max_diff_px: float = 1.0,
+) -> DenseStereo:
+    """The coarse pass of :func:`dense_stereo` at ``downsample``: one full-interval pass on a grid twice as
+    coarse (``2 * downsample``, at most 4) with the speckle window scaled to the coarser pixels (``/ 4``).
+
+    Pass the result as ``dense_stereo(..., coarse=...)`` (same images, models and ranges) to reuse it, e.g.
+    after looking at the ranges in view. Arguments as for :func:`dense_stereo`.
+    """
+    return dense_stereo(left_img, right_img, left_model, right_model, min_range_m=min_range_m,
+                        max_range_m=max_range_m, downsample=min(4, 2 * downsample), block_size=block_size,
+                        uniqueness_ratio=uniqueness_ratio, speckle_window=max(1, speckle_window // 4),
+                        speckle_range_px=speckle_range_px, lr_check=lr_check, lr_max_diff_px=lr_max_diff_px,
+                        coarse_to_fine=False)
