@@ -128,25 +128,29 @@ class StereoView:
     def dense(self):
         """Dense stereo of the pair (computed once).
 
-        Two passes: a quarter-area pass over the whole range interval finds the
-        ranges actually in view (2nd-98th percentile, with a margin); the final
-        pass at ``dense_downsample`` searches only that disparity interval.
+        Two passes: dense stereo's coarse pass (twice as coarse, over the whole
+        range interval) finds the ranges actually in view (at full resolution:
+        2nd-98th percentile, with a margin, bound the final ranges); the final
+        pass at ``dense_downsample`` searches per row band only the disparities
+        the coarse pass saw there (``dense_stereo(..., coarse=...)``).
         """
         if self._dense is None:
-            from .stereo import dense_stereo
+            from .stereo import dense_stereo, dense_stereo_coarse
 
             t0 = time.perf_counter()
             lo, hi = self.min_range_m, self.max_range_m
-            if self.dense_downsample < 2:
-                coarse = dense_stereo(self.left_img, self.right_img, self.left_model, self.right_model,
-                                      min_range_m=lo, max_range_m=hi, downsample=2)
+            coarse = None
+            if self.dense_downsample <= 2:
+                coarse = dense_stereo_coarse(self.left_img, self.right_img, self.left_model, self.right_model,
+                                             min_range_m=lo, max_range_m=hi, downsample=self.dense_downsample)
+            if coarse is not None and self.dense_downsample < 2:
                 r = coarse.range_m[np.isfinite(coarse.range_m)]
                 if r.size > 1000:
                     lo = max(lo, 0.85 * float(np.percentile(r, 2)))
                     hi = min(hi, 1.25 * float(np.percentile(r, 98)))
             self._dense = dense_stereo(
                 self.left_img, self.right_img, self.left_model, self.right_model,
-                min_range_m=lo, max_range_m=hi, downsample=self.dense_downsample,
+                min_range_m=lo, max_range_m=hi, downsample=self.dense_downsample, coarse=coarse,
             )
             self.dense_seconds = time.perf_counter() - t0
         return self._dense
