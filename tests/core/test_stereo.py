@@ -15,7 +15,9 @@ from scipctl.core.camera import CameraModel, cahv_from_intrinsics, camera_frame
 from scipctl.core.stereo import (
     DEFAULT_BAND_PX,
     default_band_px,
+    DenseStereo,
     dense_stereo,
+    dense_stereo_coarse,
     epipolar_curve,
     point_stereo,
     triangulate_rays,
@@ -320,10 +322,12 @@ def _rect_truth(ds, scene):
     return d_true.reshape(h, w), P.reshape(h, w, 3)
 
 
+@pytest.mark.parametrize("coarse_to_fine", [True, False], ids=["bands", "single-pass"])
 @pytest.mark.parametrize("kind", ["CAHV", "CAHVOR", "CAHVORE"])
-def test_dense_stereo_plane(kind):
+def test_dense_stereo_plane(kind, coarse_to_fine):
     scene, left, right, L, R = rendered(kind)
-    ds = dense_stereo(_uint8(L), _uint8(R), left, right, min_range_m=1.0, max_range_m=30.0)
+    ds = dense_stereo(_uint8(L), _uint8(R), left, right, min_range_m=1.0, max_range_m=30.0,
+                      coarse_to_fine=coarse_to_fine)
     d_true, P_true = _rect_truth(ds, scene)
     near = np.isfinite(d_true) & (np.linalg.norm(P_true - left.C, axis=-1) < 6.0)
     valid = ds.valid & near
@@ -360,11 +364,13 @@ def _occluded_in_right(ds, scene, P_true, near):
     return occl
 
 
-def test_dense_stereo_box_occlusions_are_rejected():
+@pytest.mark.parametrize("coarse_to_fine", [True, False], ids=["bands", "single-pass"])
+def test_dense_stereo_box_occlusions_are_rejected(coarse_to_fine):
     scene, left, right, L, R = rendered("CAHV", with_box=True)
     stats = {}
     for lr in ("flip", "none"):
-        ds = dense_stereo(L, R, left, right, min_range_m=1.0, max_range_m=30.0, lr_check=lr)
+        ds = dense_stereo(L, R, left, right, min_range_m=1.0, max_range_m=30.0, lr_check=lr,
+                          coarse_to_fine=coarse_to_fine)
         d_true, P_true = _rect_truth(ds, scene)
         near = np.isfinite(d_true) & (np.linalg.norm(P_true - left.C, axis=-1) < 6.0)
         valid = ds.valid & near
@@ -382,6 +388,69 @@ def test_dense_stereo_box_occlusions_are_rejected():
     assert s["occl_wrong"] < 0.2, f"{100 * s['occl_wrong']:.0f}% of occluded pixels valid and wrong"
     assert stats["none"]["gross"] > 2 * s["gross"]
     assert s["occl_wrong"] < 0.6 * stats["none"]["occl_wrong"]
+
+
+def test_dense_stereo_bands_agree_with_single_pass_and_search_less():
+    """Coarse-to-fine (per-row-band intervals from a half-resolution pass) against one full-interval pass:
+    same disparities where both are valid, same coverage, and a much smaller total search."""
+    scene, left, right, L, R = rendered("CAHVOR", with_box=True)
+    one = dense_stereo(L, R, left, right, min_range_m=0.5, max_range_m=30.0, coarse_to_fine=False)
+    log = []
+    import scipctl.core.stereo as stereo_mod
+
+    orig = stereo_mod._lr_disparity
+
+    def spy(L8, R8, d_lo, nd, *a):
+        log.append((L8.shape[0], d_lo, nd))
+        return orig(L8, R8, d_lo, nd, *a)
+
+    stereo_mod._lr_disparity = spy
+    try:
+        bands = dense_stereo(L, R, left, right, min_range_m=0.5, max_range_m=30.0, band_rows=96)
+    finally:
+        stereo_mod._lr_disparity = orig
+    both = one.valid & bands.valid
+    assert abs(bands.valid.mean() - one.valid.mean()) < 0.01
+    assert both.sum() > 0.97 * one.valid.sum()
+    diff = np.abs(one.disparity_px - bands.disparity_px)[both]
+    assert np.mean(diff > 0.5) < 0.003, f"{100 * np.mean(diff > 0.5):.2f}% differ by > 0.5 px"
+    # rows x disparities searched: the fine bands (after the half-res pass) search far fewer than one pass
+    fine = [(rows, nd) for rows, _, nd in log if rows <= 96 + 2 * 16]
+    assert len(fine) == int(np.ceil(H / 96))
+    assert all(nd % 16 == 0 for _, nd in fine)
+    assert sum(r * nd for r, nd in fine) < 0.5 * H * one.num_disparities
+
+
+def test_dense_stereo_ground_nearer_than_min_range_is_not_clamped():
+    """Ground whose true disparity lies beyond the searched interval (nearer than ``min_range_m`` along the
+    rectified axis) must come out invalid, not as a disparity at the interval's end. The coarse pass searches
+    1.5x further and rejects it; one full-interval pass cannot tell (it keeps ~14 % of these pixels, wrong)."""
+    scene, left, right, L, R = rendered("CAHV")
+    frac = {}
+    for c2f in (True, False):
+        ds = dense_stereo(L, R, left, right, min_range_m=2.5, max_range_m=30.0, coarse_to_fine=c2f)
+        d_true, P_true = _rect_truth(ds, scene)
+        top = ds.min_disparity + ds.num_disparities - 1
+        beyond = np.isfinite(d_true) & (d_true > top + 1)
+        assert beyond.sum() > 10000  # the lower part of the view
+        assert np.all(ds.disparity_px[ds.valid] <= top - 1)  # interval ends are rejected
+        frac[c2f] = ds.valid[beyond].mean()
+        ok = np.isfinite(d_true) & (d_true < top - 2) & (np.linalg.norm(P_true - left.C, axis=-1) > 2.7)
+        assert ds.valid[ok].mean() > 0.9
+    assert frac[True] < 0.01, f"{100 * frac[True]:.1f}% valid beyond the interval"
+    assert frac[True] < 0.2 * frac[False]
+
+
+def test_dense_stereo_reuses_a_given_coarse_pass():
+    scene, left, right, L, R = rendered("CAHVOR")
+    coarse = dense_stereo_coarse(L, R, left, right, min_range_m=1.0 / 1.5, max_range_m=30.0)
+    assert isinstance(coarse, DenseStereo) and coarse.downsample == 2
+    a = dense_stereo(L, R, left, right, min_range_m=1.0, max_range_m=30.0, coarse=coarse)
+    b = dense_stereo(L, R, left, right, min_range_m=1.0, max_range_m=30.0)  # computes the same coarse pass
+    assert np.array_equal(a.valid, b.valid)
+    assert np.array_equal(a.disparity_px[a.valid], b.disparity_px[b.valid])
+    with pytest.raises(ValueError):
+        dense_stereo(L, R, left, right, coarse="not a DenseStereo")
 
 
 def test_dense_stereo_downsample_and_xyz_at_left_uv():
@@ -427,3 +496,5 @@ def test_dense_stereo_bad_inputs_raise():
         dense_stereo(L, R, left, right, lr_check="both")
     with pytest.raises(ValueError):
         dense_stereo(L, R, left, right, min_range_m=0.0)
+    with pytest.raises(ValueError):
+        dense_stereo(L, R, left, right, band_rows=4)
