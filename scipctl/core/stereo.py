@@ -941,8 +941,9 @@ def dense_stereo_coarse(
     lr_check: str = "flip",
     lr_max_diff_px: float = 1.0,
 ) -> DenseStereo:
-    """The coarse pass of :func:`dense_stereo` at ``downsample``: one full-interval pass on a grid twice as
-    coarse (``2 * downsample``, at most 4) with the speckle window scaled to the coarser pixels (``/ 4``).
+    """The coarse pass of :func:`dense_stereo` at ``downsample``: dense stereo on a grid twice as coarse
+    (``2 * downsample``, at most 4) with the speckle window scaled to the coarser pixels (``/ 4``); for
+    ``downsample=1`` it is itself coarse-to-fine (from a quarter-resolution pass), else one full-interval pass.
 
     Pass the result as ``dense_stereo(..., coarse=...)`` (same images, models and ranges) to reuse it, e.g.
     after looking at the ranges in view. Arguments as for :func:`dense_stereo`.
@@ -951,4 +952,4 @@ def dense_stereo_coarse(
                         max_range_m=max_range_m, downsample=min(4, 2 * downsample), block_size=block_size,
                         uniqueness_ratio=uniqueness_ratio, speckle_window=max(1, speckle_window // 4),
                         speckle_range_px=speckle_range_px, lr_check=lr_check, lr_max_diff_px=lr_max_diff_px,
-                        coarse_to_fine=False)
+                        coarse_to_fine=downsample == 1)

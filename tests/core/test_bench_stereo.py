@@ -29,14 +29,17 @@ def navcam_pair():
 
 
 @pytest.mark.parametrize(
-    "min_range_m,downsample",
-    [(0.5, 1), (0.5, 2), (1.5, 1), (1.5, 2)],
-    ids=["full-res-0.5m", "half-res-0.5m", "full-res-1.5m", "half-res-1.5m"],
+    "min_range_m,downsample,coarse_to_fine",
+    [(0.5, 1, True), (0.5, 2, True), (1.5, 1, True), (1.5, 2, True), (0.5, 1, False), (1.5, 1, False)],
+    ids=["full-res-0.5m", "half-res-0.5m", "full-res-1.5m", "half-res-1.5m",
+         "full-res-0.5m-single-pass", "full-res-1.5m-single-pass"],
 )
-def test_bench_dense_stereo(benchmark, min_range_m, downsample):
-    """Whole dense_stereo call: rectification maps, remap, SGBM + mirrored SGBM (left-right check), 3-D."""
+def test_bench_dense_stereo(benchmark, min_range_m, downsample, coarse_to_fine):
+    """Whole dense_stereo call: rectification (cached maps), remap, coarse pass + per-band SGBM + mirrored SGBM
+    (left-right check), 3-D. ``single-pass``: one SGBM pass over the whole disparity interval (as before)."""
     scene, left, right, L, R = navcam_pair()
-    ds = benchmark(dense_stereo, L, R, left, right, min_range_m=min_range_m, max_range_m=30.0, downsample=downsample)
+    ds = benchmark(dense_stereo, L, R, left, right, min_range_m=min_range_m, max_range_m=30.0, downsample=downsample,
+                   coarse_to_fine=coarse_to_fine)
     assert ds.disparity_px.shape == (SIZE // downsample, SIZE // downsample)
     # the ground fills the lower ~90 % of the view: most of it must be ranged
     assert ds.valid.mean() > 0.7
