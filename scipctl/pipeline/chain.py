@@ -24,6 +24,12 @@ SEARCH_RADIUS_PX = {"pancam": 300.0, "navcam": 100.0, "hazcam": 80.0}
 # half-size of the context window that first finds the pose error, and the target search radius after it
 CONTEXT_HALF_PX = {"pancam": 100, "navcam": 60, "hazcam": 60}
 FINE_RADIUS_PX = 20.0
+# feature-guided coarse step: half-size of the previous view rendered into the new view around the prediction,
+# the keypoint detection downsampling, and the RANSAC inliers needed to trust it
+VIEW_REACH_PX = 300  # the rendering covers +-300 new pixels around the prediction
+FEATURE_REACH = (0.3, 0.5, 1.0)  # keypoints of the rendering within these parts of its half-size: candidates
+FEATURE_LOCAL_PX = 75.0  # inliers within this many new pixels of the target are counted as local
+FEATURE_MIN_INLIERS = 12
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
@@ -86,18 +92,19 @@ def _local_normal_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, ra
     return prod.pose.T_site_rover.rotate(n)
 
 
-def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int):
-    """The window of ``prod`` around ``centre_uv`` as ``prev`` saw it, through the local plane (X_site, n_site).
+def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
+    """``prev``'s image seen at ``prod``'s pixels ``uv`` (..., 2) through the plane (X_site, n_site), site frame.
 
-    Each template pixel's ray (new camera, new pose estimate) meets the plane;
-    the point is projected into the previous image and sampled. Returns
-    ``(template (2h+1, 2h+1) float32 or None, template_center_uv (2,))``.
+    Each pixel's ray (``prod``'s camera at its pose estimate) meets the plane
+    through ``X_site`` (3,) with normal ``n_site`` (3,); the point is projected
+    into ``prev`` (its pose estimate) and ``prev``'s image is sampled there
+    (bilinear). Returns float32 (...) with NaN where ``prev`` did not see it.
     """
     from ..core.expected import bilinear_sample
 
-    c = np.round(np.asarray(centre_uv, float))
-    us, vs = np.meshgrid(np.arange(c[0] - half, c[0] + half + 1), np.arange(c[1] - half, c[1] + half + 1))
-    o, d = prod.camera_model.unproject(np.stack([us, vs], -1).reshape(-1, 2))
+    uv = np.asarray(uv, float)
+    shape = uv.shape[:-1]
+    o, d = prod.camera_model.unproject(uv.reshape(-1, 2))
     T_new = prod.pose.T_site_rover
     o_s, d_s = T_new.apply(o), T_new.rotate(d)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -106,11 +113,39 @@ def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site
     P_s[~(t > 0)] = np.nan
     P_prev = prev.pose.T_site_rover.inverse().apply(P_s)
     uv_prev = prev.camera_model.project(P_prev)
-    vals = bilinear_sample(prev.pixels_float(), uv_prev).reshape(2 * half + 1, 2 * half + 1)
+    return bilinear_sample(prev.pixels_float(), uv_prev).reshape(shape)
+
+
+def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,
+                      step_px: float = 1.0):
+    """``prod``'s view of the window around ``centre_uv`` rendered from ``prev``'s image through a plane.
+
+    See :func:`render_through_plane`. View pixel ``(i, j)`` is ``prod`` pixel
+    ``c + step_px * ((i, j) - half)`` with ``c`` = ``centre_uv`` rounded
+    (``step_px > 1``: a coarser rendering, e.g. at ``prev``'s own
+    resolution). Returns ``(view (2h+1, 2h+1) float32 with NaN where ``prev``
+    did not see the plane, centre_in_view_uv (2,))``: ``centre_uv`` in the
+    view's pixel coordinates.
+    """
+    c = np.round(np.asarray(centre_uv, float))
+    g = np.arange(-half, half + 1) * float(step_px)
+    us, vs = np.meshgrid(c[0] + g, c[1] + g)
+    vals = render_through_plane(prev, prod, X_site, n_site, np.stack([us, vs], -1))
+    return vals, (np.asarray(centre_uv, float) - c) / float(step_px) + half
+
+
+def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int):
+    """The window of ``prod`` around ``centre_uv`` as ``prev`` saw it, through the local plane (X_site, n_site).
+
+    Each template pixel's ray (new camera, new pose estimate) meets the plane;
+    the point is projected into the previous image and sampled. Returns
+    ``(template (2h+1, 2h+1) float32 or None, template_center_uv (2,))``.
+    """
+    vals, tc = plane_warped_view(prev, prod, X_site, n_site, centre_uv, half)
     if np.isfinite(vals).mean() < 0.9:
         return None, None
     vals = np.where(np.isfinite(vals), vals, np.nanmean(vals)).astype(np.float32)
-    return vals, np.asarray(centre_uv, float) - (c - half)
+    return vals, tc
 
 
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
@@ -176,6 +211,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
     normal, normal_from = None, None
+    feats = {}  # product_id -> keypoints of the whole image (each new image is searched once)
 
     positions = [p for p in dl.positions() if p != start.position]
     positions = [p for p in positions if min(im.time_s for im in dl.images_at(p)) > start.time_s]
@@ -198,16 +234,26 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             half = TEMPLATE_HALF_PX.get(c, 15)
             kind = "handoff" if c != prev.camera else "track"
             tpl, tc, mode = None, None, "scale"
-            radius_override = None
+            radius_override, search_uv = None, None
+            extra = {}
+            tr = None
             if template_mode == "plane" and kind == "track":
                 if normal is None or normal_from is not prev:
                     X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
                     normal, normal_from = _local_normal_site(dl, prev, X_prev, prev_range), prev
-                if normal is not None:
-                    # first the pose error: a large window of the previous view, warped through the local plane,
-                    # found over the whole search region (many features: robust); then the target window near it
+                # the surface plane at the target, or the rover's ground plane when dense stereo gave no normal
+                n_view = normal if normal is not None else prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
+                tr, finfo = _feature_track(prev, prod, X_site, n_view, pred, scale, half, feats)
+                extra.update(finfo)
+                if tr is not None:
+                    mode = "plane, feature-guided"
+                elif normal is not None:
+                    extra["coarse"] = "ncc context (features failed)"
+                    # fallback: a large window of the previous view, warped through the local plane, found over
+                    # the whole search region by NCC; then the target window near it
                     big_half = CONTEXT_HALF_PX.get(c, 100)
                     tpl_big, tc_big = plane_warped_template(prev, prod, X_site, normal, pred, big_half)
+                    tr_big = None
                     if tpl_big is not None:
                         tr_big = track(tpl_big, prod.pixels_float(), pred, SEARCH_RADIUS_PX.get(c, 60.0),
                                        template_center_uv=tc_big, min_score=0.3)
@@ -215,24 +261,26 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     # pose-estimate prediction (where the warp puts the target at the template's centre)
                     tpl, tc = plane_warped_template(prev, prod, X_site, normal, pred, half)
                     mode = "plane"
-                    if tpl_big is not None and tr_big.ok and np.all(np.isfinite(tr_big.uv)):
-                        pred = tr_big.uv  # searched for near the prediction corrected for the pose error
+                    if tr_big is not None and tr_big.ok and np.all(np.isfinite(tr_big.uv)):
+                        search_uv = tr_big.uv  # searched for near the prediction corrected for the pose error
                         radius_override = FINE_RADIUS_PX
                         mode = "plane, context-corrected"
-            if tpl is None:
-                src_half = max(3, int(np.ceil(half / scale)))
-                win = extract_window(prev.pixels_float(), prev_uv, src_half)
-                tpl = scale_window(win, scale)
-                tc = None
-            img = prod.pixels_float()
-            radius = radius_override or SEARCH_RADIUS_PX.get(c, 60.0)
-            tr = track(tpl, img, pred, radius, template_center_uv=tc, min_score=0.3)
-            # a pointed mast camera was aimed at the target by the rover: its image centre is a second guess
-            centre = np.array([(prod.width - 1) / 2, (prod.height - 1) / 2])
-            if prod.mast is not None and np.linalg.norm(centre - pred) > radius / 2:
-                tr2 = track(tpl, img, centre, radius, template_center_uv=tc, min_score=0.3)
-                if np.all(np.isfinite(tr2.uv)) and (not np.all(np.isfinite(tr.uv)) or tr2.score > tr.score):
-                    tr = tr2
+            if tr is None:
+                if tpl is None:
+                    src_half = max(3, int(np.ceil(half / scale)))
+                    win = extract_window(prev.pixels_float(), prev_uv, src_half)
+                    tpl = scale_window(win, scale)
+                    tc = None
+                img = prod.pixels_float()
+                radius = radius_override or SEARCH_RADIUS_PX.get(c, 60.0)
+                search_uv = search_uv if radius_override else pred
+                tr = track(tpl, img, search_uv, radius, template_center_uv=tc, min_score=0.3)
+                # a pointed mast camera was aimed at the target by the rover: its image centre is a second guess
+                centre = np.array([(prod.width - 1) / 2, (prod.height - 1) / 2])
+                if prod.mast is not None and radius_override is None and np.linalg.norm(centre - pred) > radius / 2:
+                    tr2 = track(tpl, img, centre, radius, template_center_uv=tc, min_score=0.3)
+                    if np.all(np.isfinite(tr2.uv)) and (not np.all(np.isfinite(tr.uv)) or tr2.score > tr.score):
+                        tr = tr2
             if not tr.ok or not np.all(np.isfinite(tr.uv)):
                 steps.append(step(prod, kind, pred, None, None, tr.score, ok=False, reason=f"track: {tr.reason}"))
                 continue
@@ -240,7 +288,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             ok = ps is not None and ps.ok
             steps.append(step(prod, kind, pred, tr.uv, ps, tr.score, ok=ok,
                               reason="" if ok else ("no right eye" if ps is None else f"stereo: {ps.reason}"),
-                              extra={"scale": scale, "template": mode, "ncc_ratio": _f(tr.ratio)}))
+                              extra={"scale": scale, "template": mode, "ncc_ratio": _f(tr.ratio), **extra}))
             if ok:
                 X_site = prod.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
                 prev_range = float(ps.range_m)
@@ -251,6 +299,85 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             steps.append(_hazcam_handoff(dl, prev, prev_uv, lefts["hazcam"], handoff_method, step))
             break
     return steps
+
+
+def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, n_site, pred_uv, scale: float, half: int,
+                   feats: dict):
+    """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
+
+    ``prev``'s image is rendered into ``prod``'s view around the prediction
+    ``pred_uv`` through the plane ``(X_site, n_site)`` (site frame), at
+    ``prev``'s own resolution (one rendered pixel per ``scale`` new pixels,
+    ``scale`` = new pixels per previous pixel at the target, at least 1), so
+    that scale and perspective changes are taken out by the geometry and what
+    is left is the pose-estimate error (a shift and a small rotation). Its
+    SIFT keypoints near the target are matched against those of the whole new
+    image (area-downsampled by the same factor, so that both have the same
+    blur) and a homography ``G`` (rendering -> new image) is fitted by RANSAC,
+    with keypoints from a few reaches around the target. For each, the
+    template (``half``) is rendered through the plane and ``G``, so that it
+    carries the rotation of the pose error too, and NCC-tracked within
+    ``FINE_RADIUS_PX`` of the mapped prediction; the best NCC wins. ``feats``
+    caches the new images' keypoints by ``(product id, downsampling)``.
+    """
+    from ..core.features import detect_features, locate_by_features
+    from ..core.tracking import track
+
+    step_px = float(np.clip(scale, 1.0, 4.0))
+    vhalf = int(round(VIEW_REACH_PX / step_px))
+    view, vc = plane_warped_view(prev, prod, X_site, n_site, pred_uv, vhalf, step_px=step_px)
+    info = {"coarse": "features", "feature_inliers": 0, "feature_local_inliers": 0}
+    if np.isfinite(view).mean() < 0.2:
+        info["feature_reason"] = "the previous view does not cover the prediction"
+        return None, info
+    key = (prod.product_id, round(step_px, 2))
+    if key not in feats:
+        feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
+    ref = detect_features(view)
+    c = np.round(np.asarray(pred_uv, float))
+    # est-pose pixels of prod -> rendering pixels
+    S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px], [0, 0, 1.0]])
+    img = prod.pixels_float()
+    best, best_info, seen, reasons = None, None, [], []
+    for reach in FEATURE_REACH:
+        loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model="homography",
+                                 ransac_threshold_px=2.0 * step_px, min_inliers=FEATURE_MIN_INLIERS,
+                                 local_radius_px=FEATURE_LOCAL_PX / step_px)
+        if not loc.ok:
+            reasons.append(f"reach {reach:g}: {loc.reason}")
+            continue
+        if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
+            continue
+        seen.append(loc.uv)
+        G = loc.transform @ S
+        try:
+            Gi = np.linalg.inv(G)
+        except np.linalg.LinAlgError:
+            continue
+        cc = np.round(loc.uv)
+        g = np.arange(-half, half + 1, dtype=float)
+        xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
+        yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ys = yh[:, :2] / yh[:, 2:3]
+        tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+        if np.isfinite(tpl).mean() < 0.9:
+            continue
+        tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
+        tr = track(tpl, img, loc.uv, FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half), min_score=0.3)
+        if not np.all(np.isfinite(tr.uv)):
+            continue
+        if best is None or tr.score > best.score:
+            best = tr
+            best_info = {"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
+                         "feature_matches": loc.n_matches, "feature_reach": reach,
+                         "feature_shift_px": float(np.linalg.norm(loc.uv - pred_uv)),
+                         "coarse_uv": loc.uv.tolist(), "coarse_to_ncc_px": float(np.linalg.norm(tr.uv - loc.uv))}
+    if best is None:
+        info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
+        return None, info
+    info.update(best_info)
+    return best, info
 
 
 def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):

@@ -1,0 +1,286 @@
+"""Feature-guided coarse localisation: find where a reference point went in another image (pure numerics).
+
+Pixel convention (docs/conventions.md): ``(u, v)`` = (column, row), 0-based,
+``(0, 0)`` is the centre of the top-left pixel; an image is indexed
+``img[v, u]``.
+
+NCC over a large search region on sand texture finds better-looking wrong
+places when the prediction is hundreds of pixels off. Local features are
+robust to that: SIFT keypoints (OpenCV ``cv2.SIFT_create``) are detected in a
+reference image around the reference point and in the whole searched image,
+matched with Lowe's ratio test, and a geometric model (similarity, affine or
+homography) is fitted to the matches with RANSAC. The reference point mapped
+through the model is the coarse position; the number of RANSAC inliers (and
+how many of them lie near the point) is its confidence. A refinement (NCC in
+a small radius, :func:`scipctl.core.tracking.track`) is expected to follow.
+
+SIFT is invariant to scale and in-plane rotation, not to strong perspective
+change: a ground patch seen at a grazing angle from 10 m and again from 4.5 m
+is foreshortened differently, so the caller should first warp the reference
+into the new view's geometry (e.g. through the local ground plane) and use
+this module to find the remaining, mostly translational, offset.
+
+OpenCV is imported inside the functions (``scipctl --help`` stays fast).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+__all__ = ["Features", "FeatureLocation", "detect_features", "locate_by_features", "to_uint8"]
+
+_MODELS = ("translation", "similarity", "affine", "homography")
+
+
+@dataclass(frozen=True)
+class Features:
+    """Keypoints of one image: ``uv`` ``(N, 2)`` full-resolution pixels, ``descriptors`` ``(N, 128)`` float32,
+    ``size_px`` ``(N,)`` keypoint diameter in full-resolution pixels; ``shape`` = the image's ``(H, W)``."""
+
+    uv: np.ndarray
+    descriptors: np.ndarray
+    size_px: np.ndarray
+    shape: tuple
+
+    def __len__(self) -> int:
+        return int(self.uv.shape[0])
+
+    def subset(self, keep: np.ndarray) -> "Features":
+        """The keypoints where boolean ``keep`` ``(N,)`` is true."""
+        keep = np.asarray(keep, bool)
+        if keep.shape != (len(self),):
+            raise ValueError(f"keep: expected ({len(self)},) booleans, got {keep.shape}")
+        return Features(self.uv[keep], self.descriptors[keep], self.size_px[keep], self.shape)
+
+
+@dataclass(frozen=True)
+class FeatureLocation:
+    """Outcome of :func:`locate_by_features`.
+
+    ``uv`` (2,): the reference point mapped into the searched image (NaN when
+    no model was found). ``transform`` (3, 3): the fitted model, reference
+    pixels -> searched pixels (homogeneous; NaN when none). ``n_matches``:
+    ratio-test matches; ``n_inliers``: RANSAC inliers; ``n_local_inliers``:
+    inliers whose reference keypoint lies within ``local_radius_px`` of the
+    reference point; ``rms_px``: RMS residual of the inliers under the model.
+    ``ok`` is ``False`` with a one-line ``reason`` when the location is not
+    supported by at least ``min_inliers`` inliers.
+    """
+
+    ok: bool
+    reason: str
+    uv: np.ndarray
+    transform: np.ndarray
+    n_matches: int
+    n_inliers: int
+    n_local_inliers: int
+    rms_px: float
+
+    @staticmethod
+    def failed(reason: str, n_matches: int = 0, n_inliers: int = 0) -> "FeatureLocation":
+        return FeatureLocation(False, reason, np.full(2, np.nan), np.full((3, 3), np.nan), n_matches, n_inliers, 0,
+                               float("nan"))
+
+
+def to_uint8(image, valid: Optional[np.ndarray] = None) -> np.ndarray:
+    """``image`` ``(H, W)`` (any real dtype, NaN allowed) stretched to uint8 between its 0.5 and 99.5 percentiles.
+
+    Only pixels where ``valid`` ``(H, W)`` (default: finite) is true set the
+    stretch; the others become the mid-grey of the stretch.
+    """
+    a = np.asarray(image, dtype=np.float32)
+    if a.ndim != 2:
+        raise ValueError(f"image: expected (H, W), got shape {a.shape}")
+    ok = np.isfinite(a) if valid is None else (np.asarray(valid, bool) & np.isfinite(a))
+    if not ok.any():
+        return np.zeros(a.shape, np.uint8)
+    lo, hi = np.percentile(a[ok], [0.5, 99.5])
+    if not hi > lo:
+        hi = lo + 1.0
+    out = np.clip((a - lo) * (255.0 / (hi - lo)), 0, 255)
+    out = np.where(ok, out, 127.5)
+    return np.round(out).astype(np.uint8)
+
+
+def detect_features(image, valid: Optional[np.ndarray] = None, downsample: int = 1,
+                    contrast_threshold: float = 0.02, max_features: int = 0) -> Features:
+    """SIFT keypoints and descriptors of ``image`` ``(H, W)``.
+
+    ``valid`` ``(H, W)`` bool (default: the finite pixels): keypoints are kept
+    only where the whole keypoint footprint is valid (so that the border of a
+    warped, partly empty image makes no features). ``downsample`` (factor >= 1):
+    detect on the image area-resampled to ``round(W / f) x round(H / f)`` (faster,
+    and a way to match the blur of a coarser reference); ``uv`` is still
+    returned in full-resolution pixels (detection pixel ``i`` is centred on
+    full-resolution ``s (i + 0.5) - 0.5``, ``s = W / round(W / f)``). ``max_features``: keep the
+    strongest this many (0: all).
+    """
+    import cv2
+
+    a = np.asarray(image, dtype=np.float32)
+    if a.ndim != 2:
+        raise ValueError(f"image: expected (H, W), got shape {a.shape}")
+    f = float(downsample)
+    if not (np.isfinite(f) and f >= 1.0):
+        raise ValueError(f"downsample: must be a finite factor >= 1, got {downsample}")
+    ok = np.isfinite(a) if valid is None else np.asarray(valid, bool) & np.isfinite(a)
+    if ok.shape != a.shape:
+        raise ValueError(f"valid: expected shape {a.shape}, got {ok.shape}")
+    img8 = to_uint8(a, ok)
+    okf = ok.astype(np.float32)
+    H, W = a.shape
+    w2, h2 = max(int(round(W / f)), 1), max(int(round(H / f)), 1)
+    sx, sy = W / w2, H / h2  # full-resolution pixels per detection pixel (exactly f when it divides the size)
+    if f > 1.0:
+        img8 = cv2.resize(img8, (w2, h2), interpolation=cv2.INTER_AREA)
+        okf = cv2.resize(okf, (w2, h2), interpolation=cv2.INTER_AREA)
+    sift = cv2.SIFT_create(nfeatures=int(max_features), contrastThreshold=float(contrast_threshold))
+    kps, desc = sift.detectAndCompute(img8, None)
+    empty = Features(np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0), tuple(a.shape))
+    if not kps or desc is None:
+        return empty
+    uv = np.array([k.pt for k in kps], dtype=float)
+    size = np.array([k.size for k in kps], dtype=float)
+    # the keypoint's footprint (radius ~ size) must lie in the valid part of the image
+    if not ok.all():
+        erode = max(3, int(np.ceil(np.median(size))) | 1)
+        inside = cv2.erode((okf > 0.999).astype(np.uint8), np.ones((erode, erode), np.uint8))
+        iu = np.clip(np.round(uv[:, 0]).astype(int), 0, inside.shape[1] - 1)
+        iv = np.clip(np.round(uv[:, 1]).astype(int), 0, inside.shape[0] - 1)
+        keep = inside[iv, iu] > 0
+        uv, size, desc = uv[keep], size[keep], desc[keep]
+    # detection pixel centre i covers full-resolution [s i - 0.5, s (i + 1) - 0.5]: its centre is s (i + 0.5) - 0.5
+    uv = (uv + 0.5) * np.array([sx, sy]) - 0.5
+    return Features(uv, np.ascontiguousarray(desc, np.float32), size * np.sqrt(sx * sy), tuple(a.shape))
+
+
+def _fit(model: str, src: np.ndarray, dst: np.ndarray, threshold_px: float):
+    """RANSAC fit of ``model`` to ``src`` -> ``dst`` ``(N, 2)``: ``(M (3, 3) or None, inliers (N,) bool)``."""
+    import cv2
+
+    s = src.astype(np.float64).reshape(-1, 1, 2)
+    d = dst.astype(np.float64).reshape(-1, 1, 2)
+    n = len(src)
+    if model == "translation":
+        # 1-point RANSAC: every match proposes a shift; keep the one with most support, refit by the median
+        shifts = dst - src
+        dd = np.linalg.norm(shifts[:, None, :] - shifts[None, :, :], axis=2)
+        support = (dd <= threshold_px).sum(1)
+        inl = dd[int(np.argmax(support))] <= threshold_px
+        t = np.median(shifts[inl], axis=0)
+        inl = np.linalg.norm(shifts - t, axis=1) <= threshold_px
+        M = np.eye(3)
+        M[:2, 2] = np.median(shifts[inl], axis=0)
+        return M, inl
+    if model == "similarity":
+        A, inl = cv2.estimateAffinePartial2D(s, d, method=cv2.RANSAC, ransacReprojThreshold=threshold_px,
+                                             maxIters=4000, confidence=0.999)
+    elif model == "affine":
+        A, inl = cv2.estimateAffine2D(s, d, method=cv2.RANSAC, ransacReprojThreshold=threshold_px,
+                                      maxIters=4000, confidence=0.999)
+    else:
+        H, inl = cv2.findHomography(s, d, cv2.RANSAC, threshold_px, maxIters=4000, confidence=0.999)
+        if H is None:
+            return None, np.zeros(n, bool)
+        return H / H[2, 2], inl.ravel().astype(bool)
+    if A is None:
+        return None, np.zeros(n, bool)
+    return np.vstack([A, [0.0, 0.0, 1.0]]), inl.ravel().astype(bool)
+
+
+def _apply(M: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    p = np.c_[uv, np.ones(len(uv))] @ M.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def locate_by_features(
+    ref: Features,
+    ref_uv,
+    target: Features,
+    ref_radius_px: float,
+    search_center_uv=None,
+    search_radius_px: Optional[float] = None,
+    model: str = "similarity",
+    ratio: float = 0.8,
+    ransac_threshold_px: float = 4.0,
+    min_inliers: int = 8,
+    local_radius_px: Optional[float] = None,
+) -> FeatureLocation:
+    """Where the reference point ``ref_uv`` (reference-image pixels) lies in the target image.
+
+    Parameters
+    ----------
+    ref, target : Features
+        Keypoints of the reference image and of the searched image
+        (:func:`detect_features`).
+    ref_uv : (2,)
+        The point to map, reference-image pixels.
+    ref_radius_px : float
+        Only reference keypoints within this distance of ``ref_uv`` are matched.
+    search_center_uv : (2,), optional; search_radius_px : float, optional
+        When both are given, only target keypoints in the square of this
+        half-width around this centre are matched (default: the whole image).
+    model : {"translation", "similarity", "affine", "homography"}
+        The geometric model fitted by RANSAC (4, 4, 6, 8 degrees of freedom).
+    ratio : float
+        Lowe's ratio test: a match is kept when its descriptor distance is
+        below ``ratio`` times the second-best one.
+    ransac_threshold_px : float
+        RANSAC inlier threshold (target pixels).
+    min_inliers : int
+        Fewer inliers -> ``ok=False``.
+    local_radius_px : float, optional
+        Radius around ``ref_uv`` counted for ``n_local_inliers`` (default
+        ``ref_radius_px / 2``).
+
+    Returns
+    -------
+    FeatureLocation
+        ``uv`` (2,) in the target image's pixels.
+    """
+    import cv2
+
+    if model not in _MODELS:
+        raise ValueError(f"model: expected one of {_MODELS}, got {model!r}")
+    p = np.asarray(ref_uv, dtype=float).reshape(-1)
+    if p.shape != (2,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"ref_uv: expected a finite (u, v) pair, got {ref_uv!r}")
+    if not (np.isfinite(ref_radius_px) and ref_radius_px > 0):
+        raise ValueError(f"ref_radius_px: must be finite and > 0, got {ref_radius_px}")
+    if local_radius_px is None:
+        local_radius_px = ref_radius_px / 2.0
+    r = ref.subset(np.linalg.norm(ref.uv - p, axis=1) <= ref_radius_px) if len(ref) else ref
+    t = target
+    if search_center_uv is not None and search_radius_px is not None and len(t):
+        c = np.asarray(search_center_uv, dtype=float).reshape(2)
+        t = t.subset(np.all(np.abs(t.uv - c) <= search_radius_px, axis=1))
+    need = {"translation": 1, "similarity": 2, "affine": 3, "homography": 4}[model]
+    if len(r) < max(need, 2) or len(t) < 2:
+        return FeatureLocation.failed(f"too few keypoints (reference {len(r)}, target {len(t)})")
+    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(r.descriptors, t.descriptors, k=2)
+    qi, ti = [], []
+    for m in knn:
+        if len(m) == 2 and m[0].distance < ratio * m[1].distance:
+            qi.append(m[0].queryIdx)
+            ti.append(m[0].trainIdx)
+    n_matches = len(qi)
+    if n_matches < max(need + 1, 3):
+        return FeatureLocation.failed(f"too few feature matches ({n_matches})", n_matches)
+    src, dst = r.uv[qi], t.uv[ti]
+    M, inl = _fit(model, src, dst, float(ransac_threshold_px))
+    n_in = int(inl.sum())
+    if M is None or not np.all(np.isfinite(M)) or n_in < need:
+        return FeatureLocation.failed("no geometric model fits the matches", n_matches, n_in)
+    uv = _apply(M, p[None])[0]
+    res = np.linalg.norm(_apply(M, src[inl]) - dst[inl], axis=1)
+    rms = float(np.sqrt(np.mean(res**2))) if n_in else float("nan")
+    n_local = int(np.sum(np.linalg.norm(src[inl] - p, axis=1) <= local_radius_px))
+    ok, reason = True, ""
+    if not np.all(np.isfinite(uv)):
+        ok, reason = False, "the model maps the point to infinity"
+    elif n_in < min_inliers:
+        ok, reason = False, f"weak feature match ({n_in} inliers < {min_inliers})"
+    return FeatureLocation(ok, reason, uv, M, n_matches, n_in, n_local, rms)
