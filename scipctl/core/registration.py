@@ -69,16 +69,27 @@ def register_clouds(
         keep_s = np.linalg.norm(src_in_tgt - c, axis=1) < crop_radius_m
         keep_t = np.linalg.norm(tgt - c, axis=1) < crop_radius_m
         src_in_tgt, tgt = src_in_tgt[keep_s], tgt[keep_t]
+    # where the clouds can overlap: each within the other's bounding box, widened by twice the coarsest
+    # correspondence distance (points farther out can never pair up; they only cost time)
+    margin = 2.0 * max(scales_m) * max_corr_voxels
+    if len(src_in_tgt) and len(tgt):
+        lo_t, hi_t = tgt.min(axis=0) - margin, tgt.max(axis=0) + margin
+        lo_s, hi_s = src_in_tgt.min(axis=0) - margin, src_in_tgt.max(axis=0) + margin
+        src_in_tgt = src_in_tgt[np.all((src_in_tgt >= lo_t) & (src_in_tgt <= hi_t), axis=1)]
+        tgt = tgt[np.all((tgt >= lo_s) & (tgt <= hi_s), axis=1)]
     if len(src_in_tgt) < 50 or len(tgt) < 50:
         raise ValueError(f"too few points to register ({len(src_in_tgt)} source, {len(tgt)} target)")
-    ps = _to_o3d(src_in_tgt)
-    pt = _to_o3d(tgt)
+    # voxel grids finest first, each coarser one from the finer (cheaper than from the full clouds)
+    grids = {}
+    ps, pt = _to_o3d(src_in_tgt), _to_o3d(tgt)
+    for voxel in sorted(scales_m):
+        ps, pt = ps.voxel_down_sample(voxel), pt.voxel_down_sample(voxel)
+        grids[voxel] = (ps, pt)
     T = np.eye(4)
     reg = None
     n_s = n_t = 0
     for voxel in scales_m:
-        s = ps.voxel_down_sample(voxel)
-        t = pt.voxel_down_sample(voxel)
+        s, t = grids[voxel]
         n_s, n_t = len(s.points), len(t.points)
         if n_s < 20 or n_t < 20:
             continue

@@ -174,7 +174,9 @@ class RigidTransform:
         p = np.asarray(p, dtype=float)
         if p.shape[-1] != 3:
             raise ValueError(f"points: expected shape (..., 3), got {p.shape}")
-        return p @ self.R.T + self.t
+        out = p @ self.R.T
+        out += self.t
+        return out
 
     def rotate(self, v) -> np.ndarray:
         """Rotate direction vectors ``(..., 3)`` (no translation)."""
