@@ -27,9 +27,17 @@ FINE_RADIUS_PX = 20.0
 # feature-guided coarse step: half-size of the previous view rendered into the new view around the prediction,
 # the keypoint detection downsampling, and the RANSAC inliers needed to trust it
 VIEW_REACH_PX = 300  # the rendering covers +-300 new pixels around the prediction
-FEATURE_REACH = (0.3, 0.5, 1.0)  # keypoints of the rendering within these parts of its half-size: candidates
-FEATURE_LOCAL_PX = 75.0  # inliers within this many new pixels of the target are counted as local
-FEATURE_MIN_INLIERS = 12
+# candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
+# the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
+FEATURE_CANDIDATES = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
+                      (1.0, "homography", 12))
+FEATURE_FINE_RADIUS_PX = 20.0  # NCC refinement radius around a feature-guided coarse position
+FEATURE_LOCAL_PX = 75.0
+# NCC must land within this of the feature match to confirm it; an unconfirmed match with fewer local inliers
+# than FEATURE_MIN_LOCAL is reported as a failed step (measured: all such were > 10 px off)
+FEATURE_CONFIRM_PX = 8.0
+FEATURE_MIN_LOCAL = 5
+_DEBUG = None  # inliers within this many new pixels of the target are counted as local
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
@@ -74,22 +82,29 @@ def _stereo(dl: Downlink, left: ImageProduct, uv):
 
 
 def _local_normal_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, range_m: float):
-    """Surface normal (site frame) at ``X_rover`` from half-resolution dense stereo of ``prod``'s pair; None if unknown."""
+    """Surface normals (site frame) at ``X_rover`` from half-resolution dense stereo of ``prod``'s pair.
+
+    Returns ``(local, ground)``: the plane fitted within ``max(0.05, 0.025
+    range)`` m (the target's own surface, e.g. a rock face) and within
+    ``max(0.2, 0.1 range)`` m (mostly the surrounding ground); each ``(3,)`` or None.
+    """
     from ..core.stereo import dense_stereo
     from .designate import surface_normal
 
     right = dl.stereo_pair(prod)
     if right is None:
-        return None
+        return None, None
     try:
         ds = dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
                           min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
     except Exception:
-        return None
-    n, npts = surface_normal(ds.xyz.reshape(-1, 3), X_rover, radius_m=max(0.05, 0.025 * range_m))
-    if n is None:
-        return None
-    return prod.pose.T_site_rover.rotate(n)
+        return None, None
+    xyz = ds.xyz.reshape(-1, 3)
+    out = []
+    for radius_m in (max(0.05, 0.025 * range_m), max(0.2, 0.1 * range_m)):
+        n, npts = surface_normal(xyz, X_rover, radius_m=radius_m)
+        out.append(None if n is None else prod.pose.T_site_rover.rotate(n))
+    return tuple(out)
 
 
 def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
@@ -210,7 +225,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     X_site = start.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
-    normal, normal_from = None, None
+    normal, ground, normal_from = None, None, None
     feats = {}  # product_id -> keypoints of the whole image (each new image is searched once)
 
     positions = [p for p in dl.positions() if p != start.position]
@@ -238,12 +253,17 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             extra = {}
             tr = None
             if template_mode == "plane" and kind == "track":
-                if normal is None or normal_from is not prev:
+                if normal_from is not prev:
                     X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
-                    normal, normal_from = _local_normal_site(dl, prev, X_prev, prev_range), prev
-                # the surface plane at the target, or the rover's ground plane when dense stereo gave no normal
-                n_view = normal if normal is not None else prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
-                tr, finfo = _feature_track(prev, prod, X_site, n_view, pred, scale, half, feats)
+                    (normal, ground), normal_from = _local_normal_site(dl, prev, X_prev, prev_range), prev
+                # the surface plane at the target (or the rover's ground plane when dense stereo gave no normal)
+                # renders the template; the coarse step also tries the surrounding ground's plane
+                up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
+                n_view = normal if normal is not None else (ground if ground is not None else up)
+                planes = [n_view]
+                if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > 5.0:
+                    planes.append(ground)
+                tr, finfo = _feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats)
                 extra.update(finfo)
                 if tr is not None:
                     mode = "plane, feature-guided"
@@ -286,13 +306,32 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 continue
             ps = _stereo(dl, prod, tr.uv)
             ok = ps is not None and ps.ok
-            steps.append(step(prod, kind, pred, tr.uv, ps, tr.score, ok=ok,
-                              reason="" if ok else ("no right eye" if ps is None else f"stereo: {ps.reason}"),
+            reasons = [] if ok else ["no right eye" if ps is None else f"stereo: {ps.reason}"]
+            weak = False
+            if extra.get("feature_status") == "unconfirmed":
+                nl = extra.get("feature_local_inliers", 0)
+                if nl < FEATURE_MIN_LOCAL:
+                    weak = True
+                    reasons.append(f"weak match: NCC did not confirm the feature match and only {nl} keypoint "
+                                   f"matches lie near the target")
+                else:
+                    reasons.append(f"warning: position from the feature match alone ({nl} keypoint matches near "
+                                   f"the target); NCC did not confirm it")
+            elif extra.get("coarse", "").startswith("ncc context"):
+                reasons.append(f"warning: no feature match ({extra.get('feature_reason', '')}); NCC fallback, "
+                               f"often wrong on sand when the pose estimate is far off")
+            steps.append(step(prod, kind, pred, tr.uv, ps, tr.score, ok=ok and not weak, reason="; ".join(reasons),
                               extra={"scale": scale, "template": mode, "ncc_ratio": _f(tr.ratio), **extra}))
+            if weak:  # not a reference for the next stop: the next one is tracked from the last good one
+                continue
             if ok:
                 X_site = prod.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
                 prev_range = float(ps.range_m)
             else:
+                # no stereo: the tracked pixel's ray at the predicted range keeps the estimate consistent with the
+                # pixel in this pose (a handoff at the same stop then predicts without the pose error)
+                o, d = prod.camera_model.unproject(np.asarray(tr.uv, float)[None])
+                X_site = prod.pose.T_site_rover.apply(o[0] + rng_new * d[0])
                 prev_range = rng_new
             prev, prev_uv, cam = prod, tr.uv, c
         if "hazcam" in lefts and cam == "navcam" and prev.position == pos:
@@ -301,83 +340,99 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     return steps
 
 
-def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, n_site, pred_uv, scale: float, half: int,
-                   feats: dict):
+def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
+                   half: int, feats: dict):
     """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
 
-    ``prev``'s image is rendered into ``prod``'s view around the prediction
-    ``pred_uv`` through the plane ``(X_site, n_site)`` (site frame), at
-    ``prev``'s own resolution (one rendered pixel per ``scale`` new pixels,
-    ``scale`` = new pixels per previous pixel at the target, at least 1), so
-    that scale and perspective changes are taken out by the geometry and what
-    is left is the pose-estimate error (a shift and a small rotation). Its
-    SIFT keypoints near the target are matched against those of the whole new
-    image (area-downsampled by the same factor, so that both have the same
-    blur) and a homography ``G`` (rendering -> new image) is fitted by RANSAC,
-    with keypoints from a few reaches around the target. For each, the
-    template (``half``) is rendered through the plane and ``G``, so that it
-    carries the rotation of the pose error too, and NCC-tracked within
-    ``FINE_RADIUS_PX`` of the mapped prediction; the best NCC wins. ``feats``
-    caches the new images' keypoints by ``(product id, downsampling)``.
+    For each plane normal in ``view_normals`` (site frame, planes through
+    ``X_site``), ``prev``'s image is rendered into ``prod``'s view around the
+    prediction ``pred_uv`` (:func:`plane_warped_view`) at ``prev``'s own
+    resolution (one rendered pixel per ``scale`` new pixels, ``scale`` = new
+    pixels per previous pixel at the target, at least 1), so that scale and
+    perspective changes are taken out by the geometry and what is left is the
+    pose-estimate error (a shift and a small rotation). Its SIFT keypoints
+    near the target are matched against those of the whole new image
+    (area-downsampled by the same factor, so that both have the same blur) and
+    a homography ``G`` (pose-estimate pixels of ``prod`` -> real pixels) is
+    fitted by RANSAC, with keypoints from a few reaches and models (``FEATURE_CANDIDATES``)
+    around the target. For each ``G``, the template (half-size ``half``) is
+    rendered through the target's plane ``n_site`` at the pixels ``G^-1``
+    maps the new image's to, so that it carries the rotation of the pose
+    error too, and NCC-tracked within ``FINE_RADIUS_PX`` of the mapped
+    prediction; the best NCC wins. ``feats`` caches the new images' keypoints
+    by ``(product id, downsampling)``. ``info`` records the path, the
+    winner's inlier counts and the coarse position.
     """
     from ..core.features import detect_features, locate_by_features
-    from ..core.tracking import track
+    from ..core.tracking import TrackResult, track
 
     step_px = float(np.clip(scale, 1.0, 4.0))
     vhalf = int(round(VIEW_REACH_PX / step_px))
-    view, vc = plane_warped_view(prev, prod, X_site, n_site, pred_uv, vhalf, step_px=step_px)
     info = {"coarse": "features", "feature_inliers": 0, "feature_local_inliers": 0}
-    if np.isfinite(view).mean() < 0.2:
-        info["feature_reason"] = "the previous view does not cover the prediction"
-        return None, info
     key = (prod.product_id, round(step_px, 2))
     if key not in feats:
         feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
-    ref = detect_features(view)
     c = np.round(np.asarray(pred_uv, float))
-    # est-pose pixels of prod -> rendering pixels
+    # pose-estimate pixels of prod -> rendering pixels
     S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px], [0, 0, 1.0]])
     img = prod.pixels_float()
-    best, best_info, seen, reasons = None, None, [], []
-    for reach in FEATURE_REACH:
-        loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model="homography",
-                                 ransac_threshold_px=2.0 * step_px, min_inliers=FEATURE_MIN_INLIERS,
-                                 local_radius_px=FEATURE_LOCAL_PX / step_px)
-        if not loc.ok:
-            reasons.append(f"reach {reach:g}: {loc.reason}")
+    g = np.arange(-half, half + 1, dtype=float)
+    cands, seen, reasons = [], [], []
+    for k, n_view in enumerate(view_normals):
+        view, vc = plane_warped_view(prev, prod, X_site, n_view, pred_uv, vhalf, step_px=step_px)
+        if np.isfinite(view).mean() < 0.2:
+            reasons.append(f"plane {k}: the previous view does not cover the prediction")
             continue
-        if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
-            continue
-        seen.append(loc.uv)
-        G = loc.transform @ S
-        try:
-            Gi = np.linalg.inv(G)
-        except np.linalg.LinAlgError:
-            continue
-        cc = np.round(loc.uv)
-        g = np.arange(-half, half + 1, dtype=float)
-        xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
-        yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ys = yh[:, :2] / yh[:, 2:3]
-        tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
-        if np.isfinite(tpl).mean() < 0.9:
-            continue
-        tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
-        tr = track(tpl, img, loc.uv, FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half), min_score=0.3)
-        if not np.all(np.isfinite(tr.uv)):
-            continue
-        if best is None or tr.score > best.score:
-            best = tr
-            best_info = {"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
-                         "feature_matches": loc.n_matches, "feature_reach": reach,
-                         "feature_shift_px": float(np.linalg.norm(loc.uv - pred_uv)),
-                         "coarse_uv": loc.uv.tolist(), "coarse_to_ncc_px": float(np.linalg.norm(tr.uv - loc.uv))}
-    if best is None:
+        ref = detect_features(view)
+        for reach, model, min_inliers in FEATURE_CANDIDATES:
+            loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model=model,
+                                     ransac_threshold_px=2.0 * step_px, min_inliers=min_inliers,
+                                     local_radius_px=FEATURE_LOCAL_PX / step_px)
+            if not loc.ok:
+                reasons.append(f"plane {k} reach {reach:g}: {loc.reason}")
+                continue
+            if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
+                continue
+            seen.append(loc.uv)
+            try:
+                Gi = np.linalg.inv(loc.transform @ S)
+            except np.linalg.LinAlgError:
+                continue
+            cc = np.round(loc.uv)
+            xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
+            yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ys = yh[:, :2] / yh[:, 2:3]
+            tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+            if np.isfinite(tpl).mean() < 0.9:
+                continue
+            tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
+            tr = track(tpl, img, loc.uv, FEATURE_FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half),
+                       min_score=0.3)
+            if _DEBUG is not None:
+                _DEBUG.append((k, reach, loc, tr))
+            cands.append((loc, tr, k, reach))
+    if not cands:
         info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
         return None, info
-    info.update(best_info)
-    return best, info
+    # a candidate is confirmed when NCC refines it to a peak near the feature match; the best confirmed NCC wins.
+    # Otherwise the feature match with most inliers near the target stands alone (and is reported as such).
+    confirmed = [cd for cd in cands if cd[1].ok and np.all(np.isfinite(cd[1].uv))
+                 and np.linalg.norm(cd[1].uv - cd[0].uv) <= FEATURE_CONFIRM_PX]
+    if confirmed:
+        loc, tr, k, reach = max(confirmed, key=lambda cd: cd[1].score)
+        info["feature_status"] = "confirmed"
+        out = tr
+    else:
+        loc, tr, k, reach = max(cands, key=lambda cd: (cd[0].n_local_inliers, cd[0].n_inliers))
+        info["feature_status"] = "unconfirmed"
+        out = TrackResult(True, "", loc.uv.copy(), tr.score, tr.second_score, tr.ratio, tr.sharpness, tr.levels)
+    info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
+                 "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
+                 "feature_candidates": len(cands), "feature_confirmed": len(confirmed),
+                 "feature_shift_px": float(np.linalg.norm(loc.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
+                 "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None})
+    return out, info
 
 
 def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):
