@@ -167,7 +167,9 @@ def _fit(model: str, src: np.ndarray, dst: np.ndarray, threshold_px: float):
     if model == "translation":
         # 1-point RANSAC: every match proposes a shift; keep the one with most support, refit by the median
         shifts = dst - src
-        dd = np.linalg.norm(shifts[:, None, :] - shifts[None, :, :], axis=2)
+        # proposals: every match, or an even subset of at most 500 of them (memory stays O(500 N))
+        prop = shifts[np.linspace(0, n - 1, min(n, 500)).astype(int)]
+        dd = np.linalg.norm(prop[:, None, :] - shifts[None, :, :], axis=2)
         support = (dd <= threshold_px).sum(1)
         inl = dd[int(np.argmax(support))] <= threshold_px
         t = np.median(shifts[inl], axis=0)

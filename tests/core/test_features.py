@@ -1,0 +1,152 @@
+"""Feature-guided coarse localisation: synthetic image pairs related by a known transform (exact truth)."""
+
+import numpy as np
+import pytest
+
+cv2 = pytest.importorskip("cv2")
+
+from scipctl.core.features import Features, detect_features, locate_by_features, to_uint8  # noqa: E402
+
+
+def _texture(shape=(480, 480), seed=0):
+    """Random blobs at two scales (SIFT finds many keypoints in it)."""
+    r = np.random.default_rng(seed)
+    a = cv2.GaussianBlur(r.normal(0, 1, shape).astype(np.float32), (0, 0), 2.0)
+    a += 3 * cv2.GaussianBlur(r.normal(0, 1, shape).astype(np.float32), (0, 0), 6.0)
+    return a
+
+
+def _warp(img, M, shape=None):
+    """``img`` seen through the homography ``M`` (source pixel -> destination pixel); NaN where unseen.
+
+    OpenCV's warpPerspective uses the same pixel-centre convention as ours for integer coordinates.
+    """
+    h, w = shape or img.shape
+    return cv2.warpPerspective(img, M, (w, h), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_CONSTANT,
+                               borderValue=float("nan"))
+
+
+def _map(M, p):
+    q = M @ np.array([p[0], p[1], 1.0])
+    return q[:2] / q[2]
+
+
+H_TRUE = np.array([[1.08, 0.06, -35.0], [-0.04, 0.93, 22.0], [1.2e-4, -6e-5, 1.0]])
+# a rotation by 7 deg and scale 1.3 about (200, 220), then a shift of (-60, 45)
+_c, _s = 1.3 * np.cos(np.radians(7)), 1.3 * np.sin(np.radians(7))
+S_TRUE = np.array([[_c, -_s, 0.0], [_s, _c, 0.0], [0.0, 0.0, 1.0]])
+S_TRUE[:2, 2] = np.array([200.0, 220.0]) - S_TRUE[:2, :2] @ [200.0, 220.0] + [-60.0, 45.0]
+
+
+@pytest.fixture(scope="module")
+def scene():
+    img = _texture()
+    return img, _warp(img, H_TRUE), _warp(img, S_TRUE)
+
+
+@pytest.mark.parametrize("downsample", [1, 2, 1.5])
+def test_homography_maps_the_point(scene, downsample):
+    """An image warped by a known homography: the point mapped through the fitted homography lands on the
+    exact image of the point (RANSAC refits on all inliers, so well under a pixel), at full and reduced resolution."""
+    img, warped, _ = scene
+    a = detect_features(img, downsample=downsample)
+    b = detect_features(warped, downsample=downsample)
+    assert len(a) > 100 and len(b) > 100
+    for p in ([240.0, 250.0], [180.5, 300.25]):
+        loc = locate_by_features(a, p, b, ref_radius_px=150, model="homography")
+        assert loc.ok, loc.reason
+        assert loc.n_inliers >= 50
+        tol = 0.3 * downsample
+        assert np.linalg.norm(loc.uv - _map(H_TRUE, p)) < tol, (loc.uv, _map(H_TRUE, p))
+        # the returned transform maps reference pixels to target pixels
+        assert np.allclose(_map(loc.transform, p), loc.uv)
+
+
+def test_similarity_model_recovers_rotation_and_scale(scene):
+    img, _, warped = scene
+    a, b = detect_features(img), detect_features(warped)
+    p = np.array([230.0, 210.0])
+    loc = locate_by_features(a, p, b, ref_radius_px=120, model="similarity")
+    assert loc.ok, loc.reason
+    assert np.linalg.norm(loc.uv - _map(S_TRUE, p)) < 0.3
+    M = loc.transform[:2, :2]
+    assert np.hypot(M[0, 0], M[1, 0]) == pytest.approx(1.3, abs=0.005)
+    assert np.degrees(np.arctan2(M[1, 0], M[0, 0])) == pytest.approx(7.0, abs=0.2)
+
+
+def test_translation_model_on_a_shift():
+    img = _texture(seed=3)
+    shift = np.array([37.0, -21.0])
+    M = np.array([[1.0, 0.0, shift[0]], [0.0, 1.0, shift[1]], [0.0, 0.0, 1.0]])
+    warped = _warp(img, M)
+    p = np.array([200.0, 260.0])
+    loc = locate_by_features(detect_features(img), p, detect_features(warped), ref_radius_px=100, model="translation")
+    assert loc.ok, loc.reason
+    assert np.linalg.norm(loc.uv - (p + shift)) < 0.2
+
+
+def test_search_region_restricts_the_target_keypoints(scene):
+    """With the target keypoints limited to a square far from the truth nothing fits; around the truth it does."""
+    img, warped, _ = scene
+    a, b = detect_features(img), detect_features(warped)
+    p = np.array([240.0, 250.0])
+    q = _map(H_TRUE, p)
+    far = locate_by_features(a, p, b, ref_radius_px=100, search_center_uv=q + [-180.0, 0.0], search_radius_px=40)
+    assert not far.ok
+    near = locate_by_features(a, p, b, ref_radius_px=100, search_center_uv=q, search_radius_px=120,
+                              model="homography")
+    assert near.ok and np.linalg.norm(near.uv - q) < 0.5
+
+
+def test_unrelated_image_is_a_weak_match(scene):
+    """Two independent textures: no model gathers the required inliers -> ok False with a reason."""
+    img = scene[0]
+    other = _texture(seed=7)
+    loc = locate_by_features(detect_features(img), [240.0, 240.0], detect_features(other), ref_radius_px=150,
+                             model="homography", min_inliers=12)
+    assert not loc.ok
+    assert loc.reason
+    assert loc.n_inliers < 12
+
+
+def test_invalid_pixels_make_no_keypoints(scene):
+    """Keypoints are kept only where their footprint is valid: none next to the NaN border of a warped image."""
+    _, warped, _ = scene
+    f = detect_features(warped)
+    finite = np.isfinite(warped)
+    iu = np.round(f.uv[:, 0]).astype(int)
+    iv = np.round(f.uv[:, 1]).astype(int)
+    assert finite[iv, iu].all()
+    # distance to the nearest invalid pixel is at least a couple of pixels for every keypoint
+    dist = cv2.distanceTransform(finite.astype(np.uint8), cv2.DIST_L2, 5)
+    assert dist[iv, iu].min() >= 2.0
+
+
+def test_to_uint8_stretch_and_nan():
+    a = np.linspace(0.0, 1.0, 100, dtype=np.float32).reshape(10, 10)
+    a[0, 0] = np.nan
+    u = to_uint8(a)
+    assert u.dtype == np.uint8 and u.shape == (10, 10)
+    assert u[0, 0] == 128  # NaN -> mid-grey
+    assert u[9, 9] == 255 and u[0, 1] == 0
+    assert np.all(np.diff(u.ravel()[1:].astype(int)) >= 0)  # monotone
+
+
+def test_bad_input():
+    img = _texture((64, 64))
+    f = detect_features(img)
+    with pytest.raises(ValueError):
+        locate_by_features(f, [1.0, 2.0], f, ref_radius_px=10, model="projective")
+    with pytest.raises(ValueError):
+        locate_by_features(f, [np.nan, 2.0], f, ref_radius_px=10)
+    with pytest.raises(ValueError):
+        locate_by_features(f, [1.0, 2.0], f, ref_radius_px=0.0)
+    with pytest.raises(ValueError):
+        detect_features(np.zeros((4, 4, 3)))
+    with pytest.raises(ValueError):
+        detect_features(img, downsample=0.5)
+    with pytest.raises(ValueError):
+        f.subset(np.ones(len(f) + 1, bool))
+    empty = Features(np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0), (64, 64))
+    loc = locate_by_features(empty, [10.0, 10.0], f, ref_radius_px=20)
+    assert not loc.ok and "too few keypoints" in loc.reason
