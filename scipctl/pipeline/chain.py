@@ -3,9 +3,20 @@ from pancam to navcam, then to the hazcams.
 
 At each rover position (time order) the target's 3-D estimate (site frame,
 through the rover's pose estimates) predicts where it appears in the new left
-image; the previous stop's window around the target, scaled by the change of
-range (and of IFOV at a camera change), is NCC-tracked there; stereo at the
-tracked pixel updates the 3-D estimate.
+image. The pose estimates can be degrees off in yaw, so the prediction can be
+hundreds of pixels off: the previous stop's image is rendered into the new
+view through the local surface plane (which takes out the change of scale and
+perspective), SIFT features of the rendering are matched against the whole
+new image and a RANSAC model maps the target's place in the rendering into it
+(the coarse position); a template rendered through that model is then
+NCC-tracked within ``FEATURE_FINE_RADIUS_PX`` of it. When no feature model is
+found, the older NCC path (a large context window over the search region) gives
+an answer that is reported as unverified. At the same stop, the pancam window
+is shrunk by the IFOV ratio and tracked into the navcam image (the paper's
+handoff). Stereo at the tracked pixel updates the 3-D estimate. Every step
+records in ``extra`` which path found it, the feature inlier counts and the
+coarse position; a weak or unverified step has ``ok=False`` and is not used as
+the reference for the next stop.
 """
 
 from __future__ import annotations
@@ -21,23 +32,23 @@ from ..jsonutil import finite_or_none
 TEMPLATE_HALF_PX = {"pancam": 20, "navcam": 15, "hazcam": 15}
 # pointing error from the pose estimate: pancam IFOV is 1/3 of navcam's, so it needs 3x the radius in pixels
 SEARCH_RADIUS_PX = {"pancam": 300.0, "navcam": 100.0, "hazcam": 80.0}
-# half-size of the context window that first finds the pose error, and the target search radius after it
+# fallback when no feature match is found: half-size of the NCC context window that first finds the pose error,
+# and the target search radius after it
 CONTEXT_HALF_PX = {"pancam": 100, "navcam": 60, "hazcam": 60}
 FINE_RADIUS_PX = 20.0
-# feature-guided coarse step: half-size of the previous view rendered into the new view around the prediction,
-# the keypoint detection downsampling, and the RANSAC inliers needed to trust it
-VIEW_REACH_PX = 300  # the rendering covers +-300 new pixels around the prediction
+# feature-guided step (_feature_track): the previous view rendered into the new view covers +-VIEW_REACH_PX new
+# pixels around the prediction
+VIEW_REACH_PX = 300
 # candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
 # the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
 FEATURE_CANDIDATES = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
                       (1.0, "homography", 12))
 FEATURE_FINE_RADIUS_PX = 20.0  # NCC refinement radius around a feature-guided coarse position
-FEATURE_LOCAL_PX = 75.0
+FEATURE_LOCAL_PX = 75.0  # inliers within this many new pixels of the target are counted as local
 # NCC must land within this of the feature match to confirm it; an unconfirmed match with fewer local inliers
-# than FEATURE_MIN_LOCAL is reported as a failed step (measured: all such were > 10 px off)
+# than FEATURE_MIN_LOCAL is reported as a failed step (measured on the simulated runs: all such were > 10 px off)
 FEATURE_CONFIRM_PX = 8.0
 FEATURE_MIN_LOCAL = 5
-_DEBUG = None  # inliers within this many new pixels of the target are counted as local
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
@@ -167,13 +178,20 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
               handoff_method: str = "consensus", template_mode: str = "plane") -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
-    ``template_mode``: ``"plane"`` warps the previous stop's window into the new
-    view through the local surface plane (from dense stereo); ``"scale"`` scales
-    it uniformly by the IFOV and range ratios (the paper's way). The
-    pancam->navcam handoff always scales the pancam window by the IFOV ratio, as
-    the paper does. Returns the list of :class:`ChainStep`; the last step is the
-    navcam->hazcam handoff by ``handoff_method`` (near navcams) when a hazcam
-    pair exists.
+    ``template_mode``: ``"plane"`` (default) renders the previous stop's image
+    into the new view through the local surface plane (from dense stereo) and
+    finds the pose error with features first (:func:`_feature_track`), falling
+    back to NCC over the search region (reported unverified) when no feature
+    model is found; ``"scale"`` scales the previous window uniformly by the
+    IFOV and range ratios and NCC-tracks it over the search region (the paper's
+    way, no features). The pancam->navcam handoff at the same stop always
+    scales the pancam window by the IFOV ratio, as the paper does; a handoff
+    from a pancam image at an earlier stop (the 4.5 m pancam track was not
+    trusted) goes through the feature path. Returns the list of
+    :class:`ChainStep`; the last step is the navcam->hazcam handoff by
+    ``handoff_method`` (near navcams) when a hazcam pair exists. A step with
+    ``ok=False`` whose ``reason`` starts ``weak match`` or ``unverified`` has a
+    pixel that is reported but not used as the next stop's reference.
     """
     if template_mode not in ("plane", "scale"):
         raise ValueError(f"template_mode must be 'plane' or 'scale', got {template_mode!r}")
@@ -413,8 +431,6 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
             tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
             tr = track(tpl, img, loc.uv, FEATURE_FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half),
                        min_score=0.3)
-            if _DEBUG is not None:
-                _DEBUG.append((k, reach, loc, tr))
             cands.append((loc, tr, k, reach))
     if not cands:
         info["feature_status"] = "failed"
