@@ -39,6 +39,9 @@ FINE_RADIUS_PX = 20.0
 # feature-guided step (_feature_track): the previous view rendered into the new view covers +-VIEW_REACH_PX new
 # pixels around the prediction
 VIEW_REACH_PX = 300
+# the rendering's pixel = this many previous-image pixels (1: its own resolution); the coarser one is tried when
+# nothing was confirmed at the finer one (smooth 10 m sand against the 4.5 m image's fine speckle)
+FEATURE_STEP_FACTORS = (1.0, 1.5)
 # candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
 # the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
 FEATURE_CANDIDATES = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
@@ -388,69 +391,77 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
     from ..core.features import detect_features, locate_by_features
     from ..core.tracking import TrackResult, track
 
-    step_px = float(np.clip(scale, 1.0, 4.0))
-    vhalf = int(round(VIEW_REACH_PX / step_px))
     info = {"coarse": "features", "feature_inliers": 0, "feature_local_inliers": 0}
-    key = (prod.product_id, round(step_px, 2))
-    if key not in feats:
-        feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
-    c = np.round(np.asarray(pred_uv, float))
-    # pose-estimate pixels of prod -> rendering pixels
-    S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px], [0, 0, 1.0]])
     img = prod.pixels_float()
     g = np.arange(-half, half + 1, dtype=float)
+    c = np.round(np.asarray(pred_uv, float))
     cands, seen, reasons = [], [], []
-    for k, n_view in enumerate(view_normals):
-        view, vc = plane_warped_view(prev, prod, X_site, n_view, pred_uv, vhalf, step_px=step_px)
-        if np.isfinite(view).mean() < 0.2:
-            reasons.append(f"plane {k}: the previous view does not cover the prediction")
-            continue
-        ref = detect_features(view)
-        for reach, model, min_inliers in FEATURE_CANDIDATES:
-            loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model=model,
-                                     ransac_threshold_px=2.0 * step_px, min_inliers=min_inliers,
-                                     local_radius_px=FEATURE_LOCAL_PX / step_px)
-            if not loc.ok:
-                reasons.append(f"plane {k} reach {reach:g}: {loc.reason}")
+
+    def confirmed(cd):
+        loc, tr = cd[0], cd[1]
+        return tr.ok and np.all(np.isfinite(tr.uv)) and np.linalg.norm(tr.uv - loc.uv) <= FEATURE_CONFIRM_PX
+
+    for factor in FEATURE_STEP_FACTORS:
+        if any(confirmed(cd) for cd in cands):
+            break  # a coarser rendering only when nothing was confirmed at the finer one
+        step_px = float(np.clip(scale * factor, 1.0, 4.0 * factor))
+        vhalf = int(round(VIEW_REACH_PX / step_px))
+        key = (prod.product_id, round(step_px, 2))
+        if key not in feats:
+            feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
+        # pose-estimate pixels of prod -> rendering pixels
+        S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px],
+                      [0, 0, 1.0]])
+        for k, n_view in enumerate(view_normals):
+            view, vc = plane_warped_view(prev, prod, X_site, n_view, pred_uv, vhalf, step_px=step_px)
+            if np.isfinite(view).mean() < 0.2:
+                reasons.append(f"plane {k}: the previous view does not cover the prediction")
                 continue
-            if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
-                continue
-            seen.append(loc.uv)
-            try:
-                Gi = np.linalg.inv(loc.transform @ S)
-            except np.linalg.LinAlgError:
-                continue
-            cc = np.round(loc.uv)
-            xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
-            yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ys = yh[:, :2] / yh[:, 2:3]
-            tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
-            if np.isfinite(tpl).mean() < 0.9:
-                continue
-            tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
-            tr = track(tpl, img, loc.uv, FEATURE_FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half),
-                       min_score=0.3)
-            cands.append((loc, tr, k, reach))
+            ref = detect_features(view)
+            for reach, model, min_inliers in FEATURE_CANDIDATES:
+                loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model=model,
+                                         ransac_threshold_px=2.0 * step_px, min_inliers=min_inliers,
+                                         local_radius_px=FEATURE_LOCAL_PX / step_px)
+                if not loc.ok:
+                    reasons.append(f"x{factor:g} plane {k} reach {reach:g}: {loc.reason}")
+                    continue
+                if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
+                    continue
+                seen.append(loc.uv)
+                try:
+                    Gi = np.linalg.inv(loc.transform @ S)
+                except np.linalg.LinAlgError:
+                    continue
+                cc = np.round(loc.uv)
+                xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
+                yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ys = yh[:, :2] / yh[:, 2:3]
+                tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+                if np.isfinite(tpl).mean() < 0.9:
+                    continue
+                tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
+                tr = track(tpl, img, loc.uv, FEATURE_FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half),
+                           min_score=0.3)
+                cands.append((loc, tr, k, reach, factor))
     if not cands:
         info["feature_status"] = "failed"
         info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
         return None, info
     # a candidate is confirmed when NCC refines it to a peak near the feature match; the best confirmed NCC wins.
     # Otherwise the feature match with most inliers near the target stands alone (and is reported as such).
-    confirmed = [cd for cd in cands if cd[1].ok and np.all(np.isfinite(cd[1].uv))
-                 and np.linalg.norm(cd[1].uv - cd[0].uv) <= FEATURE_CONFIRM_PX]
-    if confirmed:
-        loc, tr, k, reach = max(confirmed, key=lambda cd: cd[1].score)
+    good = [cd for cd in cands if confirmed(cd)]
+    if good:
+        loc, tr, k, reach, factor = max(good, key=lambda cd: cd[1].score)
         info["feature_status"] = "confirmed"
         out = tr
     else:
-        loc, tr, k, reach = max(cands, key=lambda cd: (cd[0].n_local_inliers, cd[0].n_inliers))
+        loc, tr, k, reach, factor = max(cands, key=lambda cd: (cd[0].n_local_inliers, cd[0].n_inliers))
         info["feature_status"] = "unconfirmed"
         out = TrackResult(True, "", loc.uv.copy(), tr.score, tr.second_score, tr.ratio, tr.sharpness, tr.levels)
     info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
                  "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
-                 "feature_candidates": len(cands), "feature_confirmed": len(confirmed),
+                 "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
                  "feature_shift_px": float(np.linalg.norm(loc.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None})
     return out, info
