@@ -458,12 +458,13 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
     else:
         loc, tr, k, reach, factor = max(cands, key=lambda cd: (cd[0].n_local_inliers, cd[0].n_inliers))
         info["feature_status"] = "unconfirmed"
-        out = TrackResult(True, "", loc.uv.copy(), tr.score, tr.second_score, tr.ratio, tr.sharpness, tr.levels)
+        # the NCC peak found elsewhere is not this position's score: recorded in info only
+        out = TrackResult(True, "", loc.uv.copy(), float("nan"), float("nan"), float("nan"), float("nan"), 0)
     info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
                  "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
                  "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
                  "feature_shift_px": float(np.linalg.norm(loc.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
-                 "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None})
+                 "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
     return out, info
 
 
