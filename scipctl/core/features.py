@@ -105,7 +105,7 @@ def to_uint8(image, valid: Optional[np.ndarray] = None) -> np.ndarray:
     return np.round(out).astype(np.uint8)
 
 
-def detect_features(image, valid: Optional[np.ndarray] = None, downsample: int = 1,
+def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float = 1.0,
                     contrast_threshold: float = 0.02, max_features: int = 0) -> Features:
     """SIFT keypoints and descriptors of ``image`` ``(H, W)``.
 
