@@ -184,12 +184,23 @@ def _print_chains(con, chains):
 
     for ch in chains:
         tab = Table(title=f"{ch['downlink']} target {ch['target']}: tracking chain")
-        for c in ("stop", "camera", "kind", "tracked uv", "mark uv", "err px", "range m", "3-D err m"):
+        for c in ("stop", "camera", "kind", "tracked uv", "mark uv", "err px", "range m", "3-D err m", "trust"):
             tab.add_column(c)
         for s in ch["steps"]:
             f2 = lambda v: "-" if v is None else f"{v[0]:.1f},{v[1]:.1f}"  # noqa: E731
             tab.add_row(f"{s['position'][0]}/{s['position'][1]}", s["camera"], s["kind"], f2(s["tracked_uv"]), f2(s["mark_uv"]),
                         "-" if s["error_px"] is None else f"{s['error_px']:.2f}",
                         "-" if s["range_m"] is None else f"{s['range_m']:.2f}",
-                        "-" if s["error_3d_m"] is None else f"{s['error_3d_m']:.3f}")
+                        "-" if s["error_3d_m"] is None else f"{s['error_3d_m']:.3f}", _trust(s))
         con.print(tab)
+
+
+def _trust(step: dict) -> str:
+    """How far to trust a chain step: ``ok`` or ``FLAG``, the feature status, and the reason (warning) if any."""
+    parts = ["ok" if step.get("ok") else "FLAG"]
+    status = (step.get("extra") or {}).get("feature_status")
+    if status:
+        parts.append(status)
+    if step.get("reason"):
+        parts.append(str(step["reason"]))
+    return " ".join(parts)

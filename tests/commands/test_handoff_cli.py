@@ -82,3 +82,26 @@ def test_missing_and_corrupt_inputs_exit_2(tmp_path):
     bad.write_bytes(SAMPLE.read_bytes()[:100000])
     r = runner.invoke(app, ["simulate-handoff", str(bad)])
     assert r.exit_code == 2 and "half.mcap" in r.stderr
+
+
+def test_chain_option_reports_every_step_against_the_marks(sol):
+    """--chain: the whole chain from the pancam designation, in the JSON (per step: the mark, the error, the
+    trust flag) and as a table on stderr with a trust column."""
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--target", "t2", "--methods", "pure-kinematic-near",
+                            "--chain", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    (ch,) = doc["chains"]
+    assert ch["target"] == "t2"
+    steps = ch["steps"]
+    assert [s["kind"] for s in steps][0] == "designate" and steps[0]["camera"] == "pancam"
+    assert steps[-1]["camera"] == "hazcam"
+    assert {s["camera"] for s in steps} == {"pancam", "navcam", "hazcam"}
+    for s in steps:
+        assert isinstance(s["ok"], bool)
+        if s["tracked_uv"] is not None and s["mark_uv"] is not None:
+            du, dv = (s["tracked_uv"][i] - s["mark_uv"][i] for i in (0, 1))
+            assert abs((du * du + dv * dv) ** 0.5 - s["error_px"]) < 1e-9
+    # the designation is the mark itself
+    assert steps[0]["error_px"] == 0.0
+    assert "tracking chain" in r.stderr and "trust" in r.stderr
