@@ -178,7 +178,7 @@ def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site
 
 
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
-              handoff_method: str = "consensus", template_mode: str = "plane") -> list:
+              handoff_method: str = "consensus", template_mode: str = "plane", handoff_at: str = "every") -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
     ``template_mode``: ``"plane"`` (default) renders the previous stop's image
@@ -192,12 +192,19 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     from a pancam image at an earlier stop (the 4.5 m pancam track was not
     trusted) goes through the feature path. Returns the list of
     :class:`ChainStep`; the last step is the navcam->hazcam handoff by
-    ``handoff_method`` (near navcams) when a hazcam pair exists. A step with
+    ``handoff_method`` (near navcams) when a hazcam pair exists.
+    ``handoff_at``: at which stops with hazcam images the navcam->hazcam
+    handoff is made: ``"every"`` (default; the navcam track goes on through
+    all stops, each handoff is a step, the last one has ``extra["final"]``
+    True: the one the arm would use), ``"last"`` (only the last such stop),
+    ``"first"`` (the chain ends at the first such stop). A step with
     ``ok=False`` whose ``reason`` starts ``weak match`` or ``unverified`` has a
     pixel that is reported but not used as the next stop's reference.
     """
     if template_mode not in ("plane", "scale"):
         raise ValueError(f"template_mode must be 'plane' or 'scale', got {template_mode!r}")
+    if handoff_at not in ("every", "last", "first"):
+        raise ValueError(f"handoff_at must be 'every', 'last' or 'first', got {handoff_at!r}")
     from ..core.tracking import extract_window, scale_window, track, window_scale_for_handoff
 
     tgt = None
@@ -251,6 +258,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
 
     positions = [p for p in dl.positions() if p != start.position]
     positions = [p for p in positions if min(im.time_s for im in dl.images_at(p)) > start.time_s]
+    haz_positions = [p for p in positions if dl.images_at(p, "hazcam", "left")] or [None]
     for pos in positions:
         lefts = {im.camera: im for im in sorted(dl.images_at(pos, eye="left"), key=lambda i: i.time_s)}
         order = []
@@ -360,8 +368,13 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 prev_range = rng_new
             prev, prev_uv, cam = prod, tr.uv, c
         if "hazcam" in lefts and cam == "navcam" and prev.position == pos:
-            steps.append(_hazcam_handoff(dl, prev, prev_uv, lefts["hazcam"], handoff_method, step))
-            break
+            if handoff_at != "last" or pos == haz_positions[-1]:
+                steps.append(_hazcam_handoff(dl, prev, prev_uv, lefts["hazcam"], handoff_method, step))
+            if handoff_at == "first":
+                break
+    handoffs = [s for s in steps if s.camera == "hazcam" and s.kind == "handoff"]
+    for s in handoffs:
+        s.extra["final"] = s is handoffs[-1]
     return steps
 
 
