@@ -1,0 +1,32 @@
+"""Benchmark (not a timed test): the whole tracking chain for one target of a bundled sample sol — designation
+stereo, the feature-guided tracks through the stops, the pancam->navcam handoff and the navcam->hazcam handoff
+(consensus) — and over the half-size traverse of tests/data/chain (16 stops, 5 hazcam handoffs).
+
+    .venv/bin/python -m pytest tests/pipeline/test_bench_chain.py --benchmark-enable
+"""
+
+from pathlib import Path
+
+import pytest
+
+from scipctl.io.downlink import read_downlink
+from scipctl.pipeline.chain import run_chain
+
+ROOT = Path(__file__).resolve().parents[2]
+SOLS = {
+    "paper-s1-straight-t2": (ROOT / "sample_sols/mcap/paper-s1-straight.mcap", "t2"),
+    "traverse-half-t1": (ROOT / "tests/data/chain/traverse-s1-straight-half.mcap", "t1"),
+}
+
+
+@pytest.mark.parametrize("case", list(SOLS))
+def test_bench_chain(benchmark, case):
+    if not benchmark.enabled:
+        pytest.skip("measured with --benchmark-enable only")
+    path, tid = SOLS[case]
+    dl = read_downlink(path)
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target(tid).mark_in(start.product_id)
+    steps = benchmark.pedantic(run_chain, args=(dl, start, [mk.u, mk.v]), kwargs={"target_id": tid},
+                               rounds=2, iterations=1)
+    assert steps[-1].camera == "hazcam"
