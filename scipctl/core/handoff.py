@@ -72,6 +72,7 @@ from .expected import (
 )
 from ..jsonutil import finite_or_none
 from .transforms import RigidTransform
+from .registration import squared_distances
 
 PAPER_METHODS = (
     "pure-kinematic",
@@ -122,6 +123,7 @@ class StereoView:
     max_range_m: float = 30.0
     dense_downsample: int = 1
     _dense: object = field(default=None, repr=False)
+    _cloud: object = field(default=None, repr=False)
     dense_seconds: float = 0.0
 
     @property
@@ -156,8 +158,11 @@ class StereoView:
         return self._dense
 
     def cloud(self) -> tuple[np.ndarray, np.ndarray]:
-        """Valid dense-stereo points ``(N, 3)`` (rover frame at acquisition) and their left intensities ``(N,)``."""
-        return self.dense.point_cloud()
+        """Valid dense-stereo points ``(N, 3)`` (rover frame at acquisition) and their left intensities ``(N,)``
+        (computed once; callers must not modify them)."""
+        if self._cloud is None:
+            self._cloud = self.dense.point_cloud()
+        return self._cloud
 
     def xyz_at(self, uv) -> np.ndarray:
         """Dense-stereo points at original left pixels ``(N, 2)`` -> ``(N, 3)``, NaN where invalid."""
@@ -231,9 +236,10 @@ class HandoffCase:
             haz_pts = self.haz_cloud()
             C = self.haz.left_model.C
             r = self.params.registration_max_range_m
-            haz_pts = haz_pts[np.linalg.norm(haz_pts - C, axis=1) < r]
-            # the navcam cloud where it can overlap the hazcam's (seeded into the hazcam frame)
-            nav_pts = nav_pts[np.linalg.norm(self.T_haz_nav.apply(nav_pts) - C, axis=1) < r + 1.0]
+            haz_pts = haz_pts[squared_distances(haz_pts, C) < r**2]
+            # the navcam cloud where it can overlap the hazcam's, i.e. within r + 1 m of the hazcam seeded into the
+            # navcam frame (distances are the same in both frames: no need to move the whole cloud)
+            nav_pts = nav_pts[squared_distances(nav_pts, self.T_haz_nav.inverse().apply(C)) < (r + 1.0) ** 2]
             try:
                 self._cache["whole_reg"] = register_clouds(
                     nav_pts, haz_pts, self.T_haz_nav,
@@ -429,7 +435,7 @@ class HandoffCase:
             if not np.all(np.isfinite(centre)):
                 raise _NoAnswer("target does not project into the hazcam")
             pts, vals = self.nav_cloud_in_haz()
-            near = np.linalg.norm(pts - X, axis=1) < p.nav_cloud_radius_m
+            near = squared_distances(pts, X) < p.nav_cloud_radius_m**2
             c = np.round(centre).astype(int)
             roi = (int(c[0] - k), int(c[1] - k), 2 * k + 1, 2 * k + 1)
             sp = splat_points(pts[near], vals[near], self.haz.left_model, self.haz.width, self.haz.height, roi=roi)

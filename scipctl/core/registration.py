@@ -30,6 +30,26 @@ def _to_o3d(points: np.ndarray):
     return pc
 
 
+def squared_distances(p: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Squared distances ``(N,)`` of points ``(N, 3)`` from ``c`` ``(3,)``."""
+    d = p - c
+    return np.einsum("ij,ij->i", d, d)
+
+
+def _box(p: np.ndarray, margin: float) -> tuple:
+    """Axis-aligned bounding box of points ``(N, 3)`` widened by ``margin`` on every side: ``(lo, hi)``."""
+    return p.min(axis=0) - margin, p.max(axis=0) + margin
+
+
+def _in_box(p: np.ndarray, box: tuple) -> np.ndarray:
+    """``(N,)`` bool: points ``(N, 3)`` inside ``box`` ``(lo, hi)`` (one column at a time: no (N, 3) temporaries)."""
+    lo, hi = box
+    ok = (p[:, 0] >= lo[0]) & (p[:, 0] <= hi[0])
+    for k in (1, 2):
+        ok &= (p[:, k] >= lo[k]) & (p[:, k] <= hi[k])
+    return ok
+
+
 def register_clouds(
     source_m: np.ndarray,
     target_m: np.ndarray,
@@ -51,7 +71,12 @@ def register_clouds(
     simulated sols in docs/handoff.md). ``method`` is ``point-to-plane`` or
     ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
     frame) only points near the centre are used (both clouds, the source after
-    applying ``T_init``). The result replaces the seed only if, at the finest
+    applying ``T_init``). Points that cannot pair up are left out: each cloud
+    outside the other's box widened by twice the coarsest correspondence
+    distance, and at each scale the source points that, moved by the alignment
+    so far, lie outside the target's box widened by twice that scale's
+    distance (``fitness`` counts only the source points kept at the finest
+    scale). The result replaces the seed only if, at the finest
     scale, it raises the fitness by ``min_fitness_gain`` or lowers the inlier
     RMS by the fraction ``min_rmse_gain`` (``kept_seed`` says which).
     """
@@ -61,22 +86,20 @@ def register_clouds(
     tgt = np.asarray(target_m, dtype=float)
     if src.ndim != 2 or src.shape[1] != 3 or tgt.ndim != 2 or tgt.shape[1] != 3:
         raise ValueError("source_m and target_m must be (N, 3)")
-    src = src[np.all(np.isfinite(src), axis=1)]
-    tgt = tgt[np.all(np.isfinite(tgt), axis=1)]
+    # finite rows (a row's sum is finite iff its three components are): one pass over ~10^6 points
+    src = src[np.isfinite(src.sum(axis=1))]
+    tgt = tgt[np.isfinite(tgt.sum(axis=1))]
     src_in_tgt = T_init.apply(src)
     if crop_center_m is not None and crop_radius_m is not None:
         c = np.asarray(crop_center_m, float)
-        keep_s = np.linalg.norm(src_in_tgt - c, axis=1) < crop_radius_m
-        keep_t = np.linalg.norm(tgt - c, axis=1) < crop_radius_m
-        src_in_tgt, tgt = src_in_tgt[keep_s], tgt[keep_t]
+        r2 = float(crop_radius_m) ** 2
+        src_in_tgt, tgt = src_in_tgt[squared_distances(src_in_tgt, c) < r2], tgt[squared_distances(tgt, c) < r2]
     # where the clouds can overlap: each within the other's bounding box, widened by twice the coarsest
     # correspondence distance (points farther out can never pair up; they only cost time)
     margin = 2.0 * max(scales_m) * max_corr_voxels
     if len(src_in_tgt) and len(tgt):
-        lo_t, hi_t = tgt.min(axis=0) - margin, tgt.max(axis=0) + margin
-        lo_s, hi_s = src_in_tgt.min(axis=0) - margin, src_in_tgt.max(axis=0) + margin
-        src_in_tgt = src_in_tgt[np.all((src_in_tgt >= lo_t) & (src_in_tgt <= hi_t), axis=1)]
-        tgt = tgt[np.all((tgt >= lo_s) & (tgt <= hi_s), axis=1)]
+        box_t, box_s = _box(tgt, margin), _box(src_in_tgt, margin)
+        src_in_tgt, tgt = src_in_tgt[_in_box(src_in_tgt, box_t)], tgt[_in_box(tgt, box_s)]
     if len(src_in_tgt) < 50 or len(tgt) < 50:
         raise ValueError(f"too few points to register ({len(src_in_tgt)} source, {len(tgt)} target)")
     # voxel grids finest first, each coarser one from the finer (cheaper than from the full clouds)
@@ -90,10 +113,17 @@ def register_clouds(
     n_s = n_t = 0
     for voxel in scales_m:
         s, t = grids[voxel]
+        radius = voxel * max_corr_voxels
+        # source points that, moved by the alignment so far, lie beyond the target's box widened by twice this
+        # scale's correspondence distance cannot pair up at this scale: leave them out (far navcam clouds reach
+        # well beyond the hazcam's; the finest scale has most points)
+        s_pts = np.asarray(s.points)
+        keep = np.flatnonzero(_in_box(s_pts @ T[:3, :3].T + T[:3, 3], _box(np.asarray(t.points), 2.0 * radius)))
+        if len(keep) < len(s_pts):
+            s = s.select_by_index(keep)
         n_s, n_t = len(s.points), len(t.points)
         if n_s < 20 or n_t < 20:
             continue
-        radius = voxel * max_corr_voxels
         crit = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=max_iterations)
         if method == "generalized":
             for pc in (s, t):
