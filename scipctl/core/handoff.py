@@ -195,6 +195,7 @@ class HandoffCase:
     T_haz_nav: RigidTransform
     params: HandoffParams = field(default_factory=HandoffParams)
     _cache: dict = field(default_factory=dict, repr=False)
+    registration_seconds: Optional[float] = field(default=None, repr=False)  # wall time of whole_registration
 
     # ----------------------------------------------------------- shared
     def point_stereo(self, nav_uv) -> object:
@@ -228,26 +229,50 @@ class HandoffCase:
         return self.nav.left_model.transformed(self.T_haz_nav)
 
     def whole_registration(self):
-        """ICP of the whole navcam cloud onto the hazcam cloud, seeded with ``T_haz_nav`` (cached)."""
+        """ICP of the whole navcam cloud onto the hazcam cloud, seeded with ``T_haz_nav`` (cached): a
+        :class:`~scipctl.core.registration.RegistrationResult`, or the ``ValueError`` saying why there is none.
+        Waits for the computation :meth:`start_registration` started, if any."""
         if "whole_reg" not in self._cache:
-            from .registration import register_clouds
-
-            nav_pts, _ = self.nav.cloud()
-            haz_pts = self.haz_cloud()
-            C = self.haz.left_model.C
-            r = self.params.registration_max_range_m
-            haz_pts = haz_pts[squared_distances(haz_pts, C) < r**2]
-            # the navcam cloud where it can overlap the hazcam's, i.e. within r + 1 m of the hazcam seeded into the
-            # navcam frame (distances are the same in both frames: no need to move the whole cloud)
-            nav_pts = nav_pts[squared_distances(nav_pts, self.T_haz_nav.inverse().apply(C)) < (r + 1.0) ** 2]
-            try:
-                self._cache["whole_reg"] = register_clouds(
-                    nav_pts, haz_pts, self.T_haz_nav,
-                    # far seeds carry the pose-estimate error (decimetres): start coarser
-                    scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02))
-            except ValueError as e:
-                self._cache["whole_reg"] = e
+            fut = self._cache.pop("whole_reg_future", None)
+            self._cache["whole_reg"] = fut.result() if fut is not None else self._compute_registration()
         return self._cache["whole_reg"]
+
+    def start_registration(self, executor) -> None:
+        """Start :meth:`whole_registration` on ``executor`` (a ``concurrent.futures`` executor) and return.
+
+        ICP runs in Open3D without Python's global lock, so the caller's thread
+        can run the other methods meanwhile (on two cores this hides most of
+        the registration time). The dense stereo of both views and their clouds
+        are computed first, in the caller's thread, so that nothing shared is
+        computed by two threads.
+        """
+        if "whole_reg" in self._cache or "whole_reg_future" in self._cache:
+            return
+        self.nav.cloud()
+        self.haz_cloud()
+        self._cache["whole_reg_future"] = executor.submit(self._compute_registration)
+
+    def _compute_registration(self):
+        from .registration import register_clouds
+
+        t0 = time.perf_counter()
+        nav_pts, _ = self.nav.cloud()
+        haz_pts = self.haz_cloud()
+        C = self.haz.left_model.C
+        r = self.params.registration_max_range_m
+        haz_pts = haz_pts[squared_distances(haz_pts, C) < r**2]
+        # the navcam cloud where it can overlap the hazcam's, i.e. within r + 1 m of the hazcam seeded into the
+        # navcam frame (distances are the same in both frames: no need to move the whole cloud)
+        nav_pts = nav_pts[squared_distances(nav_pts, self.T_haz_nav.inverse().apply(C)) < (r + 1.0) ** 2]
+        try:
+            reg = register_clouds(
+                nav_pts, haz_pts, self.T_haz_nav,
+                # far seeds carry the pose-estimate error (decimetres): start coarser
+                scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02))
+        except ValueError as e:
+            return e
+        self.registration_seconds = time.perf_counter() - t0
+        return reg
 
     # ----------------------------------------------------------- helpers
     def _project_haz(self, X_haz) -> np.ndarray:
@@ -603,7 +628,9 @@ class HandoffCase:
             raise _NoAnswer(f"registration failed: {reg}")
         X = reg.T_target_source.apply(ps.xyz)
         uv = self._project_haz(X)
-        return MethodResult("", "", bool(np.all(np.isfinite(uv))), uv, diagnostics=_reg_diag(reg))
+        diag = _reg_diag(reg)
+        diag["registration_seconds"] = _f(self.registration_seconds)  # shared by the targets; maybe run meanwhile
+        return MethodResult("", "", bool(np.all(np.isfinite(uv))), uv, diagnostics=diag)
 
     def _coarse_fine_geometric(self, nav_uv):
         p = self.params

@@ -119,30 +119,55 @@ def run_targets(
     downlink_name: str = "",
     only: Optional[set] = None,
 ) -> list:
-    """Run ``methods`` x ``navcams`` (restricted to the (method, navcam) pairs in ``only``, if given) on ``targets``."""
+    """Run ``methods`` x ``navcams`` (restricted to the (method, navcam) pairs in ``only``, if given) on ``targets``.
+
+    Records come in the order target, navcam, method. When mesh registration is
+    asked for, the registrations are started first in a worker thread (ICP
+    runs outside Python's lock) and the mesh-registration records are computed
+    after every other method, so that the other methods run meanwhile.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    def wanted(m, nc):
+        return only is None or (m, nc) in only
+
+    mesh = "mesh-registration"
+    cases = {nc: setup.cases[nc] for nc in navcams if nc in setup.cases}
+    reg_cases = [c for nc, c in cases.items()
+                 if mesh in methods and wanted(mesh, nc) and any(src.get(nc) is not None for _, src, _ in targets)]
+    results = {}
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        for case in reg_cases:
+            case.start_registration(pool)
+        for phase in ("others", mesh):
+            for target_id, src, truth in targets:
+                near_pk = None
+                near_case = setup.cases.get("near")
+                if (phase == "others" and "far" in navcams and "refined-kinematic" in methods and near_case is not None
+                        and src.get("near") is not None):
+                    near_pk = near_case.run("pure-kinematic", src["near"])  # the far refined search centre (the paper's)
+                for nc, case in cases.items():
+                    nav_uv = src.get(nc)
+                    for m in methods:
+                        if not wanted(m, nc) or (m == mesh) != (phase == mesh) or nav_uv is None:
+                            continue
+                        if progress:
+                            progress(f"{downlink_name} {target_id} {m} {nc}")
+                        results[(target_id, nc, m)] = case.run(m, nav_uv, near_hint=near_pk)
     records = []
     for target_id, src, truth in targets:
-        near_pk = None
-        near_case = setup.cases.get("near")
-        if "far" in navcams and "refined-kinematic" in methods and near_case is not None and src.get("near") is not None:
-            near_pk = near_case.run("pure-kinematic", src["near"])  # the far refined search centre (as in the paper)
-        for nc in navcams:
-            case = setup.cases.get(nc)
-            if case is None:
-                continue
+        for nc, case in cases.items():
             nav_uv = src.get(nc)
             product = setup.near if nc == "near" else setup.far
             for m in methods:
-                if only is not None and (m, nc) not in only:
+                if not wanted(m, nc):
                     continue
-                if progress:
-                    progress(f"{downlink_name} {target_id} {m} {nc}")
                 if nav_uv is None:
                     records.append(HandoffRecord(downlink_name, target_id, m, nc, product.product_id, None, None,
                                                  truth, None, None if truth is None else False, False,
                                                  "target not marked in this navcam image", {}, 0.0))
                     continue
-                res = case.run(m, nav_uv, near_hint=near_pk)
+                res = results[(target_id, nc, m)]
                 pred = None if res.uv is None or not np.all(np.isfinite(res.uv)) else [float(x) for x in res.uv]
                 err = None
                 succ = None
@@ -153,8 +178,9 @@ def run_targets(
                     else:
                         succ = False
                 records.append(HandoffRecord(downlink_name, target_id, m, nc, product.product_id,
-                                             [float(x) for x in nav_uv], pred, truth, err, succ, bool(res.ok and pred is not None),
-                                             res.reason, res.diagnostics, res.seconds))
+                                             [float(x) for x in nav_uv], pred, truth, err, succ,
+                                             bool(res.ok and pred is not None), res.reason, res.diagnostics,
+                                             res.seconds))
     return records
 
 

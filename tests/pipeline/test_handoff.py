@@ -150,3 +150,22 @@ def test_table1_rows_split_refined_successes(noerr):
         n_f = r["failures"]["n"] if r["failures"] else 0
         assert n_s + n_f == r["answered"]
         assert r["success_rate"] == pytest.approx(n_s / r["cases"])
+
+
+def test_registration_in_a_worker_thread_changes_nothing(noerr):
+    """run_targets registers the clouds in a worker thread while the other methods run; the records come in
+    target, navcam, method order and the mesh-registration answers equal those of a plain serial registration."""
+    dl, setup, recs = noerr
+    order = [(r.target, r.navcam, r.method) for r in recs]
+    assert order == [(t.id, nc, m) for t in dl.targets for nc in ("near", "far") for m in ALL_METHODS]
+    serial = build_setup(dl)
+    for case in serial.cases.values():
+        assert "whole_reg_future" not in case._cache
+        case.whole_registration()  # computed here, in this thread, before run_targets
+    mesh = run_targets(dl, serial, marked_targets(dl, serial), methods=("mesh-registration",))
+    threaded = [r for r in recs if r.method == "mesh-registration"]
+    assert [(r.target, r.navcam) for r in mesh] == [(r.target, r.navcam) for r in threaded]
+    for a, b in zip(mesh, threaded):
+        assert a.predicted_uv == b.predicted_uv and a.diagnostics["icp_fitness"] == b.diagnostics["icp_fitness"]
+    for case in setup.cases.values():
+        assert case.registration_seconds > 0 and "whole_reg_future" not in case._cache
