@@ -445,16 +445,20 @@ def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.
     tn = tpl0.astype(np.float64).ravel()
     tn = tn - tn.mean()
     tnorm = np.sqrt(np.dot(tn, tn))
-    Hr, Wr = R.shape
+    n = tn.size
+    # per evaluation (hundreds per call): U = base_u + du - t_u (gx x + gy y), likewise V; the template is
+    # zero-mean, so sum((p - mean p) tn) = sum(p tn) and sum((p - mean p)^2) = sum(p^2) - (sum p)^2 / n
+    base_u, base_v = uv_r[0] + x, uv_r[1] + y
+    tu_x, tu_y, tv_x, tv_y = t[0] * x, t[0] * y, t[1] * x, t[1] * y
 
     def ncc(p):
         du, dv, gx, gy = p
-        s = gx * x + gy * y
-        U = (uv_r[0] + du + x - t[0] * s).astype(np.float32)
-        V = (uv_r[1] + dv + y - t[1] * s).astype(np.float32)
-        patch = cv2.remap(R, U, V, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE).astype(np.float64).ravel()
-        patch = patch - patch.mean()
-        den = np.sqrt(np.dot(patch, patch)) * tnorm
+        U = (base_u + du - (gx * tu_x + gy * tu_y)).astype(np.float32)
+        V = (base_v + dv - (gx * tv_x + gy * tv_y)).astype(np.float32)
+        patch = cv2.remap(R, U, V, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE).ravel().astype(np.float64)
+        sp = patch.sum()
+        var = float(np.dot(patch, patch)) - sp * sp / n
+        den = np.sqrt(var) * tnorm if var > 0 else 0.0
         return float(np.dot(patch, tn) / den) if den > 0 else -1.0
 
     def cost(p):
