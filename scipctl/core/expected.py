@@ -204,6 +204,41 @@ def project_map(xyz_map: np.ndarray, model: CameraModel) -> np.ndarray:
     return proj.reshape(xyz_map.shape[:-1] + (2,))
 
 
+class ProjectionMap:
+    """The projections of a point map ``xyz_map`` ``(h, w, 3)`` (NaN invalid) through ``model``, computed on
+    demand by region: ``region(rows, cols)`` -> ``(h', w', 2)`` (NaN invalid), ``full()`` -> ``(h, w, 2)``
+    (computed once, then every region is cut from it).
+
+    A projection depends only on its own point, so a region equals the same
+    slice of :func:`project_map` of the whole map (a test checks it bit for
+    bit); projecting only the regions a search visits saves projecting a
+    million-point map when a few thousand points decide.
+    """
+
+    def __init__(self, xyz_map: np.ndarray, model: CameraModel, full: Optional[np.ndarray] = None):
+        if xyz_map.ndim != 3 or xyz_map.shape[-1] != 3:
+            raise ValueError(f"xyz_map: expected (h, w, 3), got {xyz_map.shape}")
+        if full is not None and full.shape != xyz_map.shape[:-1] + (2,):
+            raise ValueError(f"full: expected {xyz_map.shape[:-1] + (2,)}, got {full.shape}")
+        self.xyz_map = xyz_map
+        self.model = model
+        self._full = full
+
+    @property
+    def shape(self) -> tuple:
+        return self.xyz_map.shape[:-1] + (2,)
+
+    def full(self) -> np.ndarray:
+        if self._full is None:
+            self._full = project_map(self.xyz_map, self.model)
+        return self._full
+
+    def region(self, rows: slice, cols: slice) -> np.ndarray:
+        if self._full is not None:
+            return self._full[rows, cols]
+        return project_map(self.xyz_map[rows, cols], self.model)
+
+
 @dataclass
 class NearestProjection:
     uv: np.ndarray  # (2,) sub-pixel position in the point map's image
@@ -212,12 +247,19 @@ class NearestProjection:
     xyz: np.ndarray  # (3,) the point of the best whole pixel
 
 
+def _squared_distance_map(P: np.ndarray, goal: np.ndarray) -> np.ndarray:
+    """``(h, w)`` squared distances of projections ``P`` ``(h, w, 2)`` from ``goal`` ``(2,)``; inf where invalid."""
+    d = np.einsum("...i,...i->...", P - goal, P - goal)
+    d[~np.isfinite(d)] = np.inf
+    return d
+
+
 def nearest_projection(
     xyz_map: np.ndarray,
     origin_uv: tuple,
     model: CameraModel,
     goal_uv,
-    proj: Optional[np.ndarray] = None,
+    proj=None,
 ) -> Optional[NearestProjection]:
     """Among the pixels of a point map ``xyz_map`` (h, w, 3) (NaN invalid), find where the projection through
     ``model`` lands nearest ``goal_uv``; ``origin_uv`` is the full-image pixel of ``xyz_map[0, 0]``.
@@ -225,60 +267,75 @@ def nearest_projection(
     Sub-pixel: the projection is locally affine in the pixel position, so the
     best pixel is refined by solving ``J dp = goal - uv(p0)`` with ``J`` from
     valid neighbours (kept only if it moves less than one pixel).
-    ``proj`` (h, w, 2): the projections of ``xyz_map`` through ``model`` if
-    already computed (see :func:`project_map`); NaN where invalid.
+    ``proj``: the projections of ``xyz_map`` through ``model``, either all of
+    them ``(h, w, 2)`` (see :func:`project_map`; NaN where invalid) or a
+    :class:`ProjectionMap` of the same map and model that computes (and
+    remembers) what the search needs; by default only the regions the search
+    visits are projected.
     """
     goal = np.asarray(goal_uv, dtype=float).reshape(2)
     h, w, _ = xyz_map.shape
-    flat = xyz_map.reshape(-1, 3)
-    ok = np.all(np.isfinite(flat), axis=-1)
-    if not np.any(ok):
-        return None
     if proj is None:
-        proj = project_map(xyz_map, model)
-    P = proj.reshape(h, w, 2)
+        proj = ProjectionMap(xyz_map, model)
+    elif not isinstance(proj, ProjectionMap):
+        proj = ProjectionMap(xyz_map, model, full=np.asarray(proj).reshape(h, w, 2))
+    if proj.shape != (h, w, 2):
+        raise ValueError(f"proj: expected the projections of a {(h, w)} map, got {proj.shape}")
     # coarse-to-fine: the best node of an 8-pixel lattice, then every pixel within 3 lattice steps of it
     # (exact unless the nearest point sits in a sliver narrower than the lattice, e.g. at a silhouette,
     # so the whole map is searched as well whenever the lattice answer is not already within 1 px)
     step = 8
-    sub = P[::step, ::step]
-    ds = np.einsum("...i,...i->...", sub - goal, sub - goal)
-    ds[~np.isfinite(ds)] = np.inf
+    ds = _squared_distance_map(proj.region(slice(None, None, step), slice(None, None, step)), goal)
     ks = int(np.argmin(ds))
     if not np.isfinite(ds.flat[ks]):
-        return None
-    js, is_ = divmod(ks, sub.shape[1])
-    j0, j1 = max(0, js * step - 3 * step), min(h, js * step + 3 * step + 1)
-    i0, i1 = max(0, is_ * step - 3 * step), min(w, is_ * step + 3 * step + 1)
-    win = P[j0:j1, i0:i1]
-    dw = np.einsum("...i,...i->...", win - goal, win - goal)
-    dw[~np.isfinite(dw)] = np.inf
-    kw = int(np.argmin(dw))
-    jw, iw = divmod(kw, win.shape[1])
-    j, i = j0 + jw, i0 + iw
-    nb = [P[jj, ii] for jj, ii in ((j, i + 1), (j, i - 1), (j + 1, i), (j - 1, i)) if 0 <= jj < h and 0 <= ii < w]
-    spacing = max([float(np.linalg.norm(q - P[j, i])) for q in nb if np.all(np.isfinite(q))] or [0.0])
-    # the lattice answer is trusted when it is within one local pixel spacing of the goal; otherwise
-    # (a silhouette, a hole, the goal outside the map) search the whole map
-    if not np.sqrt(dw[jw, iw]) <= max(spacing, 1e-9):
-        d2 = np.einsum("...i,...i->...", P - goal, P - goal)
-        d2[~np.isfinite(d2)] = np.inf
+        # no valid lattice node: the whole map decides (an empty map has no answer)
+        d2 = _squared_distance_map(proj.full(), goal)
         k = int(np.argmin(d2))
         if not np.isfinite(d2.flat[k]):
             return None
         j, i = divmod(k, w)
-    d2_best = float(np.sum((P[j, i] - goal) ** 2))
+    else:
+        js, is_ = divmod(ks, ds.shape[1])
+        j0, j1 = max(0, js * step - 3 * step), min(h, js * step + 3 * step + 1)
+        i0, i1 = max(0, is_ * step - 3 * step), min(w, is_ * step + 3 * step + 1)
+        dw = _squared_distance_map(proj.region(slice(j0, j1), slice(i0, i1)), goal)
+        kw = int(np.argmin(dw))
+        jw, iw = divmod(kw, dw.shape[1])
+        j, i = j0 + jw, i0 + iw
+        nb = _neighbourhood(proj, j, i, h, w)
+        c = nb[1, 1]
+        spacing = max([float(np.linalg.norm(q - c)) for q in (nb[1, 2], nb[1, 0], nb[2, 1], nb[0, 1])
+                       if np.all(np.isfinite(q))] or [0.0])
+        # the lattice answer is trusted when it is within one local pixel spacing of the goal; otherwise
+        # (a silhouette, a hole, the goal outside the map) search the whole map
+        if not np.sqrt(dw[jw, iw]) <= max(spacing, 1e-9):
+            d2 = _squared_distance_map(proj.full(), goal)
+            k = int(np.argmin(d2))
+            if not np.isfinite(d2.flat[k]):
+                return None
+            j, i = divmod(k, w)
+    nb = _neighbourhood(proj, j, i, h, w)
+    P0 = nb[1, 1]
+    d2_best = float(np.sum((P0 - goal) ** 2))
     uv_int = np.array([origin_uv[0] + i, origin_uv[1] + j], float)
     uv = uv_int.copy()
     if 0 < i < w - 1 and 0 < j < h - 1:
-        du = (P[j, i + 1] - P[j, i - 1]) / 2
-        dv = (P[j + 1, i] - P[j - 1, i]) / 2
+        du = (nb[1, 2] - nb[1, 0]) / 2
+        dv = (nb[2, 1] - nb[0, 1]) / 2
         J = np.stack([du, dv], axis=1)
         if np.all(np.isfinite(J)) and abs(np.linalg.det(J)) > 1e-9:
-            step = np.linalg.solve(J, goal - P[j, i])
+            step = np.linalg.solve(J, goal - P0)
             if np.all(np.abs(step) <= 1.0):
                 uv = uv_int + step
     return NearestProjection(uv, uv_int, float(np.sqrt(d2_best)), xyz_map[j, i].copy())
+
+
+def _neighbourhood(proj: ProjectionMap, j: int, i: int, h: int, w: int) -> np.ndarray:
+    """Projections ``(3, 3, 2)`` of pixel ``(j, i)`` and its eight neighbours (NaN beyond the map)."""
+    out = np.full((3, 3, 2), np.nan)
+    j0, j1, i0, i1 = max(0, j - 1), min(h, j + 2), max(0, i - 1), min(w, i + 2)
+    out[j0 - j + 1 : j1 - j + 1, i0 - i + 1 : i1 - i + 1] = proj.region(slice(j0, j1), slice(i0, i1))
+    return out
 
 
 @dataclass

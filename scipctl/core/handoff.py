@@ -67,6 +67,7 @@ from .expected import (
     match_projection,
     nearest_projection,
     plane_points,
+    ProjectionMap,
     project_map,
     splat_points,
 )
@@ -578,8 +579,8 @@ class HandoffCase:
         d = self.haz.dense
         xyz = d.xyz  # rectified-left grid of the hazcam, hazcam rover frame
         nav_in_haz = self.nav_model_in_haz()
-        if "haz_in_nav" not in self._cache:  # every hazcam point through the navcam, once per case
-            self._cache["haz_in_nav"] = project_map(xyz, nav_in_haz)
+        if "haz_in_nav" not in self._cache:  # hazcam points through the navcam, projected as needed, once per case
+            self._cache["haz_in_nav"] = ProjectionMap(xyz, nav_in_haz)
         res = nearest_projection(xyz, (0, 0), nav_in_haz, nav_uv, proj=self._cache["haz_in_nav"])
         if res is None:
             raise _NoAnswer("no hazcam stereo projects into the navcam")

@@ -229,3 +229,48 @@ def test_splat_roi_cone_prefilter_changes_nothing(name):
         assert np.isfinite(a.image).sum() > 100
         assert np.array_equal(a.image, b.image, equal_nan=True) and np.array_equal(a.depth_m, b.depth_m, equal_nan=True)
         assert a.filled_fraction == b.filled_fraction and a.see_through_removed == b.see_through_removed
+
+
+@pytest.mark.parametrize("name", ["CAHV", "CAHVOR", "CAHVORE1", "CAHVORE3"])
+def test_projection_map_regions_equal_the_whole_map(name):
+    """A region projected on its own equals the same slice of the whole map's projection, bit for bit (every
+    model kind, holes included), and the nearest-projection answer does not depend on whether the whole map
+    was projected first."""
+    from tests.models import HEIGHT as MH, WIDTH as MW, all_models
+
+    from scipctl.core.expected import ProjectionMap, project_map
+
+    m = all_models()[name]
+    rng = np.random.default_rng(5)
+    # a 300 x 400 point map: a tilted, bumpy surface 0.8-3 m away seen through the model, 10 % holes
+    u, v = np.meshgrid(np.linspace(50, MW - 50, 400), np.linspace(50, MH - 50, 300))
+    o, d = m.unproject(np.stack([u, v], -1).reshape(-1, 2))
+    r = 0.8 + 2.2 * (v.ravel() / MH) + 0.05 * np.sin(u.ravel() / 17.0)
+    xyz = (o + r[:, None] * d).reshape(300, 400, 3)
+    xyz[rng.uniform(size=(300, 400)) < 0.1] = np.nan
+    full = project_map(xyz, m)
+    lazy = ProjectionMap(xyz, m)
+    for rows, cols in [(slice(None, None, 8), slice(None, None, 8)), (slice(17, 66), slice(300, 400)),
+                       (slice(0, 3), slice(398, 400)), (slice(150, 151), slice(7, 8))]:
+        assert np.array_equal(lazy.region(rows, cols), full[rows, cols], equal_nan=True)
+    for goal in rng.uniform([60, 60], [MW - 60, MH - 60], size=(8, 2)):
+        a = nearest_projection(xyz, (0, 0), m, goal)
+        b = nearest_projection(xyz, (0, 0), m, goal, proj=full)
+        c = nearest_projection(xyz, (0, 0), m, goal, proj=lazy)
+        assert a is not None and a.distance_px < 10.0
+        for x in (b, c):
+            assert np.array_equal(a.uv, x.uv) and a.distance_px == x.distance_px
+            assert np.array_equal(a.xyz, x.xyz)
+
+
+def test_nearest_projection_finds_points_off_the_search_lattice():
+    """A sparse map whose valid pixels all miss the 8-pixel search lattice still gives the nearest point."""
+    haz = cam(np.radians(45), [0.5, 0.0, -0.5])
+    nav = cam(np.radians(60), [0.3, 0.1, -1.5], f=250.0)
+    u, v = np.meshgrid(np.arange(W, dtype=float), np.arange(H, dtype=float))
+    xyz = ray_ground(haz, np.stack([u, v], -1))
+    sparse = np.full_like(xyz, np.nan)
+    sparse[3::8, 5::8] = xyz[3::8, 5::8]  # never on rows/columns that are multiples of 8
+    res = nearest_projection(sparse, (0, 0), nav, nav.project(xyz[99, 101][None])[0])
+    assert res is not None and np.array_equal(res.uv_integer, [101.0, 99.0]) and res.distance_px < 1e-9
+    assert nearest_projection(np.full_like(xyz, np.nan), (0, 0), nav, [100.0, 100.0]) is None
