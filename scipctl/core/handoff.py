@@ -73,7 +73,7 @@ from .expected import (
 )
 from ..jsonutil import finite_or_none
 from .transforms import RigidTransform
-from .registration import squared_distances
+from .registration import select_rows, squared_distances
 
 PAPER_METHODS = (
     "pure-kinematic",
@@ -261,10 +261,10 @@ class HandoffCase:
         haz_pts = self.haz_cloud()
         C = self.haz.left_model.C
         r = self.params.registration_max_range_m
-        haz_pts = haz_pts[squared_distances(haz_pts, C) < r**2]
+        haz_pts = select_rows(haz_pts, squared_distances(haz_pts, C) < r**2)
         # the navcam cloud where it can overlap the hazcam's, i.e. within r + 1 m of the hazcam seeded into the
         # navcam frame (distances are the same in both frames: no need to move the whole cloud)
-        nav_pts = nav_pts[squared_distances(nav_pts, self.T_haz_nav.inverse().apply(C)) < (r + 1.0) ** 2]
+        nav_pts = select_rows(nav_pts, squared_distances(nav_pts, self.T_haz_nav.inverse().apply(C)) < (r + 1.0) ** 2)
         try:
             reg = register_clouds(
                 nav_pts, haz_pts, self.T_haz_nav,

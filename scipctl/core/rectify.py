@@ -111,9 +111,10 @@ def _sampling_map(src: CameraModel, dst: CameraModel, width: int, height: int, r
     Wv = _cubic_weights(height, step, nv)
     mu = Wv @ src_uv[..., 0] @ Wu.T
     mv = Wv @ src_uv[..., 1] @ Wu.T
-    bad = (np.abs(Wv) @ invalid.astype(float) @ np.abs(Wu).T) > 1e-9
-    mu[bad] = -1e6
-    mv[bad] = -1e6
+    if invalid.any():  # output pixels that any invalid node contributes to
+        bad = (np.abs(Wv) @ invalid.astype(float) @ np.abs(Wu).T) > 1e-9
+        mu[bad] = -1e6
+        mv[bad] = -1e6
     return mu.astype(np.float32), mv.astype(np.float32)
 
 

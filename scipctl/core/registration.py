@@ -44,6 +44,11 @@ def _finite_rows(p: np.ndarray) -> np.ndarray:
     return np.isfinite(p[:, 0] + p[:, 1] + p[:, 2])
 
 
+def select_rows(p: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """``p[keep]`` for a boolean ``keep`` ``(N,)``, or ``p`` itself (no copy) when every row is kept."""
+    return p if keep.all() else p[keep]
+
+
 def _box(p: np.ndarray, margin: float) -> tuple:
     """Axis-aligned bounding box of points ``(N, 3)`` widened by ``margin`` on every side: ``(lo, hi)``."""
     lo = np.array([p[:, k].min() for k in range(3)]) - margin  # by column: see squared_distances
@@ -96,19 +101,21 @@ def register_clouds(
     tgt = np.asarray(target_m, dtype=float)
     if src.ndim != 2 or src.shape[1] != 3 or tgt.ndim != 2 or tgt.shape[1] != 3:
         raise ValueError("source_m and target_m must be (N, 3)")
-    src = src[_finite_rows(src)]
-    tgt = tgt[_finite_rows(tgt)]
+    # (selections copy only when they drop something: these clouds have up to a million points)
+    src = select_rows(src, _finite_rows(src))
+    tgt = select_rows(tgt, _finite_rows(tgt))
     src_in_tgt = T_init.apply(src)
     if crop_center_m is not None and crop_radius_m is not None:
         c = np.asarray(crop_center_m, float)
         r2 = float(crop_radius_m) ** 2
-        src_in_tgt, tgt = src_in_tgt[squared_distances(src_in_tgt, c) < r2], tgt[squared_distances(tgt, c) < r2]
+        src_in_tgt = select_rows(src_in_tgt, squared_distances(src_in_tgt, c) < r2)
+        tgt = select_rows(tgt, squared_distances(tgt, c) < r2)
     # where the clouds can overlap: each within the other's bounding box, widened by twice the coarsest
     # correspondence distance (points farther out can never pair up; they only cost time)
     margin = 2.0 * max(scales_m) * max_corr_voxels
     if len(src_in_tgt) and len(tgt):
         box_t, box_s = _box(tgt, margin), _box(src_in_tgt, margin)
-        src_in_tgt, tgt = src_in_tgt[_in_box(src_in_tgt, box_t)], tgt[_in_box(tgt, box_s)]
+        src_in_tgt, tgt = select_rows(src_in_tgt, _in_box(src_in_tgt, box_t)), select_rows(tgt, _in_box(tgt, box_s))
     if len(src_in_tgt) < 50 or len(tgt) < 50:
         raise ValueError(f"too few points to register ({len(src_in_tgt)} source, {len(tgt)} target)")
     # voxel grids finest first, each coarser one from the finer (cheaper than from the full clouds)

@@ -131,3 +131,27 @@ def test_cached_rectification_is_the_same_and_keyed_on_the_models():
     _, right2 = stereo_pair("CAHVOR", baseline_m=0.25)
     c = rectify_pair_cached(left, right2, WIDTH, HEIGHT, scale=0.5)
     assert c is not a and abs(c.baseline_m - 0.25) < 1e-12
+
+
+def test_sampling_map_marks_pixels_near_rays_the_source_cannot_see():
+    """Where some lattice rays of the destination point behind the source camera, the map is -1e6 for every
+    pixel those nodes' cubic weights reach and exact elsewhere; with none, nothing is marked."""
+    from scipctl.core.rectify import _sampling_map
+    from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix
+
+    left, _ = stereo_pair("CAHV", baseline_m=0.2)
+    mu, mv = _sampling_map(left, left, WIDTH, HEIGHT, 2.0)
+    u, v = np.meshgrid(np.arange(WIDTH, dtype=np.float32), np.arange(HEIGHT, dtype=np.float32))
+    assert np.abs(mu - u).max() < 1e-3 and np.abs(mv - v).max() < 1e-3  # the identity map, nothing marked
+    # a source camera rotated 90 degrees about the destination's v axis (its A along the destination's h):
+    # the destination's rays on the left-hand side of the image point behind it
+    R = axis_angle_to_matrix(left.v_axis, np.radians(90.0))
+    src = left.transformed(RigidTransform(R, left.C - R @ left.C))  # turned about its own centre
+    mu, mv = _sampling_map(src, left, WIDTH, HEIGHT, 2.0)
+    o, d = left.unproject(np.stack([u, v], -1).reshape(-1, 2))
+    ahead = (d @ src.A > 0).reshape(HEIGHT, WIDTH)
+    marked = mu == -1e6
+    assert marked.any() and (~marked).any()
+    assert np.array_equal(marked, mv == -1e6)
+    assert not np.any(marked & ahead & (np.arange(WIDTH)[None, :] > WIDTH / 2 + 40))  # far from the edge: exact
+    assert np.all(marked[~ahead])  # every pixel whose own ray is behind the source is marked
