@@ -123,8 +123,9 @@ def run_targets(
 
     Records come in the order target, navcam, method. When mesh registration is
     asked for, the registrations are started first in a worker thread (ICP
-    runs outside Python's lock) and the mesh-registration records are computed
-    after every other method, so that the other methods run meanwhile.
+    runs outside Python's lock; the far one first, the longest) and the
+    mesh-registration records are computed after every other method, so that
+    the other methods run meanwhile.
     """
     from concurrent.futures import ThreadPoolExecutor
 
@@ -137,7 +138,9 @@ def run_targets(
                  if mesh in methods and wanted(mesh, nc) and any(src.get(nc) is not None for _, src, _ in targets)]
     results = {}
     with ThreadPoolExecutor(max_workers=1) as pool:
-        for case in reg_cases:
+        # the far registration first: it is the longest job (a coarser start, a bigger overlap), so the near
+        # navcams' dense stereo and the other methods run while it does (docs/handoff.md has the A/B timing)
+        for case in sorted(reg_cases, key=lambda c: c.label != "far"):
             case.start_registration(pool)
         for phase in ("others", mesh):
             for target_id, src, truth in targets:
