@@ -96,6 +96,9 @@ class HandoffParams:
     point_stereo_window_px: int = 21
     nav_cloud_radius_m: float = 0.6  # navcam points used for the expected window (around the target)
     registration_max_range_m: float = 5.0  # whole-cloud ICP uses points within this range of the hazcam
+    # ... and at each ICP scale only the hazcam points whose stereo range uncertainty (this disparity uncertainty,
+    # the same a priori figure as point stereo's) is within the scale's correspondence distance
+    registration_disparity_sigma_px: float = 0.25
     dense_downsample: int = 1  # shared dense stereo: 1 full resolution (accurate), 2 half (fast)
     coarse_template_half_px: int = 40
     fine_search_px: float = 4.0
@@ -269,7 +272,9 @@ class HandoffCase:
             reg = register_clouds(
                 nav_pts, haz_pts, self.T_haz_nav,
                 # far seeds carry the pose-estimate error (decimetres): start coarser
-                scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02))
+                scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02),
+                # hazcam stereo's range uncertainty grows as r^2 (0.25 px: 3 cm at 1.9 m, 21 cm at 5 m)
+                target_noise=(C, self.params.registration_disparity_sigma_px / self.haz.dense.focal_baseline_px_m))
         except ValueError as e:
             return e
         self.registration_seconds = time.perf_counter() - t0

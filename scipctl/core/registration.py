@@ -77,6 +77,7 @@ def register_clouds(
     max_corr_voxels: float = 1.5,
     min_fitness_gain: float = 0.01,
     min_rmse_gain: float = 0.05,
+    target_noise: Optional[tuple] = None,
 ) -> RegistrationResult:
     """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_init`` (``T_target_source``).
 
@@ -94,6 +95,15 @@ def register_clouds(
     scale). The result replaces the seed only if, at the finest
     scale, it raises the fitness by ``min_fitness_gain`` or lowers the inlier
     RMS by the fraction ``min_rmse_gain`` (``kept_seed`` says which).
+
+    ``target_noise`` ``(origin_m (3,), k_per_m)``: the target cloud's points
+    are uncertain along their range by ``k r^2``, ``r`` their distance from
+    ``origin_m`` (stereo: ``k = sigma_disparity / (f B)``). At each scale only
+    the target points whose uncertainty is within that scale's correspondence
+    distance ``d`` are used, ``r <= sqrt(d / k)``: a point farther from its
+    surface than the correspondences reach pairs up with the wrong surface or
+    not at all, adding error and time, not information. Coarse scales use the
+    far points (their reach is long), the finest ones the near points.
     """
     import open3d as o3d
 
@@ -127,9 +137,19 @@ def register_clouds(
     T = np.eye(4)
     reg = None
     n_s = n_t = 0
+    if target_noise is not None:
+        noise_origin = np.asarray(target_noise[0], dtype=float).reshape(3)
+        noise_k = float(target_noise[1])
+        if not (np.all(np.isfinite(noise_origin)) and np.isfinite(noise_k) and noise_k > 0):
+            raise ValueError(f"target_noise: expected (finite origin (3,), k > 0), got {target_noise!r}")
     for voxel in scales_m:
         s, t = grids[voxel]
         radius = voxel * max_corr_voxels
+        if target_noise is not None:  # the target points precise enough for this scale's correspondences
+            t_pts = np.asarray(t.points)
+            near = np.flatnonzero(squared_distances(t_pts, noise_origin) <= radius / noise_k)
+            if len(near) < len(t_pts):
+                t = t.select_by_index(near)
         # source points that, moved by the alignment so far, lie beyond the target's box widened by twice this
         # scale's correspondence distance cannot pair up at this scale: leave them out (far navcam clouds reach
         # well beyond the hazcam's; the finest scale has most points)

@@ -544,6 +544,12 @@ class DenseStereo:
         with np.errstate(divide="ignore", invalid="ignore"):
             return self._fb() / np.asarray(disparity_px, dtype=float)
 
+    @property
+    def focal_baseline_px_m(self) -> float:
+        """``f B`` (rectified focal length in px times the baseline along the rows, m): depth ``Z = f B / d``,
+        so a disparity uncertainty ``s`` px gives a depth uncertainty ``Z^2 s / (f B)``."""
+        return self._fb()
+
     def _fb(self) -> float:
         rp = self.rectified
         return float(rp.left_model.hs * np.dot(rp.right_model.C - rp.left_model.C, rp.left_model.h_axis))
