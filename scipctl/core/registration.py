@@ -107,6 +107,11 @@ def register_clouds(
     """
     import open3d as o3d
 
+    if target_noise is not None:
+        noise_origin = np.asarray(target_noise[0], dtype=float).reshape(3)
+        noise_k = float(target_noise[1])
+        if not (np.all(np.isfinite(noise_origin)) and np.isfinite(noise_k) and noise_k > 0):
+            raise ValueError(f"target_noise: expected (finite origin (3,), k > 0), got {target_noise!r}")
     src = np.asarray(source_m, dtype=float)
     tgt = np.asarray(target_m, dtype=float)
     if src.ndim != 2 or src.shape[1] != 3 or tgt.ndim != 2 or tgt.shape[1] != 3:
@@ -137,11 +142,6 @@ def register_clouds(
     T = np.eye(4)
     reg = None
     n_s = n_t = 0
-    if target_noise is not None:
-        noise_origin = np.asarray(target_noise[0], dtype=float).reshape(3)
-        noise_k = float(target_noise[1])
-        if not (np.all(np.isfinite(noise_origin)) and np.isfinite(noise_k) and noise_k > 0):
-            raise ValueError(f"target_noise: expected (finite origin (3,), k > 0), got {target_noise!r}")
     for voxel in scales_m:
         s, t = grids[voxel]
         radius = voxel * max_corr_voxels
