@@ -30,6 +30,8 @@ from typing import Optional
 
 import numpy as np
 
+from .ransac import ransac
+
 __all__ = ["Features", "FeatureLocation", "detect_features", "locate_by_features", "to_uint8"]
 
 _MODELS = ("translation", "similarity", "affine", "homography")
@@ -154,15 +156,20 @@ def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float
         uv, size, desc = uv[keep], size[keep], desc[keep]
     # detection pixel centre i covers full-resolution [s i - 0.5, s (i + 1) - 0.5]: its centre is s (i + 0.5) - 0.5
     uv = (uv + 0.5) * np.array([sx, sy]) - 0.5
+    # a fixed order (row, column, size, then descriptor), whatever order the detector emitted them in: matching and
+    # the RANSAC draw then do not depend on it
+    order = np.lexsort((desc[:, 0], size, uv[:, 0], uv[:, 1]))
+    uv, size, desc = uv[order], size[order], desc[order]
     return Features(uv, np.ascontiguousarray(desc, np.float32), size * np.sqrt(sx * sy), tuple(a.shape))
 
 
-def _fit(model: str, src: np.ndarray, dst: np.ndarray, threshold_px: float):
-    """RANSAC fit of ``model`` to ``src`` -> ``dst`` ``(N, 2)``: ``(M (3, 3) or None, inliers (N,) bool)``."""
-    import cv2
+def _fit(model: str, src: np.ndarray, dst: np.ndarray, threshold_px: float, seed: int):
+    """Robust fit of ``model`` to ``src`` -> ``dst`` ``(N, 2)``: ``(M (3, 3) or None, inliers (N,) bool)``.
 
-    s = src.astype(np.float64).reshape(-1, 1, 2)
-    d = dst.astype(np.float64).reshape(-1, 1, 2)
+    Translation: every match proposes a shift (no random draw). The others:
+    seeded LO-RANSAC (:func:`scipctl.core.ransac.ransac`), the same on every
+    OpenCV build.
+    """
     n = len(src)
     if model == "translation":
         # 1-point RANSAC: every match proposes a shift; keep the one with most support, refit by the median
@@ -177,20 +184,8 @@ def _fit(model: str, src: np.ndarray, dst: np.ndarray, threshold_px: float):
         M = np.eye(3)
         M[:2, 2] = np.median(shifts[inl], axis=0)
         return M, inl
-    if model == "similarity":
-        A, inl = cv2.estimateAffinePartial2D(s, d, method=cv2.RANSAC, ransacReprojThreshold=threshold_px,
-                                             maxIters=4000, confidence=0.999)
-    elif model == "affine":
-        A, inl = cv2.estimateAffine2D(s, d, method=cv2.RANSAC, ransacReprojThreshold=threshold_px,
-                                      maxIters=4000, confidence=0.999)
-    else:
-        H, inl = cv2.findHomography(s, d, cv2.RANSAC, threshold_px, maxIters=4000, confidence=0.999)
-        if H is None:
-            return None, np.zeros(n, bool)
-        return H / H[2, 2], inl.ravel().astype(bool)
-    if A is None:
-        return None, np.zeros(n, bool)
-    return np.vstack([A, [0.0, 0.0, 1.0]]), inl.ravel().astype(bool)
+    res = ransac(model, src, dst, threshold_px, seed=seed, max_iterations=4000, confidence=0.999)
+    return res.model, res.inliers
 
 
 def _apply(M: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -210,6 +205,7 @@ def locate_by_features(
     ransac_threshold_px: float = 4.0,
     min_inliers: int = 8,
     local_radius_px: Optional[float] = None,
+    seed: int = 0,
 ) -> FeatureLocation:
     """Where the reference point ``ref_uv`` (reference-image pixels) lies in the target image.
 
@@ -237,6 +233,9 @@ def locate_by_features(
     local_radius_px : float, optional
         Radius around ``ref_uv`` counted for ``n_local_inliers`` (default
         ``ref_radius_px / 2``).
+    seed : int
+        Seed of the RANSAC draw (the same seed and keypoints give the same
+        answer on every machine and OpenCV build).
 
     Returns
     -------
@@ -272,7 +271,7 @@ def locate_by_features(
     if n_matches < max(need + 1, 3):
         return FeatureLocation.failed(f"too few feature matches ({n_matches})", n_matches)
     src, dst = r.uv[qi], t.uv[ti]
-    M, inl = _fit(model, src, dst, float(ransac_threshold_px))
+    M, inl = _fit(model, src, dst, float(ransac_threshold_px), seed)
     n_in = int(inl.sum())
     if M is None or not np.all(np.isfinite(M)) or n_in < need:
         return FeatureLocation.failed("no geometric model fits the matches", n_matches, n_in)
