@@ -434,8 +434,9 @@ def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.
     translation-only match. Returns ``(uv_r (2,), score, g (2,))`` or ``None``
     when it did not improve the NCC or wandered more than 1.5 px.
     """
-    import cv2
     from scipy.optimize import minimize
+
+    from .resample import sample_bicubic
 
     th, tw = tpl0.shape
     ys, xs = np.mgrid[0:th, 0:tw].astype(np.float64)
@@ -453,9 +454,9 @@ def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.
 
     def ncc(p):
         du, dv, gx, gy = p
-        U = (base_u + du - (gx * tu_x + gy * tu_y)).astype(np.float32)
-        V = (base_v + dv - (gx * tv_x + gy * tv_y)).astype(np.float32)
-        patch = cv2.remap(R, U, V, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE).ravel().astype(np.float64)
+        U = base_u + du - (gx * tu_x + gy * tu_y)
+        V = base_v + dv - (gx * tv_x + gy * tv_y)
+        patch = sample_bicubic(R, U, V).ravel()
         sp = patch.sum()
         var = float(np.dot(patch, patch)) - sp * sp / n
         den = np.sqrt(var) * tnorm if var > 0 else 0.0

@@ -34,6 +34,8 @@ from typing import Optional
 
 import numpy as np
 
+from .resample import sample_bicubic, sample_bilinear
+
 __all__ = [
     "TrackResult",
     "track",
@@ -208,6 +210,12 @@ def _iterate_subpixel(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iterations:
             crop, max(-y0, 0), max(y1 - H, 0), max(-x0, 0), max(x1 - W, 0), cv2.BORDER_REPLICATE
         )
     crop = crop - np.float32(crop.mean())
+    # exact sampling positions (scipctl.core.resample): OpenCV 4.x would round them to 1/32 px
+    gy, gx = np.mgrid[0:th, 0:tw].astype(np.float64)
+
+    def shifted(du, dv):
+        return sample_bicubic(crop, gx + pad + du, gy + pad + dv).astype(np.float32)
+
     d = np.array(d0, dtype=float)
     sharp = 0.0
     for it in range(iterations):
@@ -215,10 +223,7 @@ def _iterate_subpixel(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iterations:
         m3 = np.empty((3, 3))
         for j in range(3):
             for i in range(3):
-                M = np.array([[1.0, 0.0, pad + d[0] + (i - 1) * h], [0.0, 1.0, pad + d[1] + (j - 1) * h]])
-                patch = cv2.warpAffine(
-                    crop, M, (tw, th), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE
-                )
+                patch = shifted(d[0] + (i - 1) * h, d[1] + (j - 1) * h)
                 m3[j, i] = cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0]
         dx, dy, sharp = subpixel_peak(m3, 1, 1)
         sharp /= h * h
@@ -227,8 +232,7 @@ def _iterate_subpixel(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iterations:
             return None
         if h <= 0.25 and abs(dx * h) < 1e-3 and abs(dy * h) < 1e-3:
             break
-    M = np.array([[1.0, 0.0, pad + d[0]], [0.0, 1.0, pad + d[1]]])
-    patch = cv2.warpAffine(crop, M, (tw, th), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+    patch = shifted(d[0], d[1])
     score = float(cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
     return d, sharp, score
 
@@ -554,7 +558,7 @@ def scale_window(window, scale: float) -> np.ndarray:
 
     The output is odd-sized, ``h' = largest odd <= h * scale`` (at least 3),
     and its centre pixel is the input's centre point, with the exact scale
-    (an affine warp, ``cv2.warpAffine`` bilinear). When shrinking, the input
+    (bilinear, at exact positions: :func:`scipctl.core.resample.sample_bilinear`). When shrinking, the input
     is first low-pass filtered by a Gaussian whose variance is that of the
     larger output pixel's footprint minus the input pixel's,
     ``((1/scale)^2 - 1) / 12`` px^2, which emulates area integration by the
@@ -583,11 +587,9 @@ def scale_window(window, scale: float) -> np.ndarray:
             src = cv2.GaussianBlur(w, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
     cs = np.array([(w0 - 1) / 2.0, (h0 - 1) / 2.0])
     cd = np.array([(w1 - 1) / 2.0, (h1 - 1) / 2.0])
-    # dst -> src map: src = (dst - cd) / s + cs
-    M = np.array([[1.0 / s, 0.0, cs[0] - cd[0] / s], [0.0, 1.0 / s, cs[1] - cd[1] / s]])
-    return cv2.warpAffine(
-        src, M, (w1, h1), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE
-    )
+    # dst -> src map: src = (dst - cd) / s + cs, sampled at the exact positions (scipctl.core.resample)
+    yd, xd = np.mgrid[0:h1, 0:w1].astype(np.float64)
+    return sample_bilinear(src, (xd - cd[0]) / s + cs[0], (yd - cd[1]) / s + cs[1]).astype(np.float32)
 
 
 def window_scale_for_handoff(ifov_src_rad: float, range_src_m: float, ifov_dst_rad: float, range_dst_m: float) -> float:
