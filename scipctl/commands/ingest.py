@@ -144,6 +144,8 @@ def print_summary(s: dict, title: str) -> None:
         con.print(t)
     tr = s["truth"]
     con.print("Simulation truth: " + (f"present ({tr['images']} images, {tr['targets']} targets)" if tr["present"] else "none"))
+    if s.get("products"):  # `info` only: each product with the file it is read from
+        con.print("Products: " + "; ".join(f"{esc(n)} ({esc(f)})" for n, f in s["products"].items()))
 
 
 def _check_paths(src: Path, out: Path) -> None:
@@ -172,19 +174,21 @@ def run(src: Path, out: Path, json_out: bool) -> None:
         print_summary(summary, f"Ingested {src} -> workspace {out}")
 
 
-def run_info(src: Path, json_out: bool) -> None:
+def run_info(src: Path, json_out: bool, products_root=None) -> None:
+    """Summarise ``src`` and list its products (each with the file it is read from); writes nothing."""
     from ..cli import emit_json
     from ..io.workspace import open_source
 
-    source = open_source(Path(src))
+    source = open_source(Path(src), products_root=products_root)
     summary = summarize(source.downlink)
+    names = source.product_names()
+    summary["products"] = {n: str(source.product_path(n)) for n in names}
     ws = source.workspace_info()
     if ws is not None:
-        products_dir = source.products_dir
         summary["workspace"] = {
             "path": str(source.workspace_dir),
             "ingested_from": ws.get("source", {}),
-            "products": sorted(p.name for p in products_dir.iterdir() if p.is_file() and p.name != "workspace.json"),
+            "products": names,
         }
     if json_out:
         emit_json(summary)
