@@ -122,13 +122,16 @@ def _main(
 @guarded
 def ingest(
     src: Path = typer.Argument(..., help="Downlink: an .mcap file or a directory with downlink.yaml."),
-    out: Path = typer.Option(..., "-o", "--out", help="Workspace directory to write (replaced atomically)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Workspace directory to write (replaced atomically; "
+                             "the products of an existing workspace are kept)."),
+    force: bool = typer.Option(False, "--force", help="Replace a workspace made from a different downlink; its "
+                               "products are set aside in WS/scipctl/superseded-<UTC time>/."),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Read and validate a downlink into a workspace, and summarise it."""
     from .commands.ingest import run
 
-    run(src, out, json_out)
+    run(src, out, json_out, force=force)
 
 
 @app.command()

@@ -158,18 +158,25 @@ def _check_paths(src: Path, out: Path) -> None:
         raise InputError(str(out), "output", f"contains the source {src}; replacing it would delete the source")
 
 
-def run(src: Path, out: Path, json_out: bool) -> None:
-    from ..cli import emit_json
+def run(src: Path, out: Path, json_out: bool, force: bool = False) -> None:
+    from ..cli import emit_json, note
     from ..io.downlink import read_downlink
-    from ..io.workspace import create_workspace
+    from ..io.workspace import write_workspace
 
     src, out = Path(src), Path(out)
     dl = read_downlink(src)
     _check_paths(src, out)
     summary = summarize(dl)
-    create_workspace(dl, out, summary, source_path=src)
+    done = write_workspace(dl, out, summary, source_path=src, force=force)
+    if done.kept_products:
+        note(f"kept the products of the existing workspace {out}: {', '.join(done.kept_products)}")
+    if done.superseded_dir is not None:
+        note(f"{out} was made from a different downlink; its products {', '.join(done.superseded_products)} "
+             f"are no longer used: set aside in {done.superseded_dir}/ (--force)")
     if json_out:
-        emit_json({"workspace": str(out), "summary": summary})
+        emit_json({"workspace": str(out), "summary": summary, "kept_products": done.kept_products,
+                   "superseded_products": done.superseded_products,
+                   "superseded_dir": None if done.superseded_dir is None else str(done.superseded_dir)})
     else:
         print_summary(summary, f"Ingested {src} -> workspace {out}")
 

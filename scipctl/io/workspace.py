@@ -12,9 +12,13 @@ sidecar directory ``<SRC>.scipctl/`` next to it (``sol42.mcap.scipctl/``),
 so the input is never modified. When that folder is not writable, or the
 operator gives ``--products-dir``, they live elsewhere (``product_store``).
 
+Re-ingesting onto an existing workspace keeps its products when the downlink
+is the same, and refuses (or, forced, sets them aside) when it is not.
+
 API::
 
-    create_workspace(dl, out, summary=None) -> Path     # atomic
+    create_workspace(dl, out, summary=None, source_path=None, force=False) -> Path   # atomic
+    write_workspace(...) -> WorkspaceWritten     # the same, and what was kept / set aside
     open_source(path, products_root=None) -> Source
     Source.downlink / .path / .workspace_dir / .home_products_dir / .products_dir
     Source.load_json(name, default=None) / .save_json(name, obj) / .product_path(name) / .location_note()
@@ -35,6 +39,7 @@ WORKSPACE_FORMAT = 1
 PRODUCTS_DIR = "scipctl"
 MARKER = "workspace.json"
 SIDECAR_SUFFIX = ".scipctl"
+SUPERSEDED_PREFIX = "superseded-"  # WS/scipctl/superseded-<UTC time>/: products set aside by ingest --force
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._\-]*$")
 
 
@@ -50,11 +55,41 @@ def dumps(obj) -> str:
     return json.dumps(obj, indent=2, sort_keys=True, default=_json_default, allow_nan=False) + "\n"
 
 
-def create_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_path=None) -> Path:
-    """Write ``dl`` as a workspace at ``out`` (atomically; replaces an existing workspace, refuses anything else).
+@dataclass
+class WorkspaceWritten:
+    """What :func:`write_workspace` did.
 
-    ``workspace.json`` records ``provenance`` (tool, version, command line,
-    the source path and SHA-256, time), the source container and ``summary``.
+    ``kept_products``: names of the entries of the previous ``WS/scipctl/`` carried into the new workspace
+    (all but ``workspace.json``). ``superseded_products``: names set aside (``--force`` onto a workspace made
+    from a different downlink) into ``superseded_dir`` (``WS/scipctl/superseded-<UTC time>/``).
+    ``previous_source``: the ``source`` record of the replaced workspace (None for a new one).
+    """
+
+    path: Path
+    replaced: bool
+    kept_products: list
+    superseded_products: list
+    superseded_dir: Optional[Path]
+    previous_source: Optional[dict]
+
+
+def create_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_path=None, force: bool = False) -> Path:
+    """Write ``dl`` as a workspace at ``out``; returns ``out``. See :func:`write_workspace`."""
+    return write_workspace(dl, out, summary, source_path=source_path, force=force).path
+
+
+def write_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_path=None,
+                    force: bool = False) -> WorkspaceWritten:
+    """Write ``dl`` as a workspace at ``out``, atomically (docs/workspace.md, "Rules").
+
+    ``out`` may be missing, an empty directory or an existing workspace; anything else is refused. The
+    products of an existing workspace (everything in ``WS/scipctl/`` but ``workspace.json``) are carried
+    into the new one when it holds the same downlink: re-ingest in place, the same source SHA-256 as
+    recorded, or byte-identical downlink files. Otherwise InputError (nothing changed), unless ``force``:
+    then the old products are moved to ``WS/scipctl/superseded-<UTC time>/`` with the old marker.
+
+    ``workspace.json`` records ``provenance`` (tool, version, command line, the source path and SHA-256,
+    time), the source, ``summary``, ``kept_products`` and, after ``force``, what was superseded.
     """
     from .atomic import atomic_directory
     from .downlink_dir import check_replaceable, write_dir_contents
@@ -63,6 +98,14 @@ def create_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_p
     out = Path(out)
     check_replaceable(out, "a scipctl workspace", f"{PRODUCTS_DIR}/{MARKER}")
     src = str(source_path if source_path is not None else dl.source)
+    replaced = is_workspace(out)
+    entries = _product_entries(out) if replaced else []
+    previous = None
+    if replaced:
+        try:
+            previous = read_marker(out).get("source")
+        except (InputError, AttributeError):
+            previous = None
     prov = provenance({"downlink": dl.source_sha256})  # hash already computed while reading
     prov["inputs"]["downlink"]["path"] = src
     doc = {
@@ -71,12 +114,98 @@ def create_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_p
         "provenance": prov,
         "summary": summary or {},
     }
-    text = dumps(doc)
-    with atomic_directory(out) as tmp:
-        write_dir_contents(dl, tmp)
-        (tmp / PRODUCTS_DIR).mkdir()
-        (tmp / PRODUCTS_DIR / MARKER).write_text(text, encoding="utf-8")
-    return out
+    done = WorkspaceWritten(out, replaced, [], [], None, previous if isinstance(previous, dict) else None)
+    try:
+        with atomic_directory(out) as tmp:
+            write_dir_contents(dl, tmp)
+            (tmp / PRODUCTS_DIR).mkdir()
+            live = [n for n in entries if not _is_superseded(out, n)]  # products commands still read
+            if entries:
+                if not live or _same_downlink(dl, out, tmp, source_path, done.previous_source):
+                    _carry(out, tmp, entries, done.kept_products)
+                elif not force:
+                    raise InputError(str(out), "source", _different_message(out, src, done.previous_source, live))
+                else:
+                    _supersede(out, tmp, entries, live, done)
+            doc["kept_products"] = done.kept_products
+            if done.superseded_dir is not None:
+                doc["superseded"] = {"dir": done.superseded_dir.name, "products": done.superseded_products,
+                                     "previous_source": done.previous_source}
+            (tmp / PRODUCTS_DIR / MARKER).write_text(dumps(doc), encoding="utf-8")
+    except OSError as e:
+        where = getattr(e, "filename", None) or out
+        raise InputError(str(where), "output", f"cannot write the workspace: {e.strerror or e}; nothing was changed") from None
+    if done.superseded_dir is not None:
+        done.superseded_dir = out / PRODUCTS_DIR / done.superseded_dir.name
+    return done
+
+
+def _product_entries(ws: Path) -> list:
+    """Names of everything in ``WS/scipctl/`` except the marker (products, and folders such as superseded-*)."""
+    try:
+        return sorted(p.name for p in (ws / PRODUCTS_DIR).iterdir() if p.name != MARKER)
+    except OSError as e:
+        raise InputError(str(ws / PRODUCTS_DIR), "products", f"cannot list: {e.strerror or e}") from None
+
+
+def _same_downlink(dl: Downlink, out: Path, new_tmp: Path, source_path, previous: Optional[dict]) -> bool:
+    """Whether the workspace at ``out`` holds the downlink ``dl`` (so its products stay valid)."""
+    from .provenance import sha256_path
+
+    if source_path is not None and Path(source_path).resolve() == out.resolve():
+        return True  # re-ingest in place
+    if previous and previous.get("sha256") == dl.source_sha256:
+        return True  # the same source file or directory as last time
+    return sha256_path(new_tmp) == sha256_path(out)  # the same downlink from another container / path
+
+
+def _copy_entry(src: Path, dst: Path) -> None:
+    import shutil
+
+    if src.is_dir() and not src.is_symlink():
+        shutil.copytree(src, dst, symlinks=True)
+    else:
+        shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _carry(out: Path, tmp: Path, names: list, kept: list) -> None:
+    for n in names:
+        _copy_entry(out / PRODUCTS_DIR / n, tmp / PRODUCTS_DIR / n)
+        kept.append(n)
+
+
+def _is_superseded(ws: Path, name: str) -> bool:
+    return name.startswith(SUPERSEDED_PREFIX) and (ws / PRODUCTS_DIR / name).is_dir()
+
+
+def _supersede(out: Path, tmp: Path, entries: list, live: list, done: WorkspaceWritten) -> None:
+    """Move (copy, inside the atomic swap) the ``live`` products to ``superseded-<UTC time>/`` with the old
+    marker; earlier superseded folders are carried as they are."""
+    import datetime as _dt
+
+    _carry(out, tmp, [n for n in entries if n not in live], done.kept_products)
+    stamp = _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+    name, i = SUPERSEDED_PREFIX + stamp, 1
+    while name in entries:
+        i += 1
+        name = f"{SUPERSEDED_PREFIX}{stamp}-{i}"
+    sup = tmp / PRODUCTS_DIR / name
+    sup.mkdir()
+    for n in live:
+        _copy_entry(out / PRODUCTS_DIR / n, sup / n)
+        done.superseded_products.append(n)
+    if (out / PRODUCTS_DIR / MARKER).is_file():
+        _copy_entry(out / PRODUCTS_DIR / MARKER, sup / MARKER)
+    done.superseded_dir = sup
+
+
+def _different_message(out: Path, src: str, previous: Optional[dict], entries: list) -> str:
+    was = "an unknown downlink"
+    if previous:
+        was = f"{previous.get('path', '?')} (sha256 {str(previous.get('sha256', '?'))[:12]}...)"
+    return (f"was made from a different downlink, {was}, and holds products ({', '.join(entries)}) that may not be "
+            f"valid for {src}; nothing was changed. Use --force to replace it (its products are then set aside in "
+            f"{out / PRODUCTS_DIR}/{SUPERSEDED_PREFIX}<UTC time>/), or ingest to another -o")
 
 
 def sidecar_dir(src) -> Path:
