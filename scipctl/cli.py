@@ -52,7 +52,7 @@ def _products_dir_option():
     return typer.Option(
         None, "--products-dir", envvar="SCIPCTL_PRODUCTS_DIR",
         help="Write (and also look for) products of raw downlinks and workspaces in DIR/<name>-<hash>/ "
-        "instead of beside them (docs/workspace.md). Env: SCIPCTL_PRODUCTS_DIR.")
+        "instead of beside them (docs/workspace.md).")
 
 
 def guarded(fn):
