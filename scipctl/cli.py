@@ -43,6 +43,18 @@ def _err(msg: str) -> None:
     sys.stderr.write(f"scipctl: error: {msg}\n")
 
 
+def note(msg: str) -> None:
+    """One line on stderr for something the operator should know (e.g. where products went)."""
+    sys.stderr.write(f"scipctl: note: {msg}\n")
+
+
+def _products_dir_option():
+    return typer.Option(
+        None, "--products-dir", envvar="SCIPCTL_PRODUCTS_DIR",
+        help="Write (and also look for) products of raw downlinks and workspaces in DIR/<name>-<hash>/ "
+        "instead of beside them (docs/workspace.md).")
+
+
 def guarded(fn):
     """Map exceptions to one-line errors and exit codes; never a traceback."""
 
@@ -110,25 +122,29 @@ def _main(
 @guarded
 def ingest(
     src: Path = typer.Argument(..., help="Downlink: an .mcap file or a directory with downlink.yaml."),
-    out: Path = typer.Option(..., "-o", "--out", help="Workspace directory to write (replaced atomically)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Workspace directory to write (replaced atomically; "
+                             "the products of an existing workspace are kept)."),
+    force: bool = typer.Option(False, "--force", help="Replace a workspace made from a different downlink; its "
+                               "products are set aside in WS/scipctl/superseded-<UTC time>/."),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Read and validate a downlink into a workspace, and summarise it."""
     from .commands.ingest import run
 
-    run(src, out, json_out)
+    run(src, out, json_out, force=force)
 
 
 @app.command()
 @guarded
 def info(
     src: Path = typer.Argument(..., help="Downlink (.mcap or directory) or workspace."),
+    products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Validate and summarise a downlink or workspace without writing anything."""
     from .commands.ingest import run_info
 
-    run_info(src, json_out)
+    run_info(src, json_out, products_root=products_dir)
 
 
 @app.command()
@@ -157,12 +173,13 @@ def designate(
     pixel: str = typer.Option(..., "--pixel", help="U,V (column,row; sub-pixel allowed)."),
     target_id: Optional[str] = typer.Option(None, "--id", help="Target name (default: d<N>, the first free one)."),
     band_px: Optional[float] = typer.Option(None, "--band-px", help="Half-width of the epipolar search band."),
+    products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
 ):
     """Designate a 3-D target from a pixel in a left stereo image."""
     from .commands.designate import run
 
-    run(src, product, camera, pixel, target_id, band_px, json_out)
+    run(src, product, camera, pixel, target_id, band_px, json_out, products_root=products_dir)
 
 
 @app.command("simulate-handoff")
@@ -179,12 +196,14 @@ def simulate_handoff(
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
     chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
+    products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
     """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline."""
     from .commands.handoff import run
 
-    run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast)
+    run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
+        products_root=products_dir)
 
 
 @app.command()
@@ -198,12 +217,14 @@ def sequence(
         None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the Monte Carlo (default: from the downlink)."),
     sigma_yaw_deg: Optional[float] = typer.Option(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
+    products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
     """Emit the uplink command sequence for the single-cycle approach."""
     from .commands.sequence import run
 
-    run(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg)
+    run(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
+        products_root=products_dir)
 
 
 @app.command()
@@ -215,12 +236,14 @@ def report(
         None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the prediction (default: from the downlink)."),
     sigma_yaw_deg: Optional[float] = typer.Option(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
+    products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
 ):
     """Write a self-contained HTML diagnostic report."""
     from .commands.report import run
 
-    run(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg)
+    run(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
+        products_root=products_dir)
 
 
 def main() -> None:

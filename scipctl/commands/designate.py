@@ -4,17 +4,18 @@ from __future__ import annotations
 
 import sys
 
-from ..cli import CommandFailed, emit_json, stderr_console
+from ..cli import CommandFailed, emit_json, note, stderr_console
 from ..model import InputError
 
 
-def run(src, product, camera, pixel, target_id, band_px, json_out):
+def run(src, product, camera, pixel, target_id, band_px, json_out, products_root=None):
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.designate import designate, parse_pixel, pick_left_product
 
     uv = parse_pixel(pixel)
-    source = open_source(src)
+    source = open_source(src, products_root=products_root)
+    source.check_writable()  # before the work: say now if the products cannot be saved anywhere
     dl = source.downlink
     left = pick_left_product(dl, product, camera)
     targets = source.load_json("targets.json", default={"targets": []}) or {"targets": []}
@@ -35,6 +36,8 @@ def run(src, product, camera, pixel, target_id, band_px, json_out):
     targets["provenance"] = rec["provenance"]
     path = source.save_json("targets.json", targets)
     rec["saved_to"] = str(path)
+    if source.location_note():
+        note(source.location_note())
     if json_out:
         emit_json(rec)
     _print(rec)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..cli import emit_json, stderr_console
+from ..cli import emit_json, note, stderr_console
 from ..model import InputError
 
 # the paper's Table 1 (Rocky8, 18 targets): mean +- std (range), px; refined: successes / failures
@@ -59,7 +59,8 @@ def _fmt_stats(s):
     return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
 
 
-def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=False):
+def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=False,
+        products_root=None):
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.provenance import provenance
@@ -77,7 +78,9 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
     names, navcams, pairs = _parse_methods(methods)
     con = stderr_console()
     records, chains, per_dl = [], [], []
-    sources = [open_source(s) for s in srcs]  # validate every input before any work
+    sources = [open_source(s, products_root=products_root) for s in srcs]  # validate every input before any work
+    for source in sources:
+        source.check_writable()  # and say now if a handoff.json could not be saved
     n_work = sum(1 for _ in sources) * max(1, len(names) * len(navcams))
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
@@ -113,15 +116,17 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
                                progress=progress, downlink_name=name, only=pairs)
             prog.advance(task, len(names) * len(navcams))
             records.extend(recs)
-            source.save_json("handoff.json", {
+            saved = source.save_json("handoff.json", {
                 "provenance": provenance({"downlink": str(src)}), "success_px": success_px,
                 "results": [r.to_dict() for r in recs], "table1": table1(recs),
             })
+            if source.location_note():
+                note(source.location_note())
             per_dl.append({"downlink": name, "hazcam": setup.hazcam.product_id,
                            "near": setup.near.product_id if setup.near else None,
                            "far": setup.far.product_id if setup.far else None,
                            "dense_stereo_s": {k: round(c.nav.dense_seconds, 3) for k, c in setup.cases.items()},
-                           "input_sha256": dl.source_sha256})
+                           "input_sha256": dl.source_sha256, "saved_to": str(saved)})
             if chain:
                 chains.extend(_chains(dl, name, target))
             del done

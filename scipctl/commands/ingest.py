@@ -144,6 +144,8 @@ def print_summary(s: dict, title: str) -> None:
         con.print(t)
     tr = s["truth"]
     con.print("Simulation truth: " + (f"present ({tr['images']} images, {tr['targets']} targets)" if tr["present"] else "none"))
+    if s.get("products"):  # `info` only: each product with the file it is read from
+        con.print("Products: " + "; ".join(f"{esc(n)} ({esc(f)})" for n, f in s["products"].items()))
 
 
 def _check_paths(src: Path, out: Path) -> None:
@@ -156,35 +158,44 @@ def _check_paths(src: Path, out: Path) -> None:
         raise InputError(str(out), "output", f"contains the source {src}; replacing it would delete the source")
 
 
-def run(src: Path, out: Path, json_out: bool) -> None:
-    from ..cli import emit_json
+def run(src: Path, out: Path, json_out: bool, force: bool = False) -> None:
+    from ..cli import emit_json, note
     from ..io.downlink import read_downlink
-    from ..io.workspace import create_workspace
+    from ..io.workspace import write_workspace
 
     src, out = Path(src), Path(out)
     dl = read_downlink(src)
     _check_paths(src, out)
     summary = summarize(dl)
-    create_workspace(dl, out, summary, source_path=src)
+    done = write_workspace(dl, out, summary, source_path=src, force=force)
+    if done.kept_products:
+        note(f"kept the products of the existing workspace {out}: {', '.join(done.kept_products)}")
+    if done.superseded_dir is not None:
+        note(f"{out} was made from a different downlink; its products {', '.join(done.superseded_products)} "
+             f"are no longer used: set aside in {done.superseded_dir}/ (--force)")
     if json_out:
-        emit_json({"workspace": str(out), "summary": summary})
+        emit_json({"workspace": str(out), "summary": summary, "kept_products": done.kept_products,
+                   "superseded_products": done.superseded_products,
+                   "superseded_dir": None if done.superseded_dir is None else str(done.superseded_dir)})
     else:
         print_summary(summary, f"Ingested {src} -> workspace {out}")
 
 
-def run_info(src: Path, json_out: bool) -> None:
+def run_info(src: Path, json_out: bool, products_root=None) -> None:
+    """Summarise ``src`` and list its products (each with the file it is read from); writes nothing."""
     from ..cli import emit_json
     from ..io.workspace import open_source
 
-    source = open_source(Path(src))
+    source = open_source(Path(src), products_root=products_root)
     summary = summarize(source.downlink)
+    names = source.product_names()
+    summary["products"] = {n: str(source.product_path(n)) for n in names}
     ws = source.workspace_info()
     if ws is not None:
-        products_dir = source.products_dir
         summary["workspace"] = {
             "path": str(source.workspace_dir),
             "ingested_from": ws.get("source", {}),
-            "products": sorted(p.name for p in products_dir.iterdir() if p.is_file() and p.name != "workspace.json"),
+            "products": names,
         }
     if json_out:
         emit_json(summary)

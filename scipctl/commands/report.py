@@ -21,7 +21,7 @@ def build(source, progress=None, params=None):
     dl = source.downlink
     targets_doc = source.load_json("targets.json")
     if targets_doc is not None and not isinstance(targets_doc, dict):
-        raise InputError(str(source.products_dir / "targets.json"), "targets", "expected a JSON object with a 'targets' list")
+        raise InputError(str(source.read_from["targets.json"]), "targets", "expected a JSON object with a 'targets' list")
     handoff_doc = source.load_json("handoff.json")
     data = collect(dl, targets_doc, handoff_doc, params or ReportParams(), progress)
     rows = data["handoff"]["table1"]
@@ -72,7 +72,7 @@ def _summary(data, sequences) -> dict:
     }
 
 
-def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None):
+def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
 
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
@@ -85,7 +85,7 @@ def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None):
 
     unc = uncertainty_params(sigma_position_m, sigma_yaw_deg).uncertainty
     params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad)
-    source = open_source(src)
+    source = open_source(src, products_root=products_root)
     con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
@@ -95,6 +95,7 @@ def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None):
     except OSError as e:
         raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
     summary["report"] = str(out)
+    summary["products_read"] = {k: str(v) for k, v in source.read_from.items()}
     summary["bytes"] = len(html.encode())
     summary["embedded_images"] = html.count("<img ")
     from ..io.annotations_mcap import write_annotations

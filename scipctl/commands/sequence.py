@@ -22,7 +22,7 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
     if pred is None or record is None:
         targets_doc = source.load_json("targets.json")
         if targets_doc is not None and not isinstance(targets_doc, dict):
-            raise InputError(str(source.products_dir / "targets.json"), "targets",
+            raise InputError(str(source.read_from["targets.json"]), "targets",
                              "expected a JSON object with a 'targets' list")
         record, now = resolve_target(dl, target, targets_doc)
         if not record.get("ok", True) or record.get("xyz_site_m") is None:
@@ -70,7 +70,7 @@ def uncertainty_params(sigma_position_m=None, sigma_yaw_deg=None):
     return replace(p, uncertainty=u)
 
 
-def run(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None):
+def run(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, broken
@@ -79,13 +79,14 @@ def run(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=No
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
     params = uncertainty_params(sigma_position_m, sigma_yaw_deg)
-    source = open_source(src)
+    source = open_source(src, products_root=products_root)
     doc, checks, pred, record = make_sequence(source, target, params=params)
     summary = {
         "target": target, "designated_now": bool(record.get("designated_from") == "mark"),
         "confidence": pred.confidence, "rules": [c.to_dict() for c in checks],
         "risks": [r.to_dict() for r in pred.risks], "path_length_m": pred.plan.path_length_m,
         "stops": len(pred.plan.stops) - 1, "seconds": pred.seconds,
+        "products_read": {k: str(v) for k, v in source.read_from.items()},
     }
     bad = broken(checks)
     _print(checks, pred, target)

@@ -1,6 +1,7 @@
 """``scipctl ingest`` and ``scipctl info`` through the CLI (CliRunner), plus one real subprocess."""
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -138,3 +139,82 @@ def test_real_subprocess_exit_code_and_clean_stderr(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("scipctl: error: ") and "broken.mcap" in lines[0]
     assert "Traceback" not in r.stderr
     assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["broken.mcap"]
+
+
+SAMPLES = REPO / "sample_sols" / "mcap"
+
+
+@pytest.fixture(scope="module")
+def ws_with_products(tmp_path_factory):
+    """A workspace of a sample sol holding a real designation (targets.json) and handoff results (handoff.json)."""
+    d = tmp_path_factory.mktemp("reingest")
+    src = d / "paper-s1-straight.mcap"
+    shutil.copy(SAMPLES / src.name, src)
+    ws = d / "ws"
+    assert runner.invoke(app, ["ingest", str(src), "-o", str(ws)]).exit_code == 0
+    dl = read_downlink(src)
+    latest = max((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = next(t for t in dl.targets if t.kind == "point").mark_in(latest.product_id)
+    r = runner.invoke(app, ["designate", str(ws), "--camera", "pancam", "--pixel", f"{mk.u},{mk.v}", "--id", "r1"])
+    assert r.exit_code == 0, r.stderr
+    r = runner.invoke(app, ["simulate-handoff", str(ws), "--methods", "pure-kinematic"])
+    assert r.exit_code == 0, r.stderr
+    assert sorted(p.name for p in (ws / "scipctl").iterdir()) == ["handoff.json", "targets.json", "workspace.json"]
+    return src, ws
+
+
+def _products(ws):
+    return {p.name: p.read_bytes() for p in (ws / "scipctl").iterdir() if p.name != "workspace.json"}
+
+
+def test_reingest_keeps_designations_and_handoff_results(tmp_path, ws_with_products):
+    src, ws0 = ws_with_products
+    ws = tmp_path / "ws"
+    shutil.copytree(ws0, ws)
+    made = _products(ws)
+    r = runner.invoke(app, ["ingest", str(src), "-o", str(ws), "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["kept_products"] == ["handoff.json", "targets.json"] and doc["superseded_products"] == []
+    assert f"scipctl: note: kept the products of the existing workspace {ws}: handoff.json, targets.json\n" in r.stderr
+    assert _products(ws) == made
+    assert json.loads((ws / "scipctl" / "workspace.json").read_text())["kept_products"] == ["handoff.json", "targets.json"]
+    r = runner.invoke(app, ["ingest", str(ws), "-o", str(ws), "--json"])  # in place
+    assert r.exit_code == 0, r.stderr
+    assert json.loads(r.stdout)["kept_products"] == ["handoff.json", "targets.json"] and _products(ws) == made
+    # and the commands still find them: designate adds to r1 rather than starting over
+    info = json.loads(runner.invoke(app, ["info", str(ws), "--json"]).stdout)
+    assert info["workspace"]["products"] == ["handoff.json", "targets.json"]
+    assert [t["id"] for t in json.loads((ws / "scipctl" / "targets.json").read_text())["targets"]] == ["r1"]
+
+
+def test_reingest_of_a_different_downlink_needs_force(tmp_path, ws_with_products):
+    src, ws0 = ws_with_products
+    ws = tmp_path / "ws"
+    shutil.copytree(ws0, ws)
+    made = _products(ws)
+    other = tmp_path / "paper-s1-arc.mcap"
+    shutil.copy(SAMPLES / other.name, other)
+    before = {p.relative_to(ws).as_posix(): (p.stat().st_mtime_ns, p.read_bytes() if p.is_file() else None)
+              for p in sorted(ws.rglob("*"))}
+    r = runner.invoke(app, ["ingest", str(other), "-o", str(ws)])
+    assert r.exit_code == 2
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith(f"scipctl: error: {ws}: source: ")
+    assert "--force" in r.stderr and "targets.json" in r.stderr and "Traceback" not in r.stderr
+    after = {p.relative_to(ws).as_posix(): (p.stat().st_mtime_ns, p.read_bytes() if p.is_file() else None)
+             for p in sorted(ws.rglob("*"))}
+    assert after == before  # nothing changed on disk
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["paper-s1-arc.mcap", "ws"]  # no temporary left
+
+    r = runner.invoke(app, ["ingest", str(other), "-o", str(ws), "--force", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["kept_products"] == [] and doc["superseded_products"] == ["handoff.json", "targets.json"]
+    sup = Path(doc["superseded_dir"])
+    assert sup.parent == ws / "scipctl" and sup.name.startswith("superseded-")
+    assert {n: (sup / n).read_bytes() for n in made} == made  # set aside, byte for byte
+    assert json.loads((sup / "workspace.json").read_text())["source"]["path"] == str(src)
+    assert "set aside in" in r.stderr and str(sup) in r.stderr
+    assert downlink_differences(read_downlink(other), read_downlink(ws)) == []
+    info = json.loads(runner.invoke(app, ["info", str(ws), "--json"]).stdout)
+    assert info["workspace"]["products"] == [] and info["products"] == {}

@@ -1,12 +1,14 @@
 import hashlib
 import json
+import os
 
 import pytest
 
 from scipctl.io.downlink import downlink_differences, read_downlink, write_downlink
-from scipctl.io.workspace import create_workspace, is_workspace, open_source, sidecar_dir
+from scipctl.io.workspace import create_workspace, is_workspace, open_source, sidecar_dir, write_workspace
 from scipctl.model import InputError
 from tests.io.builders import make_small_downlink
+from tests.io.readonly_fs import make_read_only, tree
 
 
 @pytest.fixture
@@ -76,12 +78,21 @@ def test_malformed_product_json(tmp_path, mcap_src):
     assert ei.value.field == "json" and ei.value.product.endswith("targets.json")
 
 
-def test_reingest_replaces_a_workspace_but_not_other_directories(tmp_path, mcap_src):
+def test_reingest_keeps_products_but_replaces_nothing_else(tmp_path, mcap_src):
     dl = read_downlink(mcap_src)
-    ws = create_workspace(dl, tmp_path / "ws")
-    (ws / "scipctl" / "targets.json").write_text("{}")
-    create_workspace(dl, ws)  # replacing a workspace is allowed (its products go with it)
-    assert not (ws / "scipctl" / "targets.json").exists() and is_workspace(ws)
+    ws = create_workspace(dl, tmp_path / "ws", source_path=mcap_src)
+    (ws / "scipctl" / "targets.json").write_text('{"targets": [{"id": "r1"}]}')
+    (ws / "scipctl" / "notes").mkdir()
+    (ws / "scipctl" / "notes" / "a.txt").write_text("operator note")
+    os.utime(ws / "scipctl" / "targets.json", ns=(1_000_000_000, 1_000_000_000))
+    done = write_workspace(dl, ws, source_path=mcap_src)  # the same source again
+    assert done.replaced and done.kept_products == ["notes", "targets.json"] and done.superseded_dir is None
+    assert is_workspace(ws) and (ws / "scipctl" / "targets.json").read_text() == '{"targets": [{"id": "r1"}]}'
+    assert (ws / "scipctl" / "targets.json").stat().st_mtime_ns == 1_000_000_000  # copied with its times
+    assert (ws / "scipctl" / "notes" / "a.txt").read_text() == "operator note"
+    info = json.loads((ws / "scipctl" / "workspace.json").read_text())
+    assert info["kept_products"] == ["notes", "targets.json"] and "superseded" not in info
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sol42.mcap", "ws"]  # no temporary or .old left
     other = tmp_path / "photos"
     other.mkdir()
     (other / "cat.jpg").write_bytes(b"meow")
@@ -92,3 +103,81 @@ def test_reingest_replaces_a_workspace_but_not_other_directories(tmp_path, mcap_
     write_downlink(dl, plain, container="dir")  # a downlink directory is not a workspace either
     with pytest.raises(InputError):
         create_workspace(dl, plain)
+
+
+def test_reingest_in_place_and_from_another_container_keeps_products(tmp_path, mcap_src):
+    dl = read_downlink(mcap_src)
+    ws = create_workspace(dl, tmp_path / "ws", source_path=mcap_src)
+    (ws / "scipctl" / "handoff.json").write_text("[1]")
+    as_dir = write_downlink(dl, tmp_path / "as_dir", container="dir")  # same downlink, other container and hash
+    dl_dir = read_downlink(as_dir)
+    assert dl_dir.source_sha256 != dl.source_sha256
+    done = write_workspace(dl_dir, ws, source_path=as_dir)  # recognised by its identical downlink files
+    assert done.kept_products == ["handoff.json"]
+    done = write_workspace(read_downlink(ws), ws, source_path=ws)  # in place
+    assert done.kept_products == ["handoff.json"] and (ws / "scipctl" / "handoff.json").read_text() == "[1]"
+
+
+def test_reingest_of_a_different_downlink_is_refused_without_force(tmp_path, mcap_src):
+    dl = read_downlink(mcap_src)
+    ws = create_workspace(dl, tmp_path / "ws", source_path=mcap_src)
+    (ws / "scipctl" / "targets.json").write_text('{"targets": []}')
+    before = tree(ws)
+    other = tmp_path / "sol43.mcap"
+    write_downlink(make_small_downlink(sol=43), other)
+    with pytest.raises(InputError) as ei:
+        create_workspace(read_downlink(other), ws, source_path=other)
+    e = ei.value
+    assert e.product == str(ws) and e.field == "source" and "--force" in e.message and "targets.json" in e.message
+    assert "\n" not in str(e)
+    assert tree(ws) == before  # nothing changed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sol42.mcap", "sol43.mcap", "ws"]
+
+
+def test_force_sets_the_old_products_aside(tmp_path, mcap_src):
+    dl = read_downlink(mcap_src)
+    ws = create_workspace(dl, tmp_path / "ws", source_path=mcap_src)
+    (ws / "scipctl" / "targets.json").write_text('{"targets": []}')
+    (ws / "scipctl" / "handoff.json").write_text("[]")
+    old_marker = (ws / "scipctl" / "workspace.json").read_text()
+    other = tmp_path / "sol43.mcap"
+    write_downlink(make_small_downlink(sol=43), other)
+    dl43 = read_downlink(other)
+    done = write_workspace(dl43, ws, source_path=other, force=True)
+    assert done.kept_products == [] and done.superseded_products == ["handoff.json", "targets.json"]
+    sup = done.superseded_dir
+    assert sup.parent == ws / "scipctl" and sup.name.startswith("superseded-")
+    assert (sup / "targets.json").read_text() == '{"targets": []}' and (sup / "handoff.json").read_text() == "[]"
+    assert (sup / "workspace.json").read_text() == old_marker  # which downlink they were made from
+    assert not (ws / "scipctl" / "targets.json").exists() and open_source(ws).load_json("targets.json") is None
+    assert downlink_differences(dl43, read_downlink(ws)) == []
+    info = json.loads((ws / "scipctl" / "workspace.json").read_text())
+    assert info["superseded"]["dir"] == sup.name and info["superseded"]["products"] == ["handoff.json", "targets.json"]
+    assert info["superseded"]["previous_source"]["path"] == str(mcap_src)
+    # forcing again (back to sol 42) keeps the earlier set-aside folder and sets the new products aside
+    (ws / "scipctl" / "targets.json").write_text('{"targets": [{"id": "b"}]}')
+    again = write_workspace(dl, ws, source_path=mcap_src, force=True)
+    assert again.kept_products == [sup.name] and again.superseded_products == ["targets.json"]
+    assert (sup / "targets.json").exists() and (again.superseded_dir / "targets.json").exists()
+    assert again.superseded_dir != sup
+    # only set-aside folders left: nothing in use to protect, so no --force is needed, and they are kept
+    third = write_workspace(dl43, ws, source_path=other)
+    assert third.kept_products == sorted([sup.name, again.superseded_dir.name]) and third.superseded_dir is None
+
+
+def test_a_different_downlink_replaces_a_workspace_without_products(tmp_path, mcap_src):
+    ws = create_workspace(read_downlink(mcap_src), tmp_path / "ws", source_path=mcap_src)
+    other = tmp_path / "sol43.mcap"
+    write_downlink(make_small_downlink(sol=43), other)
+    done = write_workspace(read_downlink(other), ws, source_path=other)
+    assert done.replaced and done.kept_products == [] and done.superseded_dir is None
+    assert read_downlink(ws).sol == 43
+
+
+def test_unwritable_output_folder_is_an_input_error(tmp_path, mcap_src, monkeypatch):
+    (tmp_path / "ro").mkdir()
+    make_read_only(monkeypatch, tmp_path / "ro")
+    with pytest.raises(InputError) as ei:
+        create_workspace(read_downlink(mcap_src), tmp_path / "ro" / "ws")
+    assert ei.value.field == "output" and str(tmp_path / "ro") in ei.value.product
+    assert list((tmp_path / "ro").iterdir()) == []
