@@ -34,6 +34,8 @@ def image_stats(im) -> dict:
 
 def summarize(dl: Downlink) -> dict:
     """Plain-data summary of a (validated) downlink."""
+    from ..io.downlink import camera_model_to_plain, pose_to_plain
+
     positions = []
     for pos in dl.positions():
         ims = sorted(dl.images_at(pos), key=lambda i: (i.time_s, i.product_id))
@@ -62,7 +64,8 @@ def summarize(dl: Downlink) -> dict:
             "site": im.site, "drive": im.drive, "width": im.width, "height": im.height,
             "pan_deg": _deg(im.mast.pan_rad) if im.mast else None,
             "tilt_deg": _deg(im.mast.tilt_rad) if im.mast else None,
-            "camera_model": im.camera_model.kind + (str(im.camera_model.cahvore_type) if im.camera_model.kind == "CAHVORE" else ""),
+            "camera_model": camera_model_to_plain(im.camera_model),  # the full model, as in the downlink format
+            "pose": pose_to_plain(im.pose), "position": {"site": im.site, "drive": im.drive},
             "exposure_ms": im.exposure_ms, "gain": im.gain, "truth": im.product_id in truth_ids,
         }
         rec.update(image_stats(im))

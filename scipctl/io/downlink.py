@@ -440,13 +440,26 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def detect_container(path) -> str:
-    """``"mcap"`` or ``"dir"`` for an existing downlink path; :class:`InputError` otherwise."""
+    """``"mcap"``, ``"dir"`` or ``"products"`` (real PDS/VICAR/raw-JSON products, :mod:`.pds_products`)
+    for an existing downlink path; :class:`InputError` otherwise."""
     p = Path(path)
     if p.is_dir():
+        if not (p / "downlink.yaml").exists():
+            from .pds_products import is_product_path
+
+            if is_product_path(p):
+                return "products"
         return "dir"
     if p.is_file():
         if p.name == "downlink.yaml":
             return "dir"
+        with open(p, "rb") as f:
+            magic = f.read(len(MCAP_MAGIC))
+        if magic != MCAP_MAGIC:
+            from .pds_products import is_product_path
+
+            if is_product_path(p):
+                return "products"
         return "mcap"
     if not p.exists():
         raise InputError(str(p), "path", "no such file or directory")
@@ -454,7 +467,9 @@ def detect_container(path) -> str:
 
 
 def read_downlink(path, validate: bool = True) -> Downlink:
-    """Read a downlink: an MCAP file (container A) or a directory with ``downlink.yaml`` (container B, also a workspace).
+    """Read a downlink: an MCAP file (container A), a directory with ``downlink.yaml`` (container B, also a
+    workspace), or real rover products (a PDS3/VICAR/PDS4 product, a detached label, a Mars 2020 raw-image
+    JSON, or a directory of them; :mod:`.pds_products`).
 
     With ``validate`` (default) every cross-record rule of the format is
     checked and every PNG decoded once (cached in ``ImageProduct.pixels``).
@@ -466,6 +481,10 @@ def read_downlink(path, validate: bool = True) -> Downlink:
         from .downlink_dir import read_dir
 
         dl = read_dir(p.parent if p.is_file() else p)
+    elif kind == "products":
+        from .pds_products import read_products
+
+        dl = read_products(p)
     else:
         from .downlink_mcap import read_mcap
 
