@@ -238,7 +238,11 @@ def _read_pds3(path: Path) -> ProductRead:
 
 
 def _read_vicar(path: Path) -> ProductRead:
-    import vicar
+    try:
+        import vicar
+    except ImportError:
+        raise InputError(path.name, "format", "a plain VICAR file needs the optional reader rms-vicar "
+                                              "(pip install 'scipctl[vicar]'); PDS3-wrapped VICAR reads without it") from None
 
     try:
         with warnings.catch_warnings():
