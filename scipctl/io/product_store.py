@@ -7,8 +7,8 @@ downlink. Two other places may hold them:
 - an **explicit root** given by the operator (``--products-dir DIR`` or
   ``SCIPCTL_PRODUCTS_DIR``): products then go to ``DIR/<key>/``;
 - the **per-user fallback** for a raw downlink whose folder is not writable
-  (read-only archives): ``$XDG_CACHE_HOME/scipctl/sidecars/<key>/``
-  (``~/.cache/...`` when ``XDG_CACHE_HOME`` is unset or not absolute).
+  (read-only archives): ``$XDG_DATA_HOME/scipctl/sidecars/<key>/``
+  (``~/.local/share/...`` when ``XDG_DATA_HOME`` is unset or not absolute).
 
 ``<key>`` is ``<source name>-<first 12 hex digits of the SHA-256 of the
 resolved source path>``, so two downlinks with the same name in different
@@ -51,13 +51,14 @@ def source_key(src) -> str:
 
 
 def user_fallback_root() -> Optional[Path]:
-    """``$XDG_CACHE_HOME/scipctl/sidecars`` (``~/.cache/scipctl/sidecars`` when unset or relative);
+    """``$XDG_DATA_HOME/scipctl/sidecars`` (``~/.local/share/scipctl/sidecars`` when unset or relative);
+    a data folder, not a cache: designations are operator work, and caches get cleaned;
     None when there is no home directory to put it in."""
-    base = os.environ.get("XDG_CACHE_HOME", "")
+    base = os.environ.get("XDG_DATA_HOME", "")
     if base and os.path.isabs(base):
         return Path(base) / "scipctl" / "sidecars"
     try:
-        return Path.home() / ".cache" / "scipctl" / "sidecars"
+        return Path.home() / ".local" / "share" / "scipctl" / "sidecars"
     except (RuntimeError, KeyError):
         return None
 

@@ -34,7 +34,7 @@ def _point_mark(dl):
 
 @pytest.fixture
 def archive(tmp_path, monkeypatch):
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "cache"))
     monkeypatch.delenv("SCIPCTL_PRODUCTS_DIR", raising=False)
     (tmp_path / "archive").mkdir()
     p = tmp_path / "archive" / SAMPLE.name

@@ -20,8 +20,8 @@ from tests.io.readonly_fs import make_read_only, tree
 
 @pytest.fixture
 def archive(tmp_path, monkeypatch):
-    """A raw downlink in its own folder ``archive/``; XDG_CACHE_HOME pointed into tmp_path."""
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    """A raw downlink in its own folder ``archive/``; XDG_DATA_HOME pointed into tmp_path."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "cache"))
     (tmp_path / "archive").mkdir()
     p = tmp_path / "archive" / "sol42.mcap"
     write_downlink(make_small_downlink(), p)
