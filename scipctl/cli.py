@@ -157,11 +157,20 @@ def synth(
     runs: Optional[str] = typer.Option(None, "--runs", help="Comma-separated run names to make (default: all)."),
     no_errors: bool = typer.Option(False, "--no-errors", help="Inject no calibration/pose/vibration/gain errors."),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable list of what was written."),
+    rover: str = typer.Option("default", "--rover", help="default | m2020 (Mars 2020 static camera models + URDF)."),
+    rover_dir: Optional[Path] = typer.Option(
+        None, "--rover-dir", help="Folder of m2020-camera-models.json + m2020.urdf (default: shared/real/12_* beside the checkout)."),
+    texture_from: Optional[Path] = typer.Option(
+        None, "--texture-from", help="Folder of real pictures/products whose texture is draped on the terrain."),
+    texture_crop: Optional[str] = typer.Option(
+        None, "--texture-crop", help="X0,Y0,X1,Y1: the part of each picture to use, fractions of width/height (default 0.1,0.55,0.9,0.92)."),
+    texture_pixel_mm: float = typer.Option(2.5, "--texture-pixel-mm", help="Ground size of one texture pixel, mm."),
 ):
     """Render synthetic downlinks with exact truth."""
     from .commands.synth import run
 
-    run(scenario, seed, out, container, runs, no_errors, json_out)
+    run(scenario, seed, out, container, runs, no_errors, json_out, rover=rover, rover_dir=rover_dir,
+        texture_from=texture_from, texture_crop=texture_crop, texture_pixel_mm=texture_pixel_mm)
 
 
 @app.command()

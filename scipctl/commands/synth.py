@@ -5,6 +5,12 @@ the directory ``OUT/<scenario>-<run>/``), plus ``OUT/<scenario>-<run>.sim.json``
 the simulation record (error settings and every realised error, true and
 estimated poses, target selection). Same arguments, same bytes: nothing in
 the data depends on the clock or on the output path.
+
+``--rover m2020`` renders with the Mars 2020 configuration read at run time
+from ``--rover-dir`` (``m2020-camera-models.json`` + ``m2020.urdf``);
+``--texture-from DIR`` drapes the texture of the pictures under DIR on the
+terrain. Both are recorded (file SHA-256s) in the ``.sim.json``; without them
+the output is byte-identical to what it was before they existed.
 """
 
 from __future__ import annotations
@@ -19,14 +25,65 @@ from ..jsonutil import json_default
 
 
 def regenerate_command(scenario: str, seed: int, container: str, run: str, no_errors: bool,
-                       image_scale: float = 1.0, supersample: int = 2) -> str:
+                       image_scale: float = 1.0, supersample: int = 2, extra_args: str = "") -> str:
+    """The command that makes the same bytes (``extra_args``: the rover/texture options, empty for the defaults)."""
     env = ""
     if image_scale != 1.0:
         env += f"SCIPCTL_SYNTH_IMAGE_SCALE={image_scale:g} "
     if supersample != 2:
         env += f"SCIPCTL_SYNTH_SUPERSAMPLE={supersample} "
     cmd = f"{env}scipctl synth --scenario {scenario} --seed {seed} --container {container} --runs {run}"
-    return cmd + (" --no-errors" if no_errors else "") + " -o OUT"
+    return cmd + (" --no-errors" if no_errors else "") + (f" {extra_args}" if extra_args else "") + " -o OUT"
+
+
+ROVERS = ("default", "m2020")
+M2020_FOLDER_PREFIX = "12_"
+
+
+def _default_m2020_dir() -> Optional[Path]:
+    """``shared/real/12_*`` beside the checkout (``$SCIPCTL_SHARED_REAL`` first), as the tests find it."""
+    import os
+
+    repo = Path(__file__).resolve().parents[2]
+    env = os.environ.get("SCIPCTL_SHARED_REAL")
+    cands = ([Path(env)] if env else []) + [repo / ".." / "shared" / "real", repo / ".." / ".." / "shared" / "real"]
+    for c in cands:
+        if c.is_dir():
+            hits = sorted(c.glob(M2020_FOLDER_PREFIX + "*"))
+            if hits:
+                return hits[0].resolve()
+    return None
+
+
+def load_rover(rover: str, rover_dir: Optional[Path]):
+    """The :class:`~scipctl.sim.rover.SimRover` for ``--rover`` (None for the default: the scenarios' own)."""
+    if rover not in ROVERS:
+        raise InputError("synth", "--rover", f"unknown rover {rover!r} (want one of: {', '.join(ROVERS)})")
+    if rover == "default":
+        if rover_dir is not None:
+            raise InputError("synth", "--rover-dir", "only with --rover m2020")
+        return None
+    from ..io.m2020_geometry import m2020_sim_rover
+
+    folder = rover_dir if rover_dir is not None else _default_m2020_dir()
+    if folder is None:
+        raise InputError("synth", "--rover-dir", "no Mars 2020 models folder given and no shared/real/12_* beside the checkout")
+    if not Path(folder).is_dir():
+        raise InputError(str(folder), "--rover-dir", "not a folder")
+    return m2020_sim_rover(folder)
+
+
+def parse_crop(text: Optional[str]) -> Optional[tuple]:
+    """``"X0,Y0,X1,Y1"`` (fractions, ``0 <= X0 < X1 <= 1``, same for Y) -> tuple, None -> None."""
+    if text is None:
+        return None
+    try:
+        vals = tuple(float(v) for v in text.split(","))
+        if len(vals) != 4 or not (0 <= vals[0] < vals[2] <= 1 and 0 <= vals[1] < vals[3] <= 1):
+            raise ValueError
+    except ValueError:
+        raise InputError("synth", "--texture-crop", f"{text!r}: want X0,Y0,X1,Y1 fractions with 0 <= X0 < X1 <= 1, 0 <= Y0 < Y1 <= 1") from None
+    return vals
 
 
 def record_json(record: dict) -> str:
@@ -37,7 +94,9 @@ def record_json(record: dict) -> str:
 _plain = json_default
 
 
-def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool) -> None:
+def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
+        rover: str = "default", rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
+        texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5) -> None:
     from ..sim.scenarios import SCENARIOS, list_runs
 
     if scenario not in SCENARIOS:
@@ -57,7 +116,26 @@ def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str]
     if out.exists() and not out.is_dir():
         raise InputError(str(out), "-o/--out", "exists and is not a directory")
     image_scale, supersample = _env_quality()
-    written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample)
+    # everything that can be bad input is checked before anything is written
+    sim_rover = load_rover(rover, rover_dir)
+    _check_scale(image_scale, sim_rover)
+    crop = parse_crop(texture_crop)
+    if not (0.1 <= texture_pixel_mm <= 100.0):
+        raise InputError("synth", "--texture-pixel-mm", f"{texture_pixel_mm:g}: want 0.1 .. 100")
+    texture = None
+    extra = []
+    if sim_rover is not None:
+        extra.append(f"--rover {rover}" + (f" --rover-dir {rover_dir}" if rover_dir is not None else ""))
+    if texture_from is not None:
+        from ..io.texture_sources import read_texture_sources
+
+        texture = read_texture_sources(texture_from, crop, texture_pixel_mm * 1e-3)
+        extra.append(f"--texture-from {texture_from}" + (f" --texture-crop {texture_crop}" if texture_crop else "")
+                     + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
+    elif texture_crop is not None or texture_pixel_mm != 2.5:
+        raise InputError("synth", "--texture-crop" if texture_crop is not None else "--texture-pixel-mm", "only with --texture-from")
+    written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample,
+                         rover=sim_rover, texture=texture, extra_args=" ".join(extra))
     if json_out:
         from ..cli import emit_json
 
@@ -76,10 +154,10 @@ def _env_quality() -> tuple[float, int]:
     raw_q = os.environ.get("SCIPCTL_SYNTH_SUPERSAMPLE", "2")
     try:
         scale = float(raw_s)
-        if not (0 < scale <= 1) or abs(1024 * scale - round(1024 * scale)) > 1e-9:
+        if not (0 < scale <= 1):
             raise ValueError
     except ValueError:
-        raise InputError("environment", "SCIPCTL_SYNTH_IMAGE_SCALE", f"{raw_s!r}: want a number in (0, 1] with 1024 x scale whole") from None
+        raise InputError("environment", "SCIPCTL_SYNTH_IMAGE_SCALE", f"{raw_s!r}: want a number in (0, 1]") from None
     try:
         ss = int(raw_q)
         if not 1 <= ss <= 8:
@@ -89,9 +167,27 @@ def _env_quality() -> tuple[float, int]:
     return scale, ss
 
 
+def _check_scale(scale: float, sim_rover) -> None:
+    """``SCIPCTL_SYNTH_IMAGE_SCALE`` must give whole image sizes for every camera of the rover (1024 px default)."""
+    from ..sim.rover import default_rover_config
+
+    config = default_rover_config() if sim_rover is None else sim_rover.config
+    for name, cam in sorted(config.cameras.items()):
+        for spec in (cam.left, cam.right):
+            w, h = spec.width * scale, spec.height * scale
+            if abs(w - round(w)) > 1e-9 or abs(h - round(h)) > 1e-9:
+                raise InputError("environment", "SCIPCTL_SYNTH_IMAGE_SCALE",
+                                 f"{scale:g}: {name} {spec.width} x {spec.height} x scale is not whole")
+
+
 def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, no_errors: bool,
-               image_scale: float = 1.0, supersample: int = 2, show_progress: bool = True) -> list[dict]:
-    """Build and write each run; returns one summary per run (path, counts, sha256)."""
+               image_scale: float = 1.0, supersample: int = 2, show_progress: bool = True,
+               rover=None, texture=None, extra_args: str = "") -> list[dict]:
+    """Build and write each run; returns one summary per run (path, counts, sha256).
+
+    ``rover``: a :class:`~scipctl.sim.rover.SimRover` (None: default); ``texture``: a
+    :class:`~scipctl.sim.texture.TextureSources` (None: procedural); ``extra_args``: their options, for the
+    record's ``regenerate`` command."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.atomic import atomic_write_text
@@ -115,7 +211,8 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                 bar.update(task, total=total, completed=done, description=f"{name}: {pid}")
 
             errors = ErrorSettings.none() if no_errors else default_errors(scenario)
-            sim = build_run(scenario, run_name, seed, errors=errors, image_scale=image_scale, supersample=supersample, progress=cb)
+            sim = build_run(scenario, run_name, seed, errors=errors, image_scale=image_scale, supersample=supersample, progress=cb,
+                            rover=rover, texture=texture)
             path = out / (f"{name}.mcap" if container == "mcap" else name)
             bar.update(task, description=f"{name}: writing {path.name}")
             write_downlink(sim.downlink, path, container)
@@ -124,7 +221,7 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
 
             rec["written_by"] = {"tool": "scipctl", "version": __version__,
                                  "regenerate": regenerate_command(scenario, seed, container, run_name, no_errors,
-                                                                 image_scale, supersample)}
+                                                                 image_scale, supersample, extra_args)}
             rec["no_errors"] = bool(no_errors)
             rec_path = out / f"{name}.sim.json"
             atomic_write_text(rec_path, record_json(rec))

@@ -158,3 +158,41 @@ def m2020_rover_config(folder, navcam_scale: int = 4, hazcam_scale: int = 4, haz
                                in_rover(f"MCAM_Z_RIGHT-{pancam_zoom}", 1)),
     }
     return RoverConfig("m2020 (nasa-jpl/m2020-urdf-models static models + URDF)", mast, cams)
+
+
+WHEEL_LINKS = ("Body_WheelLeftFront", "Body_WheelRightFront", "Body_WheelLeftMiddle", "Body_WheelRightMiddle",
+               "Body_WheelLeftRear", "Body_WheelRightRear")
+
+
+def wheels_xy_from_urdf(joints: dict) -> np.ndarray:
+    """Rover-frame (x, y) ``(6, 2)`` metres of the six wheel hubs at zero joint angles (the contact points lie under
+    them); :class:`InputError` if the URDF lacks a wheel link."""
+    out = []
+    for link in WHEEL_LINKS:
+        T = RigidTransform.identity()
+        for j in chain(joints, ROVER_LINK, link):
+            T = T @ j.T_parent_child(0.0)
+        out.append(T.t[:2])
+    return np.array(out)
+
+
+def m2020_sim_rover(folder, **config_kwargs):
+    """The Mars 2020 rover for the simulator's scenarios (:class:`~scipctl.sim.rover.SimRover`): the configuration
+    of :func:`m2020_rover_config`, the URDF's wheel hubs, and the SHA-256 of the two files read."""
+    from ..sim.rover import sim_rover_from_config
+    from .provenance import sha256_file
+
+    folder = Path(folder)
+    for name in (MODELS_FILE, URDF_FILE):
+        if not (folder / name).is_file():
+            raise InputError(str(folder), name, "missing (the Mars 2020 static camera models and URDF folder)")
+    config = m2020_rover_config(folder, **config_kwargs)
+    wheels = wheels_xy_from_urdf(read_urdf_joints(folder / URDF_FILE))
+    inputs = tuple((name, sha256_file(folder / name)) for name in (MODELS_FILE, URDF_FILE))
+    notes = ("pancam is Mastcam-Z (MCAM_Z_LEFT/RIGHT at zoom " + config_kwargs.get("pancam_zoom", "Z034")
+             + "): Mars 2020 has no pancam; Mastcam-Z rides the same RSM head",
+             "navcam/hazcam: NAVL/NAVR and front HAZFL/HAZFR string A, 4x pixel averaging (1280 x 960)")
+    try:
+        return sim_rover_from_config("m2020", config, wheels, inputs, notes)
+    except ValueError as e:
+        raise InputError(str(folder), MODELS_FILE, str(e)) from None

@@ -32,7 +32,7 @@ Field of view: pancam 16.3 deg, navcam 45.3 deg, hazcam ~124 deg (see
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -154,3 +154,83 @@ def describe(config: RoverConfig) -> dict:
                 "C_m": spec.model.C.tolist(),
             }
     return out
+
+
+# ----------------------------------------------------------------------------- rover profiles for the scenarios
+# the default rover's wheel contact points (rover frame x, y), metres: a 1 m x 1 m six-wheeler
+DEFAULT_WHEELS_XY_M = np.array([[0.5, -0.45], [0.5, 0.45], [0.0, -0.5], [0.0, 0.5], [-0.5, -0.45], [-0.5, 0.45]])
+# where the default rover's camera pairs stand along rover x (metres), used to place the stops
+DEFAULT_MAST_REF_X_M = MAST_X_M + 0.07  # between the pancam and navcam centres
+DEFAULT_NAVCAM_REF_X_M = MAST_X_M + 0.08
+DEFAULT_HAZCAM_REF_X_M = HAZCAM_X_M
+DEFAULT_HALF_TRACK_M = 0.5
+
+
+@dataclass(frozen=True)
+class SimRover:
+    """What the scenarios need to know about a rover besides its camera configuration.
+
+    ``config``: the calibrated :class:`RoverConfig` (full-size cameras, rover frame at zero mast angles);
+    ``wheels_xy_m`` ``(K, 2)``: wheel contact points in the rover frame (x forward, y right), the rover's pose on
+    the terrain is the plane fitted to the ground under them; ``*_ref_x_m``: rover-frame x of the camera pairs'
+    centres with the mast looking forward (the first guess of where a stop stands; the stop is then moved until
+    the true cameras really stand at the planned distance); ``corridor_extra_m``: added to the half width of the
+    rock-free approach corridors (a wider rover needs wider corridors); ``inputs``: ``((file label, sha256), ...)``
+    of the files the configuration was read from (provenance); ``key``: ``"default"`` or ``"m2020"``.
+    """
+
+    key: str
+    config: RoverConfig
+    wheels_xy_m: np.ndarray
+    mast_ref_x_m: float
+    navcam_ref_x_m: float
+    hazcam_ref_x_m: float
+    corridor_extra_m: float = 0.0
+    inputs: tuple = ()
+    notes: tuple = ()
+
+    @property
+    def is_default(self) -> bool:
+        return self.key == "default"
+
+    def to_record(self) -> dict:
+        return {"key": self.key, "name": self.config.name, "wheels_xy_m": np.asarray(self.wheels_xy_m).tolist(),
+                "mast_ref_x_m": self.mast_ref_x_m, "navcam_ref_x_m": self.navcam_ref_x_m,
+                "hazcam_ref_x_m": self.hazcam_ref_x_m, "corridor_extra_m": self.corridor_extra_m,
+                "inputs": [{"file": f, "sha256": h} for f, h in self.inputs], "notes": list(self.notes)}
+
+
+def default_sim_rover() -> SimRover:
+    """The ``rocky8-sim`` rover of :func:`default_rover_config` with its fixed placement constants."""
+    return SimRover("default", default_rover_config(), DEFAULT_WHEELS_XY_M, DEFAULT_MAST_REF_X_M,
+                    DEFAULT_NAVCAM_REF_X_M, DEFAULT_HAZCAM_REF_X_M)
+
+
+def _pair_centre_forward_m(config: RoverConfig, camera: str) -> np.ndarray:
+    """Rover-frame centre ``(3,)`` of a camera pair's two C vectors, mast pointed at a point 10 m ahead at head height."""
+    cam = config.cameras[camera]
+    pan = tilt = 0.0
+    if cam.mount == "mast":
+        head = np.asarray(config.mast.tilt.origin_m, float)
+        pan, tilt = config.point_at(camera, head + np.array([10.0, 0.0, 0.0]))
+    return 0.5 * (config.camera_model(camera, "left", pan, tilt).C + config.camera_model(camera, "right", pan, tilt).C)
+
+
+def sim_rover_from_config(key: str, config: RoverConfig, wheels_xy_m, inputs: tuple = (), notes: tuple = ()) -> SimRover:
+    """A :class:`SimRover` for any configuration with ``pancam``, ``navcam`` (mast) and ``hazcam`` pairs.
+
+    The reference x of each pair is measured from the configuration (mast pointed forward); the corridors widen by
+    the amount the wheels' half track exceeds the default rover's.
+    """
+    missing = [c for c in ("pancam", "navcam", "hazcam") if c not in config.cameras]
+    if missing:
+        raise ValueError(f"rover configuration {config.name!r} lacks camera(s) {', '.join(missing)}")
+    wheels = np.asarray(wheels_xy_m, float).reshape(-1, 2)
+    if len(wheels) < 3:
+        raise ValueError("wheels_xy_m: need at least 3 wheel contact points")
+    pan_c = _pair_centre_forward_m(config, "pancam")
+    nav_c = _pair_centre_forward_m(config, "navcam")
+    haz_c = _pair_centre_forward_m(config, "hazcam")
+    extra = max(0.0, float(np.max(np.abs(wheels[:, 1]))) - DEFAULT_HALF_TRACK_M)
+    return SimRover(key, config, wheels, float(0.5 * (pan_c[0] + nav_c[0])), float(nav_c[0]), float(haz_c[0]),
+                    extra, tuple(inputs), tuple(notes))

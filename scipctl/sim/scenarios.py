@@ -52,10 +52,11 @@ from .scene import GEOM_ROCKS, GEOM_TERRAIN, MAT_ROCK, MAT_TERRAIN, Scene, make_
 SCENARIOS = ("paper", "traverse")
 KINDS = ("flat", "point", "edge", "sand", "contrast")
 MISSION = "scip-sim"
-MAST_REF_X_M = rover_mod.MAST_X_M + 0.07  # between the pancam and navcam centres
-NAVCAM_REF_X_M = rover_mod.MAST_X_M + 0.08
-HAZCAM_REF_X_M = rover_mod.HAZCAM_X_M
-WHEELS_XY_M = np.array([[0.5, -0.45], [0.5, 0.45], [0.0, -0.5], [0.0, 0.5], [-0.5, -0.45], [-0.5, 0.45]])
+# the default rover's placement constants (a SimRover carries each rover's own: scipctl/sim/rover.py)
+MAST_REF_X_M = rover_mod.DEFAULT_MAST_REF_X_M  # between the pancam and navcam centres
+NAVCAM_REF_X_M = rover_mod.DEFAULT_NAVCAM_REF_X_M
+HAZCAM_REF_X_M = rover_mod.DEFAULT_HAZCAM_REF_X_M
+WHEELS_XY_M = rover_mod.DEFAULT_WHEELS_XY_M
 DEFAULT_BITS = {"pancam": 8, "navcam": 8, "hazcam": 8}
 EXPOSURE_MS_PER_UNIT = {"pancam": 40.0, "navcam": 25.0, "hazcam": 15.0}
 DRIVE_SPEED_M_S = 0.05
@@ -110,6 +111,7 @@ class RunPlan:
     kinds: tuple  # target kinds wanted, in order of preference
     key_images: list  # [(stop label, camera)] whose pairs must see every target
     sol: int = 1
+    rover: Optional[rover_mod.SimRover] = field(default=None, repr=False)  # None: the default rover
 
     @property
     def name(self) -> str:
@@ -159,8 +161,12 @@ def _scene_params(scenario: str, seed: int, scene_index: int):
     return bearing, turn_sign, bearing + sun_off, scene_seed
 
 
-def plan_run(scenario: str, run: str, seed: int) -> RunPlan:
-    """The geometry of one run (no rendering)."""
+def plan_run(scenario: str, run: str, seed: int, rover: Optional[rover_mod.SimRover] = None) -> RunPlan:
+    """The geometry of one run (no rendering). ``rover``: whose placement constants and corridor width to use
+    (None: the default rover)."""
+    rv = rover_mod.default_sim_rover() if rover is None else rover
+    MAST_REF_X_M, NAVCAM_REF_X_M, HAZCAM_REF_X_M = rv.mast_ref_x_m, rv.navcam_ref_x_m, rv.hazcam_ref_x_m
+    extra = rv.corridor_extra_m
     runs = list_runs(scenario)
     if run not in runs:
         raise ValueError(f"run: unknown {run!r} for scenario {scenario} (want one of {', '.join(runs)})")
@@ -184,13 +190,14 @@ def plan_run(scenario: str, run: str, seed: int) -> RunPlan:
         xy, yaw = _place(HAZCAM_REF_X_M, near_d, near_b, (0.0, 0.0, near_yaw))
         stops.append(StopPlan("near", xy, yaw, ("navcam", "hazcam"), "hazcam", near_d, near_b))
         _finish_legs(stops, arc_legs={3} if alpha else set())
-        keep = _corridors([beta, beta + sgn * 30.0 * DEG])
+        keep = _corridors([beta, beta + sgn * 30.0 * DEG], half_width=1.0 + extra)
         # the arc between the far arc stop and the near stop
         arc = [_place(NAVCAM_REF_X_M, r, beta + sgn * f * 30.0 * DEG)[0] for r, f in ((3.2, 1.0), (2.4, 0.6), (1.8, 0.3), (1.6, 0.0))]
-        keep += [(arc[i], arc[i + 1], 1.0) for i in range(len(arc) - 1)]
+        keep += [(arc[i], arc[i + 1], 1.0 + extra) for i in range(len(arc) - 1)]
         kinds = tuple(KINDS[(3 * run_index + j) % len(KINDS)] for j in range(3))
         key = [("near", "hazcam"), ("near", "navcam"), ("far", "navcam")]
-        return RunPlan(scenario, run, seed, scene_index, scene_seed, beta, sun_az, keep, stops, kinds, key, sol=run_index + 1)
+        return RunPlan(scenario, run, seed, scene_index, scene_seed, beta, sun_az, keep, stops, kinds, key, sol=run_index + 1,
+                       rover=rover)
     # traverse
     curve = 0.0 if approach == "straight" else sgn * 35.0 * DEG
     haz_off = HAZCAM_REF_X_M - MAST_REF_X_M
@@ -220,11 +227,12 @@ def plan_run(scenario: str, run: str, seed: int) -> RunPlan:
     bs = np.linspace(0, 1, 8)
     keep = []
     pts = [_place(MAST_REF_X_M, d_end + (10.5 - d_end) * f, beta + curve * (1 - f))[0] for f in bs]
-    keep += [(pts[i], pts[i + 1], 1.1) for i in range(len(pts) - 1)]
+    keep += [(pts[i], pts[i + 1], 1.1 + extra) for i in range(len(pts) - 1)]
     kinds = tuple(KINDS[(3 * run_index + j) % len(KINDS)] for j in range(3))
     first_nav = next(s.label for s in stops if "navcam" in s.cameras)
     key = [(stops[-1].label, "hazcam"), (stops[-1].label, "navcam"), (first_nav, "navcam"), (stops[0].label, "pancam")]
-    return RunPlan(scenario, run, seed, scene_index, scene_seed, beta, sun_az, keep, stops, kinds, key, sol=run_index + 1)
+    return RunPlan(scenario, run, seed, scene_index, scene_seed, beta, sun_az, keep, stops, kinds, key, sol=run_index + 1,
+                   rover=rover)
 
 
 def default_errors(scenario: str) -> ErrorSettings:
@@ -239,9 +247,18 @@ def default_errors(scenario: str) -> ErrorSettings:
 _SCENES: dict = {}
 
 
-def scene_for(plan: RunPlan) -> Scene:
-    """The plan's scene (cached per scene seed: both runs of a scene share it)."""
+def scene_for(plan: RunPlan, texture=None) -> Scene:
+    """The plan's scene (cached per scene seed, rover and texture: both runs of a scene share it).
+
+    ``texture``: a :class:`~scipctl.sim.texture.TextureSources` to drape on the terrain (None: procedural albedo);
+    its atlas is built from the scene seed, so the texture is a property of the scene.
+    """
+    rover_key = None if plan.rover is None or plan.rover.is_default else (plan.rover.key, plan.rover.corridor_extra_m,
+                                                                          plan.rover.mast_ref_x_m, plan.rover.navcam_ref_x_m,
+                                                                          plan.rover.hazcam_ref_x_m)
     key = (plan.scenario, plan.scene_seed)
+    if rover_key is not None or texture is not None:
+        key = key + (rover_key, None if texture is None else texture.digest)
     if key not in _SCENES:
         if len(_SCENES) >= 4:  # ~170 MB each
             _SCENES.pop(next(iter(_SCENES)))
@@ -249,21 +266,29 @@ def scene_for(plan: RunPlan) -> Scene:
         keep = []
         for r in list_runs(plan.scenario):
             if r.split("-")[0] == f"s{plan.scene_index}":
-                keep += plan_run(plan.scenario, r, plan.seed).keep_clear
-        _SCENES[key] = make_scene(plan.scene_seed, keep_clear=keep, sun_azimuth_rad=plan.sun_azimuth_rad)
+                keep += plan_run(plan.scenario, r, plan.seed, plan.rover).keep_clear
+        surface_texture = None
+        if texture is not None:
+            from .texture import build_surface_texture
+
+            surface_texture = build_surface_texture(texture, plan.scene_seed)
+        _SCENES[key] = make_scene(plan.scene_seed, keep_clear=keep, sun_azimuth_rad=plan.sun_azimuth_rad,
+                                  texture=surface_texture)
     return _SCENES[key]
 
 
 # ----------------------------------------------------------------------------- geometry
-def true_rover_pose(scene: Scene, xy_m, yaw_rad: float) -> RigidTransform:
+def true_rover_pose(scene: Scene, xy_m, yaw_rad: float, wheels_xy_m=None) -> RigidTransform:
     """``T_site_rover`` of a rover standing on the terrain at ``xy_m`` (2,) with heading ``yaw_rad``.
 
-    The wheels' ground heights are fitted by a plane; the rover frame's z axis is its downward normal and the
-    origin lies on it under the reference point.
+    The ground heights under the wheels (``wheels_xy_m`` ``(K, 2)`` rover frame; default the default rover's) are
+    fitted by a plane; the rover frame's z axis is its downward normal and the origin lies on it under the
+    reference point.
     """
+    wheels = WHEELS_XY_M if wheels_xy_m is None else np.asarray(wheels_xy_m, float)
     c, s = np.cos(yaw_rad), np.sin(yaw_rad)
     Rz = np.array([[c, -s], [s, c]])
-    wxy = np.asarray(xy_m, float)[None, :] + WHEELS_XY_M @ Rz.T
+    wxy = np.asarray(xy_m, float)[None, :] + wheels @ Rz.T
     h = scene.ground_height_m(wxy)
     A = np.concatenate([np.ones((len(wxy), 1)), wxy - np.asarray(xy_m)[None, :]], axis=1)
     a0, hx, hy = np.linalg.lstsq(A, h, rcond=None)[0]
@@ -284,17 +309,17 @@ def _ref_point_xy(stop: StopPlan, T: RigidTransform, calibrated: RoverConfig, tr
 
 
 def place_on_terrain(scene: Scene, stop: StopPlan, calibrated: RoverConfig, true_cfg: RoverConfig, aim_site,
-                     iterations: int = 4) -> RigidTransform:
+                     iterations: int = 4, wheels_xy_m=None) -> RigidTransform:
     """The true ``T_site_rover`` of a stop, moved so that its reference cameras really stand ``ref_dist_m`` from
     the rock along ``bearing_rad`` (the rover's roll and pitch on the terrain move the mast head sideways).
     Updates ``stop.xy_m``."""
     want = stop.ref_dist_m * np.array([np.cos(stop.bearing_rad), np.sin(stop.bearing_rad)]) + scene.target_rock.centre_xy_m
     xy = np.array(stop.xy_m, float)
     for _ in range(iterations):
-        T = true_rover_pose(scene, xy, stop.yaw_rad)
+        T = true_rover_pose(scene, xy, stop.yaw_rad, wheels_xy_m)
         xy = xy + (want - _ref_point_xy(stop, T, calibrated, true_cfg, aim_site))
     stop.xy_m = xy
-    return true_rover_pose(scene, xy, stop.yaw_rad)
+    return true_rover_pose(scene, xy, stop.yaw_rad, wheels_xy_m)
 
 
 @dataclass
@@ -528,7 +553,8 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
     """Geometry of every image of a run: poses, pointing, calibrated and true models. Returns (products, record)."""
     true_cfg = true_rover_config(calibrated, errors)
     aim_site = scene.target_rock.aim_point_site()
-    T_true = [place_on_terrain(scene, s, calibrated, true_cfg, aim_site) for s in plan.stops]
+    wheels = None if plan.rover is None else plan.rover.wheels_xy_m
+    T_true = [place_on_terrain(scene, s, calibrated, true_cfg, aim_site, wheels_xy_m=wheels) for s in plan.stops]
     for k in range(1, len(plan.stops)):  # the drive between the placed stops
         s1 = plan.stops[k]
         s1.path_length_m = float(np.linalg.norm(T_true[k].t[:2] - T_true[k - 1].t[:2])) * (1.05 if s1.arc_leg else 1.0)
@@ -611,20 +637,25 @@ def estimated_pose(T_est: RigidTransform, cumulative_path_m: float, n_legs: int,
 
 def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings] = None, image_scale: float = 1.0,
               supersample: int = 2, render: bool = True, bits: Optional[dict] = None,
-              progress: Optional[Callable[[int, int, str], None]] = None) -> SimRun:
+              progress: Optional[Callable[[int, int, str], None]] = None,
+              rover: Optional[rover_mod.SimRover] = None, texture=None) -> SimRun:
     """Simulate one run into an in-memory :class:`~scipctl.model.Downlink` with truth.
 
     ``errors`` defaults to :func:`default_errors` (all errors on); ``image_scale`` resamples every camera
-    (e.g. 0.125: 128 x 128 images, for tests); ``render=False`` skips the pixels (black images, still exact
-    marks and truth); ``bits`` maps camera -> 8 or 12; ``progress(done, total, product_id)`` is called per image.
+    (e.g. 0.125: 1024 -> 128 px for the default rover; it must give whole sizes for every camera of the rover);
+    ``render=False`` skips the pixels (black images, still exact marks and truth); ``bits`` maps camera -> 8 or 12;
+    ``progress(done, total, product_id)`` is called per image. ``rover``: a :class:`~scipctl.sim.rover.SimRover`
+    (None: the default ``rocky8-sim``; e.g. ``io.m2020_geometry.m2020_sim_rover(folder)``); ``texture``: a
+    :class:`~scipctl.sim.texture.TextureSources` draped on the terrain (None: procedural albedo). The record gains
+    ``rover`` / ``texture`` entries only when they are not the defaults.
     """
     from ..io.images import encode_png
     from .render import Sensor, auto_exposure, expose, render_radiance
 
     errors = default_errors(scenario) if errors is None else errors
-    plan = plan_run(scenario, run, seed)
-    scene = scene_for(plan)
-    calibrated = rover_mod.default_rover_config()
+    plan = plan_run(scenario, run, seed, rover)
+    scene = scene_for(plan, texture)
+    calibrated = rover_mod.default_rover_config() if rover is None else rover.config
     if image_scale != 1.0:
         calibrated = rover_mod.scale_rover_config(calibrated, image_scale)
     products, geo_rec = plan_products(plan, scene, calibrated, errors)
@@ -673,4 +704,8 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
                      "n_marks": len(m.marks)} for t, m in zip(targets, marks)],
         "target_selection": tgt_rec, "images": img_rec, **geo_rec,
     }
+    if rover is not None and not rover.is_default:
+        record["rover"] = rover.to_record()
+    if texture is not None:
+        record["texture"] = dict(texture.to_record(), **scene.appearance.texture.to_record())
     return SimRun(plan, dl, record, scene, products, targets)

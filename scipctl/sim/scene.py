@@ -305,6 +305,7 @@ class Appearance:
     soil_albedo: float = 0.34
     sand_albedo: float = 0.44
     rock_albedo: float = 0.26
+    texture: Optional[object] = None  # a sim.texture.SurfaceTexture: real relative albedo replacing the soil's grain
 
     def sand_weight(self, xy: np.ndarray) -> np.ndarray:
         """0 (soil) .. 1 (drift sand) ``(N,)``: irregular patches (radius modulated by the angle) with a soft 4 cm edge."""
@@ -342,7 +343,10 @@ class Appearance:
             base *= f32(1.0) + self.patches.eval_T(PT, f)
             soil = np.flatnonzero(ws < 1)
             tex = np.zeros(len(ter), np.float32)
-            if len(soil) == len(ter):
+            if self.texture is not None:  # real texture: a function of the ground point (x, y), faded by the footprint
+                if len(soil):
+                    tex[soil] = self.texture.sample(PT[:2, soil].T, sub(f, soil))
+            elif len(soil) == len(ter):
                 tex = self.soil.eval_T(PT, f)
             elif len(soil):
                 tex[soil] = self.soil.eval_T(np.ascontiguousarray(PT[:, soil]), sub(f, soil))
@@ -357,10 +361,11 @@ class Appearance:
                     rip *= lod_weight(0.09 / 4, f[sel])
                 tex[sel] = (1 - ws[sel]) * tex[sel] + ws[sel] * (sand + rip)
             a = base * (f32(1.0) + tex)
-            s = self.spots.eval_T(PT, f)  # ~[-0.5, 0.5]
-            dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
-            bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
-            a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
+            if self.texture is None:  # the real texture carries its own specks
+                s = self.spots.eval_T(PT, f)  # ~[-0.5, 0.5]
+                dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
+                bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
+                a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
             out[ter] = a
         rk = np.flatnonzero((material == MAT_ROCK) | (material == MAT_PEBBLE))
         if len(rk):
@@ -629,11 +634,12 @@ def _dist_to_segments(xy, segments):
 
 
 def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_deg: Optional[float] = None,
-               sun_azimuth_rad: Optional[float] = None) -> Scene:
+               sun_azimuth_rad: Optional[float] = None, texture=None) -> Scene:
     """A scene from ``seed`` (any int). ``keep_clear``: ``[(p0_xy, p1_xy, half_width_m), ...]`` corridors free of rocks.
 
     The target rock is ``scene.rocks[0]`` at the origin. ``sun_azimuth_rad``: direction (from north towards
-    east) in which the sun stands; default random.
+    east) in which the sun stands; default random. ``texture``: a :class:`~scipctl.sim.texture.SurfaceTexture`
+    whose relative albedo replaces the procedural soil grain and specks (geometry and random draws unchanged).
     """
     ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, 0x5C1B])
     r_field, r_rock, r_peb, r_app, r_sun = (np.random.default_rng(s) for s in ss.spawn(5))
@@ -733,6 +739,10 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_de
         off += len(V)
 
     app = make_appearance(r_app, sand)
+    if texture is not None:
+        from dataclasses import replace as _replace
+
+        app = _replace(app, texture=texture)
     el = np.deg2rad(sun_elevation_deg if sun_elevation_deg is not None else r_sun.uniform(35, 60))
     az = r_sun.uniform(0, 2 * np.pi)
     if sun_azimuth_rad is not None:

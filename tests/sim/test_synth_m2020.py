@@ -1,0 +1,109 @@
+"""``synth --rover m2020``: the Mars 2020 configuration (real static models + URDF, read at run time) renders a
+downlink that validates, carries the M2020 models pointed through the URDF's RSM chain, and marks exactly."""
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from scipctl.cli import app
+from scipctl.io.downlink import read_downlink
+from scipctl.io.m2020_geometry import m2020_rover_config, m2020_sim_rover
+from scipctl.sim.rover import scale_model
+from scipctl.sim.scenarios import plan_run, scene_for
+from tests.io.real_data import real
+
+runner = CliRunner()
+SCALE = 0.125
+SMALL_ENV = {"SCIPCTL_SYNTH_IMAGE_SCALE": str(SCALE), "SCIPCTL_SYNTH_SUPERSAMPLE": "1"}
+
+
+@pytest.fixture(scope="module")
+def m2020_run(tmp_path_factory):
+    folder = real("12_")
+    out = tmp_path_factory.mktemp("m2020")
+    r = runner.invoke(app, ["synth", "--seed", "1", "--runs", "s1-straight", "--rover", "m2020", "--rover-dir", str(folder),
+                            "-o", str(out), "--json"], env=SMALL_ENV)
+    assert r.exit_code == 0, r.stderr
+    return folder, out, json.loads(r.stdout)
+
+
+def test_m2020_downlink_validates_and_carries_the_m2020_models_pointed_through_the_urdf(m2020_run):
+    folder, out, summary = m2020_run
+    dl = read_downlink(out / "paper-s1-straight.mcap")  # validates
+    assert dl.rover_config.name.startswith("m2020")
+    rc = m2020_rover_config(folder)
+    assert len(dl.images) == summary["runs"][0]["images"] == 12
+    for im in dl.images:
+        spec = rc.spec(im.camera, im.eye)
+        assert (im.width, im.height) == (round(spec.width * SCALE), round(spec.height * SCALE))
+        assert im.pixels.shape == (im.height, im.width) and im.pixels.std() > 0
+        pan, tilt = (im.mast.pan_rad, im.mast.tilt_rad) if im.mast is not None else (0.0, 0.0)
+        want = scale_model(rc.camera_model(im.camera, im.eye, pan, tilt), SCALE)
+        for k in ("C", "A", "H", "V"):
+            assert np.allclose(getattr(im.camera_model, k), getattr(want, k), atol=1e-9), (im.product_id, k)
+        assert im.camera_model.kind == spec.model.kind
+        if im.camera == "hazcam":
+            assert im.mast is None  # body-mounted
+    # Mastcam-Z stands in for the pancam, NAVL/NAVR for the navcams
+    assert abs(rc.spec("pancam", "left").model.hs - dl.rover_config.spec("pancam", "left").model.hs / SCALE) \
+        < 0.02 * rc.spec("pancam", "left").model.hs
+
+
+def test_m2020_marks_are_the_exact_projection_of_the_true_targets(m2020_run):
+    folder, out, _ = m2020_run
+    dl = read_downlink(out / "paper-s1-straight.mcap")
+    scene = scene_for(plan_run("paper", "s1-straight", 1, m2020_sim_rover(folder)))
+    n = 0
+    for tm in dl.targets:
+        X = dl.truth_target(tm.id).xyz_site_m
+        for m in tm.marks:
+            tr = dl.truth_for(m.product_id)
+            uv = tr.camera_model.project(tr.pose.T_site_rover.inverse().apply(X[None]))[0]
+            assert np.hypot(uv[0] - m.u, uv[1] - m.v) < 1e-6
+            o, d = tr.camera_model.transformed(tr.pose.T_site_rover).unproject(np.array([[m.u, m.v]]))
+            assert np.linalg.norm(scene.cast(o, d).points[0] - X) < 1e-3
+            n += 1
+    assert len(dl.targets) == 3 and n >= 3 * 6  # every target in both eyes of the 3 key pairs at least
+
+
+def test_m2020_record_names_the_files_and_the_pancam_stand_in(m2020_run):
+    folder, out, _ = m2020_run
+    rec = json.loads((out / "paper-s1-straight.sim.json").read_text())
+    files = {f["file"]: f["sha256"] for f in rec["rover"]["inputs"]}
+    from scipctl.io.provenance import sha256_file
+
+    assert files == {n: sha256_file(folder / n) for n in ("m2020-camera-models.json", "m2020.urdf")}
+    assert "--rover m2020" in rec["written_by"]["regenerate"]
+    assert any("Mastcam-Z" in n for n in rec["rover"]["notes"])
+    # the URDF's wheel hubs: a 2.4 m x 2.4 m six-wheeler, so the approach corridors widened
+    assert np.ptp(np.array(rec["rover"]["wheels_xy_m"])[:, 1]) > 2.0 and rec["rover"]["corridor_extra_m"] > 0.5
+
+
+@pytest.mark.parametrize("args,field", [
+    (["--rover", "curiosity"], "--rover"),
+    (["--rover", "m2020", "--rover-dir", "/nonexistent/m2020"], "--rover-dir"),
+    (["--rover-dir", "/tmp"], "--rover-dir"),
+])
+def test_bad_rover_exit_2_nothing_written(tmp_path, args, field):
+    r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), *args], env=SMALL_ENV)
+    assert r.exit_code == 2 and field in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_m2020_folder_without_the_urdf_names_the_file(tmp_path):
+    (tmp_path / "m").mkdir()
+    (tmp_path / "m" / "m2020-camera-models.json").write_text("[]")
+    r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), "--rover", "m2020", "--rover-dir", str(tmp_path / "m")],
+                      env=SMALL_ENV)
+    assert r.exit_code == 2 and "m2020.urdf" in r.stderr and not (tmp_path / "o").exists()
+
+
+def test_scale_hook_checked_against_the_m2020_sizes(tmp_path):
+    folder = real("12_")
+    # 1280 x 960 navcams and 1648 x 1200 Mastcam-Z at 0.3: not whole
+    r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), "--rover", "m2020", "--rover-dir", str(folder)],
+                      env={"SCIPCTL_SYNTH_IMAGE_SCALE": "0.3"})
+    assert r.exit_code == 2 and "SCIPCTL_SYNTH_IMAGE_SCALE" in r.stderr and not (tmp_path / "o").exists()
