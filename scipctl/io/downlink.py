@@ -116,7 +116,10 @@ class Fields:
         v = self.d[key]
         if not _is_num(v):
             raise self.err(key, f"must be a number, got {_type_name(v)} {v!r}"[:200])
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:  # an integer such as 10**400
+            raise self.err(key, "must be finite, got an integer too large for a float") from None
         if not math.isfinite(v):
             raise self.err(key, f"must be finite, got {v!r}")
         if min_value is not None and v < min_value:
@@ -148,7 +151,10 @@ class Fields:
         for x in v:
             if not _is_num(x):
                 raise self.err(key, f"must be a list of {n} numbers, got {v!r}"[:200])
-            x = float(x)
+            try:
+                x = float(x)
+            except OverflowError:
+                raise self.err(key, f"must be finite, got an integer too large for a float in {v!r}"[:200]) from None
             if not math.isfinite(x):
                 raise self.err(key, f"must be finite, got {v!r}"[:200])
             out.append(x)

@@ -135,10 +135,12 @@ WRONG = [
     ("mast.pan_rad", True, "must be a number"),
     ("image.format", "jpeg", "must be 'png'"),
     ("image.data", "not base64 !!", "not valid base64"),
+    ("time_s", 10**400, "integer too large for a float"),  # float(10**400) raised OverflowError
+    ("pose.position_m", [10**400, 0, 0], "integer too large for a float"),
 ]
 
 
-@pytest.mark.parametrize("key, value, fragment", WRONG, ids=[f"{w[0]}={w[1]!r}" for w in WRONG])
+@pytest.mark.parametrize("key, value, fragment", WRONG, ids=[f"{w[0]}={w[1]!r}"[:60] for w in WRONG])
 def test_wrong_type_or_value(tmp_path, key, value, fragment):
     path = mcap_with(tmp_path, _set(NAV, key, value))
     index = [r["product_id"] for r in _records()[IMG]].index(NAV)
