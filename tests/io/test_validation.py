@@ -401,6 +401,17 @@ def test_message_not_json(tmp_path):
     expect_error(p, str(p), f"{IMG}[0]", "not valid JSON")
 
 
+@pytest.mark.parametrize("raw", [b'{"product_id": "x", "width": ' + b"9" * 5000 + b"}", b"[" * 5000 + b"]" * 5000],
+                         ids=["5000-digit-integer", "5000-deep-list"])
+def test_message_json_python_cannot_read(tmp_path, raw):
+    """Valid JSON beyond Python's limits (int digits, recursion) is bad input, not a ValueError/RecursionError."""
+    def mutate(t):
+        t[IMG][0] = raw
+
+    p = mcap_with(tmp_path, mutate)
+    expect_error(p, str(p), f"{IMG}[0]", "cannot be read as JSON")
+
+
 @pytest.mark.parametrize("cut", [0.1, 0.5, 0.9, -1, -9])
 def test_truncated_mcap(tmp_path, cut):
     good = tmp_path / "good.mcap"
