@@ -475,6 +475,37 @@ def test_dir_malformed_yaml(dir_dl):
     expect_error(root, str(root / "downlink.yaml"), "yaml", "malformed YAML at line")
 
 
+@pytest.mark.parametrize("value", ["2001-13-01", "9" * 5000], ids=["month-13", "5000-digit-integer"])
+def test_dir_yaml_scalar_python_cannot_construct(dir_dl, value):
+    """A date or integer PyYAML's constructors refuse is malformed YAML, not a ValueError."""
+    root, doc = dir_dl
+    text = (root / "downlink.yaml").read_text()
+    (root / "downlink.yaml").write_text(text.replace("sol: 42", f"sol: {value}", 1))
+    expect_error(root, str(root / "downlink.yaml"), "yaml", "malformed YAML")
+
+
+def test_dir_yaml_nested_too_deep(dir_dl):
+    """Deep nesting is refused before the loader recurses: at 5000 levels it used to load (and error messages
+    then hit RecursionError); at ~40000 levels libyaml's loader crashed the process (see the next test)."""
+    root, doc = dir_dl
+    doc["images"][0]["gain"] = "DEEP"
+    (root / "downlink.yaml").write_text(yaml.safe_dump(doc).replace("DEEP", "[" * 5000 + "]" * 5000))
+    expect_error(root, str(root / "downlink.yaml"), "yaml", "nested more than 100 deep")
+
+
+def test_dir_yaml_nested_deep_enough_to_crash_libyaml(tmp_path):
+    """100000 open brackets used to be a segmentation fault (exit -11), so this runs in a child process."""
+    import subprocess
+    import sys
+
+    (tmp_path / "downlink.yaml").write_text("[" * 100000)
+    code = ("import sys; from scipctl.io.downlink import read_downlink; from scipctl.model import InputError\n"
+            "try:\n    read_downlink(sys.argv[1])\nexcept InputError as e:\n    print(e)")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert r.stdout == f"{tmp_path / 'downlink.yaml'}: yaml: collections nested more than 100 deep at line 1, column 101\n"
+
+
 def test_dir_top_level_not_a_mapping(dir_dl):
     root, _ = dir_dl
     (root / "downlink.yaml").write_text("- 1\n- 2\n")
