@@ -255,6 +255,20 @@ def test_png_size_differs_from_width_height(tmp_path):
     expect_error(path, NAV, "image", "PNG is 64x40 pixels")
 
 
+def test_png_header_claiming_another_size_is_not_decoded(tmp_path, capfd):
+    """The IHDR size is compared with width x height before decoding (libpng used to print
+    'Not enough image data' for this one, beside the error)."""
+    import struct
+    import zlib
+
+    png = bytearray(encode_png(np.zeros((48, 64), np.uint8)))
+    png[16:24] = struct.pack(">II", 19200, 14400)
+    png[29:33] = struct.pack(">I", zlib.crc32(bytes(png[12:29])))
+    path = mcap_with(tmp_path, _set(NAV, "image", {"format": "png", "data": base64.b64encode(bytes(png)).decode()}))
+    expect_error(path, NAV, "image", "PNG is 19200x14400 pixels, but width x height says 64x48")
+    assert capfd.readouterr() == ("", "")
+
+
 def test_size_differs_from_rover_configuration(tmp_path):
     def mutate(t):
         rec(t, NAV).update(width=32, height=24, image={"format": "png", "data": b64png(np.zeros((24, 32), np.uint8))})
