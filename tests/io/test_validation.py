@@ -147,6 +147,15 @@ def test_wrong_type_or_value(tmp_path, key, value, fragment):
     expect_error(path, NAV if key != "product_id" else f"{IMG}[{index}]", key, fragment)
 
 
+@pytest.mark.parametrize("pid", ["nav\ncam", "nav\u2028cam", "nav\x00cam"], ids=["newline", "line-separator", "nul"])
+def test_error_naming_a_product_id_with_a_line_break_is_one_line(tmp_path, pid):
+    def mutate(t):
+        rec(t, NAV).update(product_id=pid, time_s="soon")
+
+    e = expect_error(mcap_with(tmp_path, mutate), pid, "time_s", "must be a number")
+    assert str(e).isprintable() and str(e).startswith(repr(pid)[1:-1] + ": time_s: ")
+
+
 def test_image_record_not_a_mapping(tmp_path):
     def mutate(t):
         t[IMG][0] = [1, 2, 3]
