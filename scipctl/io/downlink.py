@@ -381,9 +381,17 @@ def product_to_plain(im: ImageProduct) -> dict:
     return out
 
 
+def _nonempty_id(fs: Fields, key: str) -> str:
+    """The record's id (it names the record in later errors, so it must not be blank)."""
+    v = fs.str_(key)
+    if not v.strip():
+        raise fs.err(key, "must not be empty")
+    return v
+
+
 def target_from_plain(d, label: str) -> TargetMarks:
     fs = Fields(d, label, "")
-    tid = fs.str_("id")
+    tid = _nonempty_id(fs, "id")
     fs.product = tid
     kind = fs.str_("kind", required=False)
     desc = fs.str_("description", required=False)
@@ -408,7 +416,7 @@ def target_to_plain(t: TargetMarks) -> dict:
 
 def truth_image_from_plain(d, label: str, resolve_file: ModelFileResolver = None) -> ImageTruth:
     fs = Fields(d, label, "")
-    pid = fs.str_("product_id")
+    pid = _nonempty_id(fs, "product_id")
     fs.product = pid
     fs.prefix = "truth"
     pose = pose_from_plain(fs.map_("pose"), source_required=False)
@@ -422,7 +430,7 @@ def truth_image_to_plain(t: ImageTruth) -> dict:
 
 def truth_target_from_plain(d, label: str) -> TargetTruth:
     fs = Fields(d, label, "")
-    tid = fs.str_("id")
+    tid = _nonempty_id(fs, "id")
     fs.product = tid
     fs.prefix = "truth"
     return TargetTruth(tid, np.array(fs.vec("xyz_site_m", 3)))

@@ -333,6 +333,16 @@ def test_duplicate_target_ids(tmp_path):
     expect_error(mcap_with(tmp_path, mutate), _records()["/downlink/targets"][0]["id"], "id", "duplicate target")
 
 
+@pytest.mark.parametrize("topic, key", [("/downlink/targets", "id"), ("/truth/image", "product_id"),
+                                        ("/truth/targets", "id")])
+def test_blank_target_or_truth_id_names_the_message(tmp_path, topic, key):
+    """A blank id would name nothing in the errors that follow (it used to be accepted, then used)."""
+    def mutate(t):
+        t[topic][1][key] = " "
+
+    expect_error(mcap_with(tmp_path, mutate), f"{topic}[1]", key, "must not be empty")
+
+
 def test_truth_for_unknown_product(tmp_path):
     def mutate(t):
         t["/truth/image"][0]["product_id"] = "ghost"
