@@ -64,7 +64,7 @@ def load_yaml(path: Path, label: str):
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(label, "file", f"no such file: {path}") from None
-    except (OSError, UnicodeDecodeError) as e:
+    except (OSError, ValueError) as e:  # ValueError: not UTF-8, or a NUL in the path
         raise InputError(label, "file", f"cannot read {path}: {getattr(e, 'strerror', None) or e}") from None
     try:
         _check_depth(text, label)
@@ -127,8 +127,8 @@ def read_dir(root: Path) -> Downlink:
             png = ipath.read_bytes()
         except FileNotFoundError:
             raise InputError(pl, "image", f"file not found: {rel}") from None
-        except OSError as e:
-            raise InputError(pl, "image", f"cannot read {rel}: {e.strerror or e}") from None
+        except (OSError, ValueError) as e:  # ValueError: a NUL in the path
+            raise InputError(pl, "image", f"cannot read {rel}: {getattr(e, 'strerror', None) or e}") from None
         images.append(P.product_from_plain(d, png, rover_config, pl, resolve_here))
 
     targets = [P.target_from_plain(d, f"targets[{i}]") for i, d in enumerate(top.list_("targets", required=False))]

@@ -566,6 +566,24 @@ def test_dir_unsupported_format_version(dir_dl):
     expect_error(root, str(root / "downlink.yaml"), "format_version", "unsupported")
 
 
+@pytest.mark.parametrize("where", ["image", "rover_config", "camera_model_file"])
+def test_dir_path_with_a_nul_byte(dir_dl, where):
+    """A NUL in a path read from downlink.yaml made Python raise ValueError ('embedded null byte')."""
+    root, doc = dir_dl
+    pid = doc["images"][0]["product_id"]
+    expected = {"image": (pid, "image"), "rover_config": (str(root / "rover\x00.yaml"), "file"),
+                "camera_model_file": (pid, "camera_model_file")}[where]
+    if where == "image":
+        doc["images"][0]["image"] = "images/x\x00.png"
+    elif where == "rover_config":
+        doc["rover_config"] = "rover\x00.yaml"
+    else:
+        del doc["images"][0]["camera_model"]
+        doc["images"][0]["camera_model_file"] = "x\x00.cahv"
+    _save(root, doc)
+    expect_error(root, *expected, "null byte")
+
+
 def test_dir_model_and_model_file_both_given(dir_dl):
     root, doc = dir_dl
     doc["images"][0]["camera_model_file"] = "x.cahv"
