@@ -82,9 +82,10 @@ def validate_downlink(dl: Downlink, check_pixels: bool = True) -> None:
         ref = first_at.setdefault(im.position, im)
         if ref is im:
             continue
-        dt = float(np.linalg.norm(im.pose.T_site_rover.t - ref.pose.T_site_rover.t))
+        with np.errstate(over="ignore"):  # positions of 1e308 m: the distance is inf (an error), without a warning
+            dt = float(np.linalg.norm(im.pose.T_site_rover.t - ref.pose.T_site_rover.t))
         dr = _rotation_angle(im.pose.T_site_rover.R, ref.pose.T_site_rover.R)
-        if dt > POSE_TOL_M or dr > POSE_TOL_RAD:
+        if not (dt <= POSE_TOL_M and dr <= POSE_TOL_RAD):
             raise InputError(im.product_id, "pose",
                              f"differs from {ref.product_id} at the same position (site {im.site}, drive {im.drive}) "
                              f"by {dt:.3g} m and {np.degrees(dr):.3g} deg")

@@ -5,6 +5,7 @@ import copy
 import functools
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -234,6 +235,18 @@ def test_same_position_different_pose(tmp_path):
         r["pose"]["position_m"] = [r["pose"]["position_m"][0] + 0.01, *r["pose"]["position_m"][1:]]
 
     expect_error(mcap_with(tmp_path, mutate), "hazcam_right_1_0", "pose", "same position (site 1, drive 0)")
+
+
+def test_same_position_huge_position_without_warnings(tmp_path):
+    """The distance between 1e308 and -1e308 overflows: an error, without numpy's warning on stderr."""
+    def mutate(t):
+        rec(t, "hazcam_left_1_0")["pose"]["position_m"][0] = 1e308
+        rec(t, "hazcam_right_1_0")["pose"]["position_m"][0] = -1e308
+
+    path = mcap_with(tmp_path, mutate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        expect_error(path, "hazcam_left_1_0", "pose", "by inf m")
 
 
 def test_same_position_different_orientation(tmp_path):
