@@ -59,6 +59,23 @@ def _remember_quat(R: np.ndarray, q: list) -> None:
     _QUAT_HINTS[np.ascontiguousarray(R).tobytes()] = q
 
 
+# Joint axes likewise: JointAxis normalises the axis it is given, and normalising an already normalised
+# vector again need not give the same bits; so the writer writes the axis the reader saw.
+_AXIS_HINTS: dict = {}
+
+
+def _remember_axis(unit: np.ndarray, given: list) -> None:
+    if len(_AXIS_HINTS) >= _QUAT_HINTS_MAX:
+        _AXIS_HINTS.clear()
+    _AXIS_HINTS[np.ascontiguousarray(unit).tobytes()] = given
+
+
+def axis_for(j: JointAxis) -> list:
+    """The axis to write for ``j``: the one read for exactly this normalised axis, else ``j.axis``."""
+    given = _AXIS_HINTS.get(np.ascontiguousarray(j.axis).tobytes())
+    return list(given) if given is not None else _fl(j.axis)
+
+
 def quat_for(T: RigidTransform) -> list:
     """Quaternion ``[w, x, y, z]`` for ``T.R`` that reproduces it exactly when it came from a read quaternion."""
     q = _QUAT_HINTS.get(np.ascontiguousarray(T.R).tobytes())
@@ -278,6 +295,7 @@ def rover_config_from_plain(d, resolve_file: ModelFileResolver = None, product: 
         if math.sqrt(sum(a * a for a in axis)) < 1e-9:
             raise jf.err("axis", "zero-length axis")
         joints[j] = JointAxis(np.array(origin), np.array(axis))
+        _remember_axis(joints[j].axis, axis)
     cams_fs = fs.map_("cameras")
     cameras = {}
     for cam_name in cams_fs.d:
@@ -301,7 +319,7 @@ def rover_config_from_plain(d, resolve_file: ModelFileResolver = None, product: 
 
 def rover_config_to_plain(rc: RoverConfig) -> dict:
     def joint(j: JointAxis):
-        return {"origin_m": _fl(j.origin_m), "axis": _fl(j.axis)}
+        return {"origin_m": _fl(j.origin_m), "axis": axis_for(j)}
 
     def spec(s: CameraSpec):
         return {"camera_model": camera_model_to_plain(s.model), "width": int(s.width), "height": int(s.height)}
