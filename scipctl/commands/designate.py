@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 
 from ..cli import CommandFailed, emit_json, note, stderr_console
@@ -25,8 +26,8 @@ def run(src, product, camera, pixel, target_id, band_px, json_out, products_root
         while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
             n += 1
         target_id = f"d{n}"
-    if band_px is not None and not band_px > 0:
-        raise InputError("--band-px", "band_px", "must be > 0")
+    if band_px is not None and not (math.isfinite(band_px) and band_px > 0):
+        raise InputError("--band-px", "band_px", f"must be a positive finite number, got {band_px}")
     rec = designate(dl, left, uv, band_px=band_px, target_id=target_id)
     rec["provenance"] = provenance({"downlink": str(src)})
     if not rec["ok"]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from ..cli import emit_json, note, stderr_console
@@ -71,8 +72,8 @@ def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazca
 
     params = HandoffParams(dense_downsample=2 if fast else 1)
 
-    if not success_px > 0:
-        raise InputError("--success-px", "success_px", "must be > 0")
+    if not (math.isfinite(success_px) and success_px > 0):
+        raise InputError("--success-px", "success_px", f"must be a positive finite number, got {success_px}")
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
     names, navcams, pairs = _parse_methods(methods)

@@ -132,24 +132,31 @@ class CameraModel:
                 raise CameraModelError(name, "contains NaN or infinity")
         if self.linearity is not None and not np.isfinite(self.linearity):
             raise CameraModelError("linearity", "NaN or infinity")
-        na = np.linalg.norm(self.A)
-        if abs(na - 1.0) > 1e-3:
-            raise CameraModelError("A", f"must be a unit vector (|A| = {na:.6g})")
-        if self.O is not None:
-            no = np.linalg.norm(self.O)
-            if abs(no - 1.0) > 1e-3:
-                raise CameraModelError("O", f"must be a unit vector (|O| = {no:.6g})")
-            if np.dot(self.O, self.A) < 0.5:
-                raise CameraModelError("O", "optical axis is more than 60 deg from A")
-        hp = np.cross(self.A, self.H)
-        vp = np.cross(self.A, self.V)
-        if np.linalg.norm(hp) < 1e-9:
-            raise CameraModelError("H", "parallel to A (no horizontal scale)")
-        if np.linalg.norm(vp) < 1e-9:
-            raise CameraModelError("V", "parallel to A (no vertical scale)")
-        s = np.linalg.norm(np.cross(hp, vp)) / (np.linalg.norm(hp) * np.linalg.norm(vp))
-        if s < 1e-3:
-            raise CameraModelError("V", "H and V are parallel (degenerate image plane)")
+        # Finite but huge numbers (1e300) overflow below: no warnings, and every test is written so that
+        # NaN/inf fail it (``not ok``) rather than slip past a ``bad`` comparison.
+        with np.errstate(over="ignore", invalid="ignore"):
+            na = np.linalg.norm(self.A)
+            if not abs(na - 1.0) <= 1e-3:
+                raise CameraModelError("A", f"must be a unit vector (|A| = {na:.6g})")
+            if self.O is not None:
+                no = np.linalg.norm(self.O)
+                if not abs(no - 1.0) <= 1e-3:
+                    raise CameraModelError("O", f"must be a unit vector (|O| = {no:.6g})")
+                if not np.dot(self.O, self.A) >= 0.5:
+                    raise CameraModelError("O", "optical axis is more than 60 deg from A")
+            hp = np.cross(self.A, self.H)
+            vp = np.cross(self.A, self.V)
+            nh, nv = np.linalg.norm(hp), np.linalg.norm(vp)
+            for name, n in (("H", nh), ("V", nv)):
+                if not np.isfinite(n):
+                    raise CameraModelError(name, f"too large (|A x {name}| overflows)")
+            if not nh >= 1e-9:
+                raise CameraModelError("H", "parallel to A (no horizontal scale)")
+            if not nv >= 1e-9:
+                raise CameraModelError("V", "parallel to A (no vertical scale)")
+            s = np.linalg.norm(np.cross(hp / nh, vp / nv))
+            if not s >= 1e-3:
+                raise CameraModelError("V", "H and V are parallel (degenerate image plane)")
 
     # ------------------------------------------------------------ derived terms
     @property

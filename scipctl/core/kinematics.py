@@ -25,8 +25,14 @@ class JointAxis:
     def __post_init__(self):
         o = np.asarray(self.origin_m, dtype=float).reshape(3)
         a = np.asarray(self.axis, dtype=float).reshape(3)
-        n = np.linalg.norm(a)
-        if not np.all(np.isfinite(o)) or not np.all(np.isfinite(a)) or n < 1e-9:
+        if not np.all(np.isfinite(o)) or not np.all(np.isfinite(a)):
+            raise ValueError("joint axis: non-finite origin or zero-length axis")
+        with np.errstate(over="ignore"):
+            n = np.linalg.norm(a)
+        if np.isinf(n):  # huge finite components (1e308): |a| overflowed, and a / |a| would be a zero axis
+            a = a / np.abs(a).max()
+            n = np.linalg.norm(a)
+        if not n >= 1e-9:
             raise ValueError("joint axis: non-finite origin or zero-length axis")
         object.__setattr__(self, "origin_m", o)
         object.__setattr__(self, "axis", a / n)

@@ -121,6 +121,8 @@ def read_cmod(path_or_text: Union[str, os.PathLike], name: Optional[str] = None)
             raise InputError(label, "file", "is a directory, not a cmod file") from None
         except UnicodeDecodeError:
             raise InputError(label, "file", "not a text file") from None
+        except ValueError as e:  # a NUL in the path
+            raise InputError(label, "file", str(e)) from None
         except OSError as e:
             raise InputError(label, "file", e.strerror or str(e)) from None
     else:

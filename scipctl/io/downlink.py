@@ -59,6 +59,23 @@ def _remember_quat(R: np.ndarray, q: list) -> None:
     _QUAT_HINTS[np.ascontiguousarray(R).tobytes()] = q
 
 
+# Joint axes likewise: JointAxis normalises the axis it is given, and normalising an already normalised
+# vector again need not give the same bits; so the writer writes the axis the reader saw.
+_AXIS_HINTS: dict = {}
+
+
+def _remember_axis(unit: np.ndarray, given: list) -> None:
+    if len(_AXIS_HINTS) >= _QUAT_HINTS_MAX:
+        _AXIS_HINTS.clear()
+    _AXIS_HINTS[np.ascontiguousarray(unit).tobytes()] = given
+
+
+def axis_for(j: JointAxis) -> list:
+    """The axis to write for ``j``: the one read for exactly this normalised axis, else ``j.axis``."""
+    given = _AXIS_HINTS.get(np.ascontiguousarray(j.axis).tobytes())
+    return list(given) if given is not None else _fl(j.axis)
+
+
 def quat_for(T: RigidTransform) -> list:
     """Quaternion ``[w, x, y, z]`` for ``T.R`` that reproduces it exactly when it came from a read quaternion."""
     q = _QUAT_HINTS.get(np.ascontiguousarray(T.R).tobytes())
@@ -116,7 +133,10 @@ class Fields:
         v = self.d[key]
         if not _is_num(v):
             raise self.err(key, f"must be a number, got {_type_name(v)} {v!r}"[:200])
-        v = float(v)
+        try:
+            v = float(v)
+        except OverflowError:  # an integer such as 10**400
+            raise self.err(key, "must be finite, got an integer too large for a float") from None
         if not math.isfinite(v):
             raise self.err(key, f"must be finite, got {v!r}")
         if min_value is not None and v < min_value:
@@ -148,7 +168,10 @@ class Fields:
         for x in v:
             if not _is_num(x):
                 raise self.err(key, f"must be a list of {n} numbers, got {v!r}"[:200])
-            x = float(x)
+            try:
+                x = float(x)
+            except OverflowError:
+                raise self.err(key, f"must be finite, got an integer too large for a float in {v!r}"[:200]) from None
             if not math.isfinite(x):
                 raise self.err(key, f"must be finite, got {v!r}"[:200])
             out.append(x)
@@ -272,6 +295,7 @@ def rover_config_from_plain(d, resolve_file: ModelFileResolver = None, product: 
         if math.sqrt(sum(a * a for a in axis)) < 1e-9:
             raise jf.err("axis", "zero-length axis")
         joints[j] = JointAxis(np.array(origin), np.array(axis))
+        _remember_axis(joints[j].axis, axis)
     cams_fs = fs.map_("cameras")
     cameras = {}
     for cam_name in cams_fs.d:
@@ -295,7 +319,7 @@ def rover_config_from_plain(d, resolve_file: ModelFileResolver = None, product: 
 
 def rover_config_to_plain(rc: RoverConfig) -> dict:
     def joint(j: JointAxis):
-        return {"origin_m": _fl(j.origin_m), "axis": _fl(j.axis)}
+        return {"origin_m": _fl(j.origin_m), "axis": axis_for(j)}
 
     def spec(s: CameraSpec):
         return {"camera_model": camera_model_to_plain(s.model), "width": int(s.width), "height": int(s.height)}
@@ -375,9 +399,17 @@ def product_to_plain(im: ImageProduct) -> dict:
     return out
 
 
+def _nonempty_id(fs: Fields, key: str) -> str:
+    """The record's id (it names the record in later errors, so it must not be blank)."""
+    v = fs.str_(key)
+    if not v.strip():
+        raise fs.err(key, "must not be empty")
+    return v
+
+
 def target_from_plain(d, label: str) -> TargetMarks:
     fs = Fields(d, label, "")
-    tid = fs.str_("id")
+    tid = _nonempty_id(fs, "id")
     fs.product = tid
     kind = fs.str_("kind", required=False)
     desc = fs.str_("description", required=False)
@@ -402,7 +434,7 @@ def target_to_plain(t: TargetMarks) -> dict:
 
 def truth_image_from_plain(d, label: str, resolve_file: ModelFileResolver = None) -> ImageTruth:
     fs = Fields(d, label, "")
-    pid = fs.str_("product_id")
+    pid = _nonempty_id(fs, "product_id")
     fs.product = pid
     fs.prefix = "truth"
     pose = pose_from_plain(fs.map_("pose"), source_required=False)
@@ -416,7 +448,7 @@ def truth_image_to_plain(t: ImageTruth) -> dict:
 
 def truth_target_from_plain(d, label: str) -> TargetTruth:
     fs = Fields(d, label, "")
-    tid = fs.str_("id")
+    tid = _nonempty_id(fs, "id")
     fs.product = tid
     fs.prefix = "truth"
     return TargetTruth(tid, np.array(fs.vec("xyz_site_m", 3)))

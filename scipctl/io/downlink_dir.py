@@ -40,21 +40,42 @@ _Loader.add_implicit_resolver(
 )
 
 
+MAX_YAML_DEPTH = 100  # downlink.yaml nests 7 deep; libyaml's loader crashes the process at ~40000
+
+
+def _check_depth(text: str, label: str) -> None:
+    """InputError if collections nest more than :data:`MAX_YAML_DEPTH` deep (checked on the parser's events,
+    which need no recursion, before the recursive loader sees the text)."""
+    depth = 0
+    for ev in yaml.parse(text, Loader=_Loader):
+        if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                mark = ev.start_mark
+                raise InputError(label, "yaml", f"collections nested more than {MAX_YAML_DEPTH} deep "
+                                                f"at line {mark.line + 1}, column {mark.column + 1}")
+        elif isinstance(ev, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
+            depth -= 1
+
+
 def load_yaml(path: Path, label: str):
     """Parse a YAML file; :class:`InputError` ``(label, "yaml", ...)`` on unreadable or malformed text."""
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise InputError(label, "file", f"no such file: {path}") from None
-    except (OSError, UnicodeDecodeError) as e:
+    except (OSError, ValueError) as e:  # ValueError: not UTF-8, or a NUL in the path
         raise InputError(label, "file", f"cannot read {path}: {getattr(e, 'strerror', None) or e}") from None
     try:
+        _check_depth(text, label)
         return yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
         raise InputError(label, "yaml", f"malformed YAML{where}: {problem}") from None
+    except (ValueError, RecursionError) as e:  # a scalar the constructors refuse: 2001-13-01, a 5000-digit integer
+        raise InputError(label, "yaml", f"malformed YAML: {str(e)[:120]}") from None
 
 
 def dump_yaml(obj) -> str:
@@ -106,8 +127,8 @@ def read_dir(root: Path) -> Downlink:
             png = ipath.read_bytes()
         except FileNotFoundError:
             raise InputError(pl, "image", f"file not found: {rel}") from None
-        except OSError as e:
-            raise InputError(pl, "image", f"cannot read {rel}: {e.strerror or e}") from None
+        except (OSError, ValueError) as e:  # ValueError: a NUL in the path
+            raise InputError(pl, "image", f"cannot read {rel}: {getattr(e, 'strerror', None) or e}") from None
         images.append(P.product_from_plain(d, png, rover_config, pl, resolve_here))
 
     targets = [P.target_from_plain(d, f"targets[{i}]") for i, d in enumerate(top.list_("targets", required=False))]

@@ -171,6 +171,8 @@ def _decode_json(name: str, topic: str, index: int, encoding: str, data: bytes):
         return json.loads(data)
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise InputError(name, f"{topic}[{index}]", f"message is not valid JSON ({e})") from None
+    except (ValueError, RecursionError) as e:  # valid JSON Python will not read: >4300-digit integers, deep nesting
+        raise InputError(name, f"{topic}[{index}]", f"message cannot be read as JSON ({str(e)[:120]})") from None
 
 
 def _image_bytes(d, label: str) -> bytes:

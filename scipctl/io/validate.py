@@ -14,6 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from ..model import Downlink, ImageProduct, InputError
+from .images import png_size
 
 POSE_TOL_M = 1e-6  # products at one (site, drive) must agree on the pose to this (metres) ...
 POSE_TOL_RAD = 1e-6  # ... and this (radians)
@@ -22,10 +23,12 @@ MAST_TOL_RAD = 1e-6  # mast angles this close count as the same pointing
 
 
 def _check_size(im: ImageProduct) -> None:
-    px = im.pixels  # decodes once and caches; InputError naming the product if corrupt
-    if px.shape != (im.height, im.width):
-        raise InputError(im.product_id, "image",
-                         f"PNG is {px.shape[1]}x{px.shape[0]} pixels, but width x height says {im.width}x{im.height}")
+    w, h = png_size(im.png, im.product_id)  # the header, before decoding: a damaged or oversized PNG is not decoded
+    if (w, h) == (im.width, im.height):
+        px = im.pixels  # decodes once and caches; InputError naming the product if corrupt
+        h, w = px.shape[:2]
+    if (h, w) != (im.height, im.width):
+        raise InputError(im.product_id, "image", f"PNG is {w}x{h} pixels, but width x height says {im.width}x{im.height}")
 
 
 def decode_all(images: list) -> None:
@@ -79,9 +82,10 @@ def validate_downlink(dl: Downlink, check_pixels: bool = True) -> None:
         ref = first_at.setdefault(im.position, im)
         if ref is im:
             continue
-        dt = float(np.linalg.norm(im.pose.T_site_rover.t - ref.pose.T_site_rover.t))
+        with np.errstate(over="ignore"):  # positions of 1e308 m: the distance is inf (an error), without a warning
+            dt = float(np.linalg.norm(im.pose.T_site_rover.t - ref.pose.T_site_rover.t))
         dr = _rotation_angle(im.pose.T_site_rover.R, ref.pose.T_site_rover.R)
-        if dt > POSE_TOL_M or dr > POSE_TOL_RAD:
+        if not (dt <= POSE_TOL_M and dr <= POSE_TOL_RAD):
             raise InputError(im.product_id, "pose",
                              f"differs from {ref.product_id} at the same position (site {im.site}, drive {im.drive}) "
                              f"by {dt:.3g} m and {np.degrees(dr):.3g} deg")

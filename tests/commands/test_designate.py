@@ -90,6 +90,8 @@ def test_epipolar_offset_reports_the_injected_vibration(sol, dl):
     (["--pixel", "5000,10"], "pixel"),
     (["--pixel", "abc"], "pixel"),
     (["--pixel", "nan,3"], "pixel"),
+    (["--pixel", "500,500", "--band-px", "inf"], "band_px"),  # was exit 3 (a ValueError from point_stereo)
+    (["--pixel", "500,500", "--band-px", "0"], "band_px"),
 ])
 def test_bad_pixels_exit_2(sol, dl, args, field):
     left = _first_pancam(dl)

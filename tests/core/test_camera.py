@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -118,6 +120,25 @@ def test_degenerate_models_name_the_field(field, mutate):
     mutate(d)
     with pytest.raises(CameraModelError) as ei:
         CameraModel.from_dict(d)
+    assert ei.value.field == field
+
+
+@pytest.mark.parametrize(
+    "field,mutate",
+    [
+        ("A", lambda d: d.update(A=[1e308, 0.0, 0.0])),
+        ("O", lambda d: d.update(O=[0.0, 1e200, 0.0])),
+        ("H", lambda d: d.update(H=[1e308, -1e308, 1e308])),  # A x H overflowed to NaN and passed every check
+        ("V", lambda d: d.update(V=[1e200, 1e200, 0.0])),
+    ],
+)
+def test_huge_finite_vectors_name_the_field_without_warnings(field, mutate):
+    d = MODELS["CAHVOR"].to_dict()
+    mutate(d)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # numpy's overflow warnings were extra lines on the CLI's stderr
+        with pytest.raises(CameraModelError) as ei:
+            CameraModel.from_dict(d)
     assert ei.value.field == field
 
 

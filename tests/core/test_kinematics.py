@@ -1,3 +1,5 @@
+import warnings
+
 import numpy as np
 import pytest
 
@@ -128,3 +130,13 @@ def test_point_at_straight_below_the_head_and_array_initial():
     pan2, tilt2 = cfg.point_at("navcam", [4.0, 1.0, 0.0], initial=np.array([0.2, -0.2]))
     uv2 = cfg.camera_model("navcam", "left", pan2, tilt2).project(np.array([[4.0, 1.0, 0.0]]))[0]
     assert np.allclose(uv2, [511.5, 511.5], atol=1e-6)
+
+
+def test_joint_axis_with_huge_components_is_normalised_without_warnings():
+    """|axis| overflowed to inf (a numpy warning), and axis / inf made a zero axis that was accepted."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        j = JointAxis([0.0, 0.0, 0.0], [1e308, 0.0, -1e308])
+    np.testing.assert_allclose(j.axis, [np.sqrt(0.5), 0.0, -np.sqrt(0.5)], rtol=1e-15)
+    with pytest.raises(ValueError, match="zero-length axis"):
+        JointAxis([0.0, 0.0, 0.0], [0.0, 0.0, 0.0])

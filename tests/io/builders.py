@@ -171,16 +171,17 @@ def make_small_downlink(
 META = {"format_version": "1", "mission": "test", "sol": "42"}
 
 
-def write_raw_mcap(path, metadata, topics, encoding="json", extra_topics=None):
+def write_raw_mcap(path, metadata, topics, encoding="json", extra_topics=None, writer_options=None):
     """An MCAP written directly with the mcap package (not with scipctl's writer), for producer variations.
 
     ``topics`` maps topic -> list of message dicts (or raw bytes); ``metadata`` is the ``scip.downlink``
-    record (None: left out); ``encoding`` is the channels' message encoding.
+    record (None: left out); ``encoding`` is the channels' message encoding; ``writer_options`` go to
+    ``mcap.writer.Writer`` (e.g. ``use_chunking=False, enable_crcs=False``: records stored plain, unchecked).
     """
     from mcap.writer import Writer
 
     buf = io.BytesIO()
-    w = Writer(buf)
+    w = Writer(buf, **(writer_options or {}))
     w.start()
     if metadata is not None:
         w.add_metadata("scip.downlink", metadata)

@@ -181,6 +181,26 @@ def test_extra_topics_and_keys_are_ignored(tmp_path):
     assert [d for d in downlink_differences(dl, got) if ".pose.R" not in d and "microscope" not in d] == []
 
 
+def test_non_unit_joint_axes_round_trip_exactly(tmp_path):
+    """The reader normalises joint axes; normalising the written unit axis again may change its last bits
+    (it did for these two), so the writer writes the axis it read."""
+    topics = plain_records(make_small_downlink(n_positions=1))
+    mast = topics["/downlink/rover_config"][0]["mast"]
+    mast["pan"]["axis"] = [687.1907331094725, 0.0, 1.0]
+    mast["tilt"]["axis"] = [0.0, 1.0, 1.580343551617133e-05]
+    for j in ("pan", "tilt"):
+        u = np.array(mast[j]["axis"]) / np.linalg.norm(mast[j]["axis"])
+        assert (u / np.linalg.norm(u)).tobytes() != u.tobytes()  # the case this test is about
+    write_raw_mcap(tmp_path / "x.mcap", META, topics)
+    a = read_downlink(tmp_path / "x.mcap")
+    write_downlink(a, tmp_path / "b", container="dir")
+    write_downlink(read_downlink(tmp_path / "b"), tmp_path / "c.mcap")
+    c = read_downlink(tmp_path / "c.mcap")
+    assert downlink_differences(a, c) == []
+    for j in ("pan", "tilt"):
+        assert getattr(a.rover_config.mast, j).axis.tobytes() == getattr(c.rover_config.mast, j).axis.tobytes()
+
+
 def test_quaternion_sign_and_mast_on_body_camera(tmp_path):
     dl = make_small_downlink(n_positions=1)
     topics = plain_records(dl)

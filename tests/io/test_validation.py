@@ -5,6 +5,7 @@ import copy
 import functools
 import json
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -135,14 +136,25 @@ WRONG = [
     ("mast.pan_rad", True, "must be a number"),
     ("image.format", "jpeg", "must be 'png'"),
     ("image.data", "not base64 !!", "not valid base64"),
+    ("time_s", 10**400, "integer too large for a float"),  # float(10**400) raised OverflowError
+    ("pose.position_m", [10**400, 0, 0], "integer too large for a float"),
 ]
 
 
-@pytest.mark.parametrize("key, value, fragment", WRONG, ids=[f"{w[0]}={w[1]!r}" for w in WRONG])
+@pytest.mark.parametrize("key, value, fragment", WRONG, ids=[f"{w[0]}={w[1]!r}"[:60] for w in WRONG])
 def test_wrong_type_or_value(tmp_path, key, value, fragment):
     path = mcap_with(tmp_path, _set(NAV, key, value))
     index = [r["product_id"] for r in _records()[IMG]].index(NAV)
     expect_error(path, NAV if key != "product_id" else f"{IMG}[{index}]", key, fragment)
+
+
+@pytest.mark.parametrize("pid", ["nav\ncam", "nav\u2028cam", "nav\x00cam"], ids=["newline", "line-separator", "nul"])
+def test_error_naming_a_product_id_with_a_line_break_is_one_line(tmp_path, pid):
+    def mutate(t):
+        rec(t, NAV).update(product_id=pid, time_s="soon")
+
+    e = expect_error(mcap_with(tmp_path, mutate), pid, "time_s", "must be a number")
+    assert str(e).isprintable() and str(e).startswith(repr(pid)[1:-1] + ": time_s: ")
 
 
 def test_image_record_not_a_mapping(tmp_path):
@@ -225,6 +237,18 @@ def test_same_position_different_pose(tmp_path):
     expect_error(mcap_with(tmp_path, mutate), "hazcam_right_1_0", "pose", "same position (site 1, drive 0)")
 
 
+def test_same_position_huge_position_without_warnings(tmp_path):
+    """The distance between 1e308 and -1e308 overflows: an error, without numpy's warning on stderr."""
+    def mutate(t):
+        rec(t, "hazcam_left_1_0")["pose"]["position_m"][0] = 1e308
+        rec(t, "hazcam_right_1_0")["pose"]["position_m"][0] = -1e308
+
+    path = mcap_with(tmp_path, mutate)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        expect_error(path, "hazcam_left_1_0", "pose", "by inf m")
+
+
 def test_same_position_different_orientation(tmp_path):
     def mutate(t):
         r = rec(t, "navcam_right_1_12")
@@ -251,6 +275,20 @@ def test_stereo_eyes_of_different_size(tmp_path):
 def test_png_size_differs_from_width_height(tmp_path):
     path = mcap_with(tmp_path, _set(NAV, "image", {"format": "png", "data": b64png(np.zeros((40, 64), np.uint8))}))
     expect_error(path, NAV, "image", "PNG is 64x40 pixels")
+
+
+def test_png_header_claiming_another_size_is_not_decoded(tmp_path, capfd):
+    """The IHDR size is compared with width x height before decoding (libpng used to print
+    'Not enough image data' for this one, beside the error)."""
+    import struct
+    import zlib
+
+    png = bytearray(encode_png(np.zeros((48, 64), np.uint8)))
+    png[16:24] = struct.pack(">II", 19200, 14400)
+    png[29:33] = struct.pack(">I", zlib.crc32(bytes(png[12:29])))
+    path = mcap_with(tmp_path, _set(NAV, "image", {"format": "png", "data": base64.b64encode(bytes(png)).decode()}))
+    expect_error(path, NAV, "image", "PNG is 19200x14400 pixels, but width x height says 64x48")
+    assert capfd.readouterr() == ("", "")
 
 
 def test_size_differs_from_rover_configuration(tmp_path):
@@ -306,6 +344,16 @@ def test_duplicate_target_ids(tmp_path):
         t["/downlink/targets"][1]["id"] = t["/downlink/targets"][0]["id"]
 
     expect_error(mcap_with(tmp_path, mutate), _records()["/downlink/targets"][0]["id"], "id", "duplicate target")
+
+
+@pytest.mark.parametrize("topic, key", [("/downlink/targets", "id"), ("/truth/image", "product_id"),
+                                        ("/truth/targets", "id")])
+def test_blank_target_or_truth_id_names_the_message(tmp_path, topic, key):
+    """A blank id would name nothing in the errors that follow (it used to be accepted, then used)."""
+    def mutate(t):
+        t[topic][1][key] = " "
+
+    expect_error(mcap_with(tmp_path, mutate), f"{topic}[1]", key, "must not be empty")
 
 
 def test_truth_for_unknown_product(tmp_path):
@@ -399,6 +447,17 @@ def test_message_not_json(tmp_path):
     expect_error(p, str(p), f"{IMG}[0]", "not valid JSON")
 
 
+@pytest.mark.parametrize("raw", [b'{"product_id": "x", "width": ' + b"9" * 5000 + b"}", b"[" * 5000 + b"]" * 5000],
+                         ids=["5000-digit-integer", "5000-deep-list"])
+def test_message_json_python_cannot_read(tmp_path, raw):
+    """Valid JSON beyond Python's limits (int digits, recursion) is bad input, not a ValueError/RecursionError."""
+    def mutate(t):
+        t[IMG][0] = raw
+
+    p = mcap_with(tmp_path, mutate)
+    expect_error(p, str(p), f"{IMG}[0]", "cannot be read as JSON")
+
+
 @pytest.mark.parametrize("cut", [0.1, 0.5, 0.9, -1, -9])
 def test_truncated_mcap(tmp_path, cut):
     good = tmp_path / "good.mcap"
@@ -462,6 +521,37 @@ def test_dir_malformed_yaml(dir_dl):
     expect_error(root, str(root / "downlink.yaml"), "yaml", "malformed YAML at line")
 
 
+@pytest.mark.parametrize("value", ["2001-13-01", "9" * 5000], ids=["month-13", "5000-digit-integer"])
+def test_dir_yaml_scalar_python_cannot_construct(dir_dl, value):
+    """A date or integer PyYAML's constructors refuse is malformed YAML, not a ValueError."""
+    root, doc = dir_dl
+    text = (root / "downlink.yaml").read_text()
+    (root / "downlink.yaml").write_text(text.replace("sol: 42", f"sol: {value}", 1))
+    expect_error(root, str(root / "downlink.yaml"), "yaml", "malformed YAML")
+
+
+def test_dir_yaml_nested_too_deep(dir_dl):
+    """Deep nesting is refused before the loader recurses: at 5000 levels it used to load (and error messages
+    then hit RecursionError); at ~40000 levels libyaml's loader crashed the process (see the next test)."""
+    root, doc = dir_dl
+    doc["images"][0]["gain"] = "DEEP"
+    (root / "downlink.yaml").write_text(yaml.safe_dump(doc).replace("DEEP", "[" * 5000 + "]" * 5000))
+    expect_error(root, str(root / "downlink.yaml"), "yaml", "nested more than 100 deep")
+
+
+def test_dir_yaml_nested_deep_enough_to_crash_libyaml(tmp_path):
+    """100000 open brackets used to be a segmentation fault (exit -11), so this runs in a child process."""
+    import subprocess
+    import sys
+
+    (tmp_path / "downlink.yaml").write_text("[" * 100000)
+    code = ("import sys; from scipctl.io.downlink import read_downlink; from scipctl.model import InputError\n"
+            "try:\n    read_downlink(sys.argv[1])\nexcept InputError as e:\n    print(e)")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert r.stdout == f"{tmp_path / 'downlink.yaml'}: yaml: collections nested more than 100 deep at line 1, column 101\n"
+
+
 def test_dir_top_level_not_a_mapping(dir_dl):
     root, _ = dir_dl
     (root / "downlink.yaml").write_text("- 1\n- 2\n")
@@ -487,6 +577,24 @@ def test_dir_unsupported_format_version(dir_dl):
     doc["format_version"] = 2
     _save(root, doc)
     expect_error(root, str(root / "downlink.yaml"), "format_version", "unsupported")
+
+
+@pytest.mark.parametrize("where", ["image", "rover_config", "camera_model_file"])
+def test_dir_path_with_a_nul_byte(dir_dl, where):
+    """A NUL in a path read from downlink.yaml made Python raise ValueError ('embedded null byte')."""
+    root, doc = dir_dl
+    pid = doc["images"][0]["product_id"]
+    expected = {"image": (pid, "image"), "rover_config": (str(root / "rover\x00.yaml"), "file"),
+                "camera_model_file": (pid, "camera_model_file")}[where]
+    if where == "image":
+        doc["images"][0]["image"] = "images/x\x00.png"
+    elif where == "rover_config":
+        doc["rover_config"] = "rover\x00.yaml"
+    else:
+        del doc["images"][0]["camera_model"]
+        doc["images"][0]["camera_model_file"] = "x\x00.cahv"
+    _save(root, doc)
+    expect_error(root, *expected, "null byte")
 
 
 def test_dir_model_and_model_file_both_given(dir_dl):
