@@ -1,16 +1,16 @@
-"""Seeded 3-D lattice value noise (pure numerics; OpenCV only as a fast bilinear sampler).
+"""Seeded 3-D lattice value noise (pure numerics).
 
 A noise field is a periodic random lattice of ``n^3`` values in ``[0, 1]``.
 It is evaluated at lattice coordinates ``q`` (``(N, 3)``, unit = one lattice
 cell): bilinear in ``(x, y)`` and quintic-faded linear in ``z``. The lattice is
 stored as a 2-D "atlas" (the ``z`` slices side by side, each with one wrap-around
-row and column) so that the ``(x, y)`` interpolation is one ``cv2.remap`` call per
-slice pair, which is an order of magnitude faster than ``scipy.ndimage``.
+row and column); each point's four neighbours are gathered from it and blended
+in float32 at the exact position.
 
-OpenCV's bilinear weights are quantised to 1/32 of a cell; the resulting
-steps are below 1/32 of one octave's amplitude and far below any pixel
-footprint, and they are a fixed function of the 3-D point, so they do not
-break view consistency.
+(Until issue #12 the blend was ``cv2.remap``: OpenCV 4.x rounds its positions to
+1/32 of a cell, and the rounding depended on where a point sat in the batch, so
+the albedo of one surface point differed between views and between OpenCV
+builds by up to ~1e-3. The gather is ~4x slower per point than remap.)
 
 The value is a deterministic function of ``q`` and the seed: identical from
 every viewpoint.
@@ -19,9 +19,6 @@ every viewpoint.
 from __future__ import annotations
 
 import numpy as np
-
-_MAX_COLS = 4096  # remap maps are passed as 2-D blocks; OpenCV limits both sides to < 32767
-
 
 class LatticeNoise:
     """Periodic value noise on an ``n^3`` lattice drawn from ``rng`` (a ``numpy.random.Generator``)."""
@@ -51,36 +48,40 @@ class LatticeNoise:
 
     def eval_T(self, qT: np.ndarray) -> np.ndarray:
         """As :meth:`__call__` for transposed coordinates ``qT`` ``(3, N)`` float32 (the fast layout)."""
-        import cv2
-
         N = qT.shape[1]
         if N == 0:
             return np.zeros(0, np.float32)
         n = self.n
         f32 = np.float32
         inv_n = f32(1.0 / n)
-        cols = min(_MAX_COLS, N)
-        rows = -(-N // cols)
-        M = rows * cols
-        mx0 = np.zeros(M, f32)
-        mx1 = np.zeros(M, f32)
-        my = np.zeros(M, f32)
+        W = n * (n + 1)  # atlas row length
+        flat = self._atlas.reshape(-1)
+
+        def cell(c):
+            """Wrapped lattice coordinate -> (integer cell in [0, n - 1], fraction in [0, 1]) (float32 arithmetic)."""
+            w = c - f32(n) * np.floor(c * inv_n)  # in [0, n]; n itself only by float32 rounding
+            i = np.minimum(np.floor(w), f32(n - 1))
+            return i.astype(np.int32), w - i
+
         z = qT[2]
         zf = np.floor(z)
         fz = z - zf
-        k0 = zf - f32(n) * np.floor(zf * inv_n)  # zf mod n (exact for integers)
-        x = qT[0] - f32(n) * np.floor(qT[0] * inv_n)
-        np.multiply(k0, f32(n + 1), out=mx0[:N])
-        mx0[:N] += x
-        k0 += f32(1)
-        k0[k0 >= n] = 0
-        np.multiply(k0, f32(n + 1), out=mx1[:N])
-        mx1[:N] += x
-        y = qT[1]
-        np.subtract(y, f32(n) * np.floor(y * inv_n), out=my[:N])
-        my2 = my.reshape(rows, cols)
-        a = cv2.remap(self._atlas, mx0.reshape(rows, cols), my2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1)[:N]
-        b = cv2.remap(self._atlas, mx1.reshape(rows, cols), my2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(-1)[:N]
+        k0 = (zf - f32(n) * np.floor(zf * inv_n)).astype(np.int32)  # zf mod n (exact for integers)
+        k1 = k0 + 1
+        k1[k1 >= n] = 0
+        xi, fx = cell(qT[0])
+        yi, fy = cell(qT[1])
+        row = yi * W + xi
+
+        def bilinear(k):
+            i00 = row + k * (n + 1)
+            v00, v01 = flat[i00], flat[i00 + 1]
+            v10, v11 = flat[i00 + W], flat[i00 + W + 1]
+            top = v00 + fx * (v01 - v00)
+            return top + fy * ((v10 + fx * (v11 - v10)) - top)
+
+        a = bilinear(k0)
+        b = bilinear(k1)
         w = fz * fz * fz * (fz * (fz * f32(6) - f32(15)) + f32(10))
         b -= a
         b *= w
