@@ -511,3 +511,9 @@ def with_distortion(model: CameraModel, **kw) -> CameraModel:
     """Convenience: a copy with some fields replaced (e.g. ``kind``, ``O``, ``R``, ``E``)."""
     return replace(model, **kw)
 
+
+
+def check_camera_model(model, name: str) -> None:
+    """Raise ``ValueError`` naming argument ``name`` unless ``model`` is a :class:`CameraModel`."""
+    if not isinstance(model, CameraModel):
+        raise ValueError(f"{name}: expected a CameraModel, got {type(model).__name__}")

@@ -141,7 +141,7 @@ class StereoView:
         the coarse pass saw there (``dense_stereo(..., coarse=...)``).
         """
         if self._dense is None:
-            from .stereo import dense_stereo, dense_stereo_coarse
+            from .dense_stereo import dense_stereo, dense_stereo_coarse
 
             t0 = time.perf_counter()
             lo, hi = self.min_range_m, self.max_range_m
@@ -205,7 +205,7 @@ class HandoffCase:
     def point_stereo(self, nav_uv) -> object:
         key = ("ps", tuple(np.round(np.asarray(nav_uv, float), 6)))
         if key not in self._cache:
-            from .stereo import point_stereo
+            from .point_stereo import point_stereo
 
             self._cache[key] = point_stereo(
                 self.nav.left_img, self.nav.right_img, self.nav.left_model, self.nav.right_model,
@@ -497,7 +497,7 @@ class HandoffCase:
                         diag = {"warp": "local plane", "nav_px_per_haz_px": A.tolist(),
                                 "start_uv": np.asarray(start).tolist()}
             if tpl is None:  # the paper's uniformly scaled window
-                from .tracking import extract_window, scale_window, window_scale_for_handoff
+                from .windows import extract_window, scale_window, window_scale_for_handoff
 
                 ifov_nav = local_ifov_rad(self.nav.left_model, nav_uv)
                 ifov_haz = local_ifov_rad(self.haz.left_model, start)
@@ -526,7 +526,7 @@ class HandoffCase:
         uv = np.asarray(haz_uv, float).reshape(2)
         key = ("hps", tuple(np.round(uv, 4)))
         if key not in self._cache:
-            from .stereo import point_stereo
+            from .point_stereo import point_stereo
 
             lo, hi = self.haz.min_range_m, self.haz.max_range_m
             if range_hint_m is not None and np.isfinite(range_hint_m):

@@ -15,13 +15,10 @@ diagnostics: the best competing peak (``second_score``), the ratio
 ``score / second_score`` and the peak sharpness (smallest curvature of the
 NCC surface at the peak, per px^2; ~0 along an edge).
 
-NCC is invariant to an affine intensity change ``a * I + b`` (``a > 0``) of
-either image, so camera gain/offset differences do not matter.
-
-Camera changes (pancam -> navcam handoff, far navcam -> hazcam): a target
-seen at range ``r`` through IFOV ``i`` (rad/px) spans ``1 / (r * i)`` pixels
-per metre, so a window taken in one camera is shrunk or enlarged by
-:func:`window_scale_for_handoff` with :func:`scale_window` before tracking.
+The NCC primitives are in :mod:`scipctl.core.ncc` (NCC is invariant to an
+affine intensity change of either image, so camera gain/offset differences do
+not matter); templates are cut and rescaled between cameras by
+:mod:`scipctl.core.windows`.
 
 OpenCV is imported inside the functions (``scipctl --help`` stays fast).
 """
@@ -34,20 +31,10 @@ from typing import Optional
 
 import numpy as np
 
-from .resample import sample_bicubic, sample_bilinear
+from .image import as_float_image, as_uv
+from .ncc import default_min_std, local_maxima, ncc_region, refine_subpixel_peak, subpixel_peak
 
-__all__ = [
-    "TrackResult",
-    "track",
-    "ncc_map",
-    "subpixel_peak",
-    "extract_window",
-    "crop_window",
-    "scale_window",
-    "window_scale_for_handoff",
-    "as_float_image",
-    "default_min_std",
-]
+__all__ = ["TrackResult", "track"]
 
 #: candidate peaks carried from the coarsest pyramid level to the finest
 _N_CANDIDATES = 5
@@ -89,171 +76,10 @@ class TrackResult:
         return TrackResult(False, reason, np.full(2, np.nan), score, float("nan"), float("nan"), float("nan"), levels)
 
 
-# ---------------------------------------------------------------- utilities
-def as_float_image(img, name: str = "image") -> np.ndarray:
-    """A single-channel image (``(H, W)``, any real dtype) as contiguous float32; checks the shape."""
-    a = np.asarray(img)
-    if a.ndim != 2:
-        raise ValueError(f"{name}: expected a single-channel (H, W) image, got shape {a.shape}")
-    if a.shape[0] < 1 or a.shape[1] < 1:
-        raise ValueError(f"{name}: empty image {a.shape}")
-    if a.dtype.kind not in "uif" and a.dtype != bool:
-        raise ValueError(f"{name}: unsupported dtype {a.dtype}")
-    return np.ascontiguousarray(a, dtype=np.float32)
-
-
-def default_min_std(dtype) -> float:
-    """Default texture threshold (std of a window, in the image's own units).
-
-    Integer images: half a digital number (a window varying by less than half
-    a quantum is flat). Float images: ``1e-6`` (only an exactly flat window).
-    """
-    return 0.5 if np.dtype(dtype).kind in "ui" else 1e-6
-
-
-def _as_uv(uv, name: str) -> np.ndarray:
-    a = np.asarray(uv, dtype=float).reshape(-1)
-    if a.shape != (2,) or not np.all(np.isfinite(a)):
-        raise ValueError(f"{name}: expected a finite (u, v) pair, got {uv!r}")
-    return a
-
-
-def ncc_map(template, image) -> np.ndarray:
-    """Zero-mean NCC of ``template`` ``(h, w)`` at every placement inside ``image`` ``(H, W)``.
-
-    Returns ``(H - h + 1, W - w + 1)`` float32; entry ``[y, x]`` scores the
-    template with its top-left pixel on image pixel ``(u=x, v=y)``. Both
-    inputs are mean-subtracted first (the NCC is unchanged; the float32
-    sums are better conditioned).
-    """
-    import cv2
-
-    t = as_float_image(template, "template")
-    im = as_float_image(image, "image")
-    if t.shape[0] > im.shape[0] or t.shape[1] > im.shape[1]:
-        raise ValueError(f"template {t.shape} larger than image {im.shape}")
-    t = t - np.float32(t.mean())
-    im = im - np.float32(im.mean())
-    return cv2.matchTemplate(im, t, cv2.TM_CCOEFF_NORMED)
-
-
-# 3x3 least-squares quadratic f = a + b x + c y + d x^2 + e x y + g y^2
-_QX, _QY = np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0])
-_QDESIGN = np.stack(
-    [np.ones(9), _QX.ravel(), _QY.ravel(), _QX.ravel() ** 2, (_QX * _QY).ravel(), _QY.ravel() ** 2], axis=1
-)
-_QPINV = np.linalg.pinv(_QDESIGN)
-
-
-def subpixel_peak(score_map: np.ndarray, iy: int, ix: int) -> tuple[float, float, float]:
-    """Sub-pixel offset ``(dx, dy)`` of the maximum at ``[iy, ix]`` of ``score_map`` ``(H, W)`` and its sharpness.
-
-    Fits a quadratic to the 3x3 neighbourhood (least squares); if the fit
-    is not a proper maximum or its vertex lies more than 1 px away, falls
-    back to two 1-D parabolas through the centre row and column (each clipped
-    to +-0.5 px). Sharpness is the smallest eigenvalue of ``-Hessian`` of the
-    fitted surface (per px^2); 0 when the peak is on the map's border.
-    """
-    Hm, Wm = score_map.shape
-    if not (0 <= iy < Hm and 0 <= ix < Wm):
-        raise ValueError(f"peak index ({iy}, {ix}) outside map {score_map.shape}")
-    if iy == 0 or ix == 0 or iy == Hm - 1 or ix == Wm - 1:
-        return 0.0, 0.0, 0.0
-    n = np.asarray(score_map[iy - 1 : iy + 2, ix - 1 : ix + 2], dtype=float)
-    if not np.all(np.isfinite(n)):
-        return 0.0, 0.0, 0.0
-    _, b, c, d, e, g = _QPINV @ n.ravel()
-    Hs = np.array([[2 * d, e], [e, 2 * g]])
-    ev = np.linalg.eigvalsh(-Hs)
-    sharp = float(max(ev.min(), 0.0))
-    if ev.min() > 0:
-        off = -np.linalg.solve(Hs, np.array([b, c]))
-        if np.all(np.abs(off) <= 1.0):
-            return float(off[0]), float(off[1]), sharp
-
-    def para(fm, f0, fp):
-        den = fm - 2 * f0 + fp
-        if den >= 0:
-            return 0.0
-        return float(np.clip(0.5 * (fm - fp) / den, -0.5, 0.5))
-
-    return para(n[1, 0], n[1, 1], n[1, 2]), para(n[0, 1], n[1, 1], n[2, 1]), sharp
-
-
-def _iterate_subpixel(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iterations: int = 4):
-    """Refine the sub-pixel offset ``d0`` of the NCC peak at integer top-left ``peak_xy``.
-
-    A quadratic fitted to NCC samples 1 px apart is biased towards the
-    sampling grid ("pixel locking") and by the peak's asymmetry (a cubic
-    term; the bias shrinks with the square of the sample spacing). So we
-    resample the image (bicubic) around the current estimate, evaluate the
-    NCC on a 3x3 grid of spacing ``h`` (1, then 0.5, then 0.25 px) centred on
-    it, and add the fitted vertex. Returns ``(d (2,), sharpness per px^2)``
-    and the NCC at the refined position, or ``None`` when the template does
-    not fit in the image at ``peak_xy`` or the refinement wanders off by more
-    than a pixel. Near the image border the missing neighbourhood repeats the
-    edge pixels.
-    """
-    import cv2
-
-    th, tw = tpl.shape
-    H, W = img.shape
-    px, py = int(peak_xy[0]), int(peak_xy[1])
-    pad = 4
-    x0, y0 = px - pad, py - pad
-    x1, y1 = px + tw + pad, py + th + pad
-    if px < 0 or py < 0 or px + tw > W or py + th > H:
-        return None
-    crop = img[max(y0, 0) : y1, max(x0, 0) : x1]
-    if x0 < 0 or y0 < 0 or x1 > W or y1 > H:  # at the image border: repeat the edge pixels
-        crop = cv2.copyMakeBorder(
-            crop, max(-y0, 0), max(y1 - H, 0), max(-x0, 0), max(x1 - W, 0), cv2.BORDER_REPLICATE
-        )
-    crop = crop - np.float32(crop.mean())
-    # exact sampling positions (scipctl.core.resample): OpenCV 4.x would round them to 1/32 px
-    gy, gx = np.mgrid[0:th, 0:tw].astype(np.float64)
-
-    def shifted(du, dv):
-        return sample_bicubic(crop, gx + pad + du, gy + pad + dv).astype(np.float32)
-
-    d = np.array(d0, dtype=float)
-    sharp = 0.0
-    for it in range(iterations):
-        h = 1.0 / 2 ** min(it, 2)
-        m3 = np.empty((3, 3))
-        for j in range(3):
-            for i in range(3):
-                patch = shifted(d[0] + (i - 1) * h, d[1] + (j - 1) * h)
-                m3[j, i] = cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0]
-        dx, dy, sharp = subpixel_peak(m3, 1, 1)
-        sharp /= h * h
-        d += (dx * h, dy * h)
-        if np.any(np.abs(d) > 1.0):
-            return None
-        if h <= 0.25 and abs(dx * h) < 1e-3 and abs(dy * h) < 1e-3:
-            break
-    patch = shifted(d[0], d[1])
-    score = float(cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
-    return d, sharp, score
-
-
-def _local_maxima(m: np.ndarray, valid: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
-    """Row/column indices of 3x3 local maxima of ``m`` (ties kept), strongest first."""
-    import cv2
-
-    mm = np.where(np.isfinite(m), m, -np.inf).astype(np.float32)
-    if valid is not None:
-        mm = np.where(valid, mm, -np.inf).astype(np.float32)
-    dil = cv2.dilate(mm, np.ones((3, 3), np.uint8), borderType=cv2.BORDER_REPLICATE)
-    peak = (mm >= dil) & np.isfinite(mm)
-    ys, xs = np.nonzero(peak)
-    order = np.argsort(-mm[ys, xs], kind="stable")
-    return ys[order], xs[order]
-
-
+# ---------------------------------------------------------------- search
 def _select_peaks(m: np.ndarray, k: int, sep: float, valid: Optional[np.ndarray] = None) -> list[tuple[int, int, float]]:
     """Up to ``k`` local maxima of ``m``, strongest first, pairwise farther apart than ``sep`` px."""
-    ys, xs = _local_maxima(m, valid)
+    ys, xs = local_maxima(m, valid)
     out: list[tuple[int, int, float]] = []
     for y, x in zip(ys, xs):
         if all((y - y2) ** 2 + (x - x2) ** 2 > sep * sep for y2, x2, _ in out):
@@ -261,24 +87,6 @@ def _select_peaks(m: np.ndarray, k: int, sep: float, valid: Optional[np.ndarray]
             if len(out) >= k:
                 break
     return out
-
-
-def _ncc_region(tpl: np.ndarray, img: np.ndarray, x0: int, x1: int, y0: int, y1: int):
-    """NCC for top-left placements ``x0..x1``, ``y0..y1`` (inclusive), clipped to the image.
-
-    Returns ``(map, x0c, y0c)`` or ``None`` when no placement fits.
-    """
-    import cv2
-
-    th, tw = tpl.shape
-    H, W = img.shape
-    x0c, y0c = max(x0, 0), max(y0, 0)
-    x1c, y1c = min(x1, W - tw), min(y1, H - th)
-    if x1c < x0c or y1c < y0c:
-        return None
-    crop = img[y0c : y1c + th, x0c : x1c + tw]
-    crop = crop - np.float32(crop.mean())
-    return cv2.matchTemplate(crop, tpl, cv2.TM_CCOEFF_NORMED), x0c, y0c
 
 
 def _pyramid(img: np.ndarray, levels: int) -> list[np.ndarray]:
@@ -310,7 +118,7 @@ def _refine(tpl, img, p_xy, rad: int, max_moves: int = 4):
     px, py = int(p_xy[0]), int(p_xy[1])
     res = None
     for _ in range(max_moves):
-        res = _ncc_region(tpl, img, px - rad, px + rad, py - rad, py + rad)
+        res = ncc_region(tpl, img, px - rad, px + rad, py - rad, py + rad)
         if res is None:
             return None
         m, x0, y0 = res
@@ -389,10 +197,10 @@ def track(
     th, tw = tpl.shape
     if th < 3 or tw < 3:
         raise ValueError(f"template: need at least 3x3 pixels, got {tpl.shape}")
-    pred = _as_uv(predicted_uv, "predicted_uv")
+    pred = as_uv(predicted_uv, "predicted_uv")
     if not (np.isfinite(search_radius_px) and search_radius_px >= 0):
         raise ValueError(f"search_radius_px: must be finite and >= 0, got {search_radius_px}")
-    c = np.array([(tw - 1) / 2.0, (th - 1) / 2.0]) if template_center_uv is None else _as_uv(template_center_uv, "template_center_uv")
+    c = np.array([(tw - 1) / 2.0, (th - 1) / 2.0]) if template_center_uv is None else as_uv(template_center_uv, "template_center_uv")
     if min_template_std is None:
         min_template_std = default_min_std(tdtype)
     if not np.all(np.isfinite(tpl)):
@@ -434,7 +242,7 @@ def track(
     s = 2.0**levels
     r_c = search_radius_px / s
     pc = p0 / s
-    res = _ncc_region(
+    res = ncc_region(
         tpls[levels], imgs[levels],
         int(math.floor(pc[0] - r_c)), int(math.ceil(pc[0] + r_c)),
         int(math.floor(pc[1] - r_c)), int(math.ceil(pc[1] + r_c)),
@@ -481,14 +289,14 @@ def track(
     for cx_, cy_, osc in others:
         if (cx_ - peak_xy[0]) ** 2 + (cy_ - peak_xy[1]) ** 2 > exclusion_px**2:
             second = max(second, osc)
-    ys, xs = _local_maxima(mb)
+    ys, xs = local_maxima(mb)
     for yy, xx in zip(ys, xs):
         if (bx0 + xx - peak_xy[0]) ** 2 + (by0 + yy - peak_xy[1]) ** 2 > exclusion_px**2:
             second = max(second, float(mb[yy, xx]))
             break
     dx, dy, sharp = subpixel_peak(mb, biy, bix)
     if subpixel_iterations > 0:
-        it = _iterate_subpixel(tpls[0], img, peak_xy, (dx, dy), subpixel_iterations)
+        it = refine_subpixel_peak(tpls[0], img, peak_xy, (dx, dy), subpixel_iterations)
         if it is not None:
             (dx, dy), sharp, score_sub = it
             score = max(score, score_sub)
@@ -506,101 +314,3 @@ def track(
     elif ratio < min_ratio:
         ok, reason = False, f"ambiguous match (peak ratio {ratio:.3f} < {min_ratio:.3f})"
     return TrackResult(ok, reason, uv, score, second, ratio, sharp, levels)
-
-
-# ---------------------------------------------------------------- windows
-def extract_window(image, center_uv, half_size_px: int) -> np.ndarray:
-    """A ``(2 k + 1, 2 k + 1)`` float32 window (``k = half_size_px``) centred on sub-pixel ``center_uv``.
-
-    Bilinear resampling with ``cv2.getRectSubPix``: window pixel ``(k, k)``
-    is image point ``center_uv``. Parts outside the image repeat the border
-    pixels (see :func:`crop_window` for an un-resampled, clipped window).
-    """
-    import cv2
-
-    img = as_float_image(image)
-    c = _as_uv(center_uv, "center_uv")
-    k = int(half_size_px)
-    if k < 1:
-        raise ValueError(f"half_size_px: must be >= 1, got {half_size_px}")
-    n = 2 * k + 1
-    return cv2.getRectSubPix(img, (n, n), (float(c[0]), float(c[1])))
-
-
-def crop_window(image, center_uv, half_size_px: int) -> tuple[np.ndarray, np.ndarray, float]:
-    """The image pixels within ``half_size_px`` of the pixel nearest ``center_uv``, clipped to the image.
-
-    No resampling: returns ``(window (h, w) same dtype as image, center_in_window_uv (2,),
-    inside_fraction)`` where ``center_in_window_uv`` is ``center_uv`` in the
-    window's pixel coordinates (fractional) and ``inside_fraction`` is the
-    part of the full ``(2k+1)^2`` window that lies inside the image. Use it
-    as ``track(window, ..., template_center_uv=center_in_window_uv)``.
-    """
-    a = np.asarray(image)
-    if a.ndim != 2:
-        raise ValueError(f"image: expected (H, W), got shape {a.shape}")
-    c = _as_uv(center_uv, "center_uv")
-    k = int(half_size_px)
-    if k < 1:
-        raise ValueError(f"half_size_px: must be >= 1, got {half_size_px}")
-    H, W = a.shape
-    iu, iv = int(np.floor(c[0] + 0.5)), int(np.floor(c[1] + 0.5))
-    x0, x1 = max(iu - k, 0), min(iu + k + 1, W)
-    y0, y1 = max(iv - k, 0), min(iv + k + 1, H)
-    if x1 <= x0 or y1 <= y0:
-        return a[0:0, 0:0], c.copy(), 0.0
-    frac = (x1 - x0) * (y1 - y0) / float((2 * k + 1) ** 2)
-    return a[y0:y1, x0:x1], c - np.array([x0, y0], dtype=float), frac
-
-
-def scale_window(window, scale: float) -> np.ndarray:
-    """Resample ``window`` ``(h, w)`` by ``scale`` about its centre -> float32 ``(h', w')``.
-
-    The output is odd-sized, ``h' = largest odd <= h * scale`` (at least 3),
-    and its centre pixel is the input's centre point, with the exact scale
-    (bilinear, at exact positions: :func:`scipctl.core.resample.sample_bilinear`). When shrinking, the input
-    is first low-pass filtered by a Gaussian whose variance is that of the
-    larger output pixel's footprint minus the input pixel's,
-    ``((1/scale)^2 - 1) / 12`` px^2, which emulates area integration by the
-    coarser camera (``cv2.resize(INTER_AREA)`` would round the scale to the
-    integer output size).
-    """
-    import cv2
-
-    w = as_float_image(window, "window")
-    s = float(scale)
-    if not (np.isfinite(s) and s > 0):
-        raise ValueError(f"scale: must be finite and > 0, got {scale}")
-    h0, w0 = w.shape
-
-    def odd(n):
-        n = int(math.floor(n + 1e-9))
-        if n % 2 == 0:
-            n -= 1
-        return max(n, 3)
-
-    h1, w1 = odd(h0 * s), odd(w0 * s)
-    src = w
-    if s < 1:
-        sigma = math.sqrt(((1.0 / s) ** 2 - 1.0) / 12.0)
-        if sigma > 0.05:
-            src = cv2.GaussianBlur(w, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
-    cs = np.array([(w0 - 1) / 2.0, (h0 - 1) / 2.0])
-    cd = np.array([(w1 - 1) / 2.0, (h1 - 1) / 2.0])
-    # dst -> src map: src = (dst - cd) / s + cs, sampled at the exact positions (scipctl.core.resample)
-    yd, xd = np.mgrid[0:h1, 0:w1].astype(np.float64)
-    return sample_bilinear(src, (xd - cd[0]) / s + cs[0], (yd - cd[1]) / s + cs[1]).astype(np.float32)
-
-
-def window_scale_for_handoff(ifov_src_rad: float, range_src_m: float, ifov_dst_rad: float, range_dst_m: float) -> float:
-    """Scale factor that turns a window from the source camera into the destination camera's view.
-
-    A target at range ``r`` seen through IFOV ``i`` (rad/px) spans ``1/(r i)``
-    px per metre, so the factor is ``(r_src i_src) / (r_dst i_dst)``. Pancam
-    (IFOV ~0.28 mrad) to navcam (~0.82 mrad) at the same range: ~1/3.
-    """
-    vals = dict(ifov_src_rad=ifov_src_rad, range_src_m=range_src_m, ifov_dst_rad=ifov_dst_rad, range_dst_m=range_dst_m)
-    for k, v in vals.items():
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"{k}: must be finite and > 0, got {v}")
-    return float((range_src_m * ifov_src_rad) / (range_dst_m * ifov_dst_rad))

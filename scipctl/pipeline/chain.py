@@ -87,7 +87,7 @@ _f = finite_or_none
 
 
 def _stereo(dl: Downlink, left: ImageProduct, uv):
-    from ..core.stereo import point_stereo
+    from ..core.point_stereo import point_stereo
 
     right = dl.stereo_pair(left)
     if right is None:
@@ -104,7 +104,7 @@ def _local_normal_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, ra
     range)`` m (the target's own surface, e.g. a rock face) and within
     ``max(0.2, 0.1 range)`` m (mostly the surrounding ground); each ``(3,)`` or None.
     """
-    from ..core.stereo import dense_stereo
+    from ..core.dense_stereo import dense_stereo
     from .designate import surface_normal
 
     right = dl.stereo_pair(prod)
@@ -207,7 +207,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         raise ValueError(f"template_mode must be 'plane' or 'scale', got {template_mode!r}")
     if handoff_at not in ("every", "last", "first"):
         raise ValueError(f"handoff_at must be 'every', 'last' or 'first', got {handoff_at!r}")
-    from ..core.tracking import extract_window, scale_window, track, window_scale_for_handoff
+    from ..core.tracking import track
+    from ..core.windows import extract_window, scale_window, window_scale_for_handoff
 
     tgt = None
     truth_xyz = None

@@ -57,7 +57,7 @@ def surface_normal(xyz: np.ndarray, centre: np.ndarray, radius_m: float) -> tupl
 def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = None,
               target_id: str = "t1", with_normal: bool = True) -> dict:
     """Point stereo at ``uv`` in ``left``; returns the designation record (raises InputError / NoMatch)."""
-    from ..core.stereo import point_stereo
+    from ..core.point_stereo import point_stereo
 
     uv = np.asarray(uv, float)
     if not (-0.5 <= uv[0] <= left.width - 0.5 and -0.5 <= uv[1] <= left.height - 0.5):
@@ -109,7 +109,7 @@ def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = N
                  "source": left.pose.source},
     })
     if with_normal:
-        from ..core.stereo import dense_stereo
+        from ..core.dense_stereo import dense_stereo
 
         try:
             ds = dense_stereo(L, R, left.camera_model, right.camera_model,

@@ -1234,7 +1234,8 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     tracked pixel lies within ``SUCCESS_PX`` of the projection of the target's
     surface point; a failed step loses the target for the rest of the chain.
     """
-    from ..core.tracking import extract_window, scale_window, track, window_scale_for_handoff
+    from ..core.tracking import track
+    from ..core.windows import extract_window, scale_window, window_scale_for_handoff
 
     Xs = np.asarray(surface_point_site, float).reshape(3)
     n_mc = 0 if mc is None else min(int(n_samples if n_samples is not None else params.uncertainty.n_track_samples),
@@ -1664,7 +1665,7 @@ def resolve_target(dl, target_id: str, targets_doc: Optional[dict], with_normal:
 
 def terrain_sources(dl, position, cameras=STEREO_CAMERAS, downsample: int = 2, target_range_m: Optional[float] = None):
     """Dense stereo of every left/right pair of ``cameras`` at ``position`` -> list of :class:`TerrainSource` (site frame)."""
-    from ..core.stereo import dense_stereo
+    from ..core.dense_stereo import dense_stereo
 
     out = []
     for im in sorted(dl.images_at(position, eye="left"), key=lambda i: (_PRIORITY.get(i.camera, 9), i.time_s)):

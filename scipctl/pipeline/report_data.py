@@ -103,7 +103,7 @@ def image_stats(dl: Downlink) -> list:
 # ============================================================================ calibration health
 def _epipolar_offset(left_model, right_model, uv_left, uv_right) -> Optional[float]:
     """Signed distance (px) of ``uv_right`` from the epipolar curve of ``uv_left`` (+: below/right of its direction)."""
-    from ..core.stereo import epipolar_curve, polyline_foot
+    from ..core.epipolar import epipolar_curve, polyline_foot
 
     try:
         c, _ = epipolar_curve(left_model, right_model, uv_left, 0.3, 200.0)
@@ -134,7 +134,7 @@ def _texture_points(img: np.ndarray, n: int, margin: int = 40) -> np.ndarray:
 
 def calibration_health(dl: Downlink, points_per_pair: int = 5) -> dict:
     """Epipolar offsets per stereo pair (point stereo on textured points; and from marks) and a mast bias estimate."""
-    from ..core.stereo import default_band_px, point_stereo
+    from ..core.point_stereo import default_band_px, point_stereo
 
     pairs = []
     for im in sorted(dl.images, key=lambda i: i.time_s):
@@ -179,7 +179,7 @@ def mast_bias(dl: Downlink) -> Optional[dict]:
     Returns ``{cases, dpan_rad, dtilt_rad, residual_before_px (mean du, dv), rms_before_px, rms_after_px}``
     or None without suitable marks (near navcam pair + hazcam left at one position, all marked).
     """
-    from ..core.stereo import triangulate_rays
+    from ..core.triangulation import triangulate_rays
 
     rc = dl.rover_config
     cases = []

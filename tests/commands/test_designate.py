@@ -46,7 +46,7 @@ def test_designate_a_marked_target(sol, dl):
     assert rec["id"] == "rock1" and rec["ok"]
     # the stereo match against the ideal one: the exact left and right marks triangulated with the downlinked
     # models (the models carry the simulated mast-calibration error, which no matcher can see)
-    from scipctl.core.stereo import triangulate_rays
+    from scipctl.core.triangulation import triangulate_rays
 
     right = dl.stereo_pair(left)
     mr = t.mark_in(right.product_id)

@@ -11,12 +11,13 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from scipctl.core.stereo import dense_stereo, point_stereo
+from scipctl.core.dense_stereo import dense_stereo
+from scipctl.core.point_stereo import point_stereo
 from scipctl.core.tracking import track
-from tests.core.test_stereo import Scene, make_pair
+from tests.core.stereo_scenes import Scene, make_pair
 
 SIZE = 1024
-F_NAVCAM_PX = 1220.0  # ~45 deg over 1024 px, baseline 0.2 m (tests/core/test_stereo.make_pair)
+F_NAVCAM_PX = 1220.0  # ~45 deg over 1024 px, baseline 0.2 m (tests/core/stereo_scenes.make_pair)
 
 
 @lru_cache(maxsize=None)

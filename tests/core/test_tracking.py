@@ -3,16 +3,8 @@
 import numpy as np
 import pytest
 
-from scipctl.core.tracking import (
-    TrackResult,
-    crop_window,
-    extract_window,
-    ncc_map,
-    scale_window,
-    subpixel_peak,
-    track,
-    window_scale_for_handoff,
-)
+from scipctl.core.tracking import TrackResult, track
+from scipctl.core.windows import crop_window, extract_window, scale_window, window_scale_for_handoff
 
 
 class Texture:
@@ -196,48 +188,6 @@ def test_target_near_border_with_clipped_window():
     assert np.abs(res.uv - (target + s)).max() < 0.05
 
 
-def test_extract_window_centre_convention_and_border():
-    v, u = np.mgrid[0:50, 0:60].astype(np.float32)
-    ramp = 3.0 * u + 0.5 * v + 10.0  # bilinear resampling is exact on a linear ramp
-    c = (20.3, 30.75)
-    w = extract_window(ramp, c, 4)
-    assert w.shape == (9, 9) and w.dtype == np.float32
-    assert w[4, 4] == pytest.approx(3.0 * 20.3 + 0.5 * 30.75 + 10.0, abs=1e-3)
-    assert np.allclose(np.diff(w, axis=1), 3.0, atol=1e-3)
-    assert np.allclose(np.diff(w, axis=0), 0.5, atol=1e-3)
-    # at the border the missing part repeats the edge pixels
-    wb = extract_window(ramp, (1.0, 25.0), 4)
-    assert np.allclose(wb[:, :3], wb[:, [3]], atol=1e-4)
-    assert np.allclose(wb[4, 3:], 3.0 * np.arange(0, 6) + 0.5 * 25 + 10.0, atol=1e-3)
-
-
-def test_scale_window_keeps_centre_and_scale():
-    v, u = np.mgrid[0:61, 0:61].astype(np.float32)
-    ramp = 2.0 * (u - 30) - 1.0 * (v - 30) + 50.0
-    w = scale_window(ramp, 1.0 / 3.0)
-    assert w.shape == (19, 19)  # largest odd <= 61 / 3
-    assert w[9, 9] == pytest.approx(50.0, abs=1e-3)
-    # a linear ramp stays linear; slope per output pixel is 3x (blur keeps ramps away from the border)
-    assert np.allclose(np.diff(w[5:14, 5:14], axis=1), 6.0, atol=1e-2)
-    assert np.allclose(np.diff(w[5:14, 5:14], axis=0), -3.0, atol=1e-2)
-    w2 = scale_window(ramp[:41, :41], 1.5)
-    assert w2.shape == (61, 61)
-    assert w2[30, 30] == pytest.approx(ramp[20, 20], abs=1e-3)
-    with pytest.raises(ValueError):
-        scale_window(ramp, 0.0)
-
-
-def test_window_scale_for_handoff():
-    # pancam -> navcam at the same range: IFOV ratio
-    assert window_scale_for_handoff(0.28e-3, 4.5, 0.82e-3, 4.5) == pytest.approx(0.28 / 0.82)
-    # px per metre: 1 / (r i) in each camera
-    r1, i1, r2, i2 = 3.0, 0.8e-3, 1.2, 2.1e-3
-    s = window_scale_for_handoff(i1, r1, i2, r2)
-    assert s == pytest.approx((1 / (r2 * i2)) / (1 / (r1 * i1)))
-    with pytest.raises(ValueError):
-        window_scale_for_handoff(0.0, 1.0, 1.0, 1.0)
-
-
 def test_scale_handoff_tracks_into_coarser_camera():
     """A window from a fine camera, shrunk by 1/3, found in a camera with 3x coarser pixels."""
     tex = Texture(n=80, fmax=0.12, seed=8)
@@ -256,33 +206,6 @@ def test_scale_handoff_tracks_into_coarser_camera():
     assert err < 0.05, f"handoff error {err:.4f} coarse px"
     # without the rescale the same window does not match
     assert track(win[30:61, 30:61], coarse, target_coarse, 8).score < res.score - 0.2
-
-
-def test_subpixel_peak_on_exact_quadratic():
-    y, x = np.mgrid[0:7, 0:7].astype(float)
-    x0, y0 = 3.3, 2.8
-    m = 1.0 - 0.1 * (x - x0) ** 2 - 0.05 * (y - y0) ** 2 - 0.02 * (x - x0) * (y - y0)
-    iy, ix = np.unravel_index(np.argmax(m), m.shape)
-    dx, dy, sharp = subpixel_peak(m, iy, ix)
-    assert ix + dx == pytest.approx(x0, abs=1e-9)
-    assert iy + dy == pytest.approx(y0, abs=1e-9)
-    ev = np.linalg.eigvalsh(np.array([[0.2, 0.02], [0.02, 0.1]]))
-    assert sharp == pytest.approx(ev.min(), rel=1e-9)
-    assert subpixel_peak(m, 0, 3)[:2] == (0.0, 0.0)  # border: no fit
-
-
-def test_ncc_map_matches_definition():
-    rng = np.random.default_rng(0)
-    img = rng.normal(size=(20, 25))
-    tpl = img[5:12, 8:13] * 3.0 + 1.0
-    m = ncc_map(tpl, img)
-    assert m.shape == (14, 21)
-    y, x = 9, 4
-    a = img[y : y + 7, x : x + 5]
-    a = a - a.mean()
-    t = tpl - tpl.mean()
-    assert m[y, x] == pytest.approx((a * t).sum() / np.sqrt((a * a).sum() * (t * t).sum()), abs=1e-5)
-    assert m[5, 8] == pytest.approx(1.0, abs=1e-5)
 
 
 def test_bad_inputs_raise():

@@ -5,7 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scipctl.core.tracking import extract_window, scale_window, track, window_scale_for_handoff
+from scipctl.core.tracking import track
+from scipctl.core.windows import extract_window, scale_window, window_scale_for_handoff
 from scipctl.io.downlink import read_downlink
 from scipctl.pipeline.chain import FEATURE_AGREE_PX, FEATURE_CONFIRM_PX, plane_warped_template, run_chain
 

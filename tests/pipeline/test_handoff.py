@@ -100,7 +100,7 @@ def test_every_method_answers_and_is_timed(noerr):
 
 
 def _triangulate(models, uvs):
-    from scipctl.core.stereo import triangulate_rays
+    from scipctl.core.triangulation import triangulate_rays
 
     (o1, d1), (o2, d2) = (m.unproject(np.asarray(uv, float)) for m, uv in zip(models, uvs))
     X, _, _ = triangulate_rays(o1, d1, o2, d2)

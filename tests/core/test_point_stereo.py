@@ -1,0 +1,135 @@
+"""Point stereo on synthetic scenes with exact truth (tests/core/stereo_scenes.py)."""
+
+import numpy as np
+import pytest
+
+from scipctl.core.camera import camera_frame
+from scipctl.core.point_stereo import DEFAULT_BAND_PX, default_band_px, point_stereo
+from scipctl.core.transforms import RigidTransform
+from tests.core.stereo_scenes import BASELINE_M, F_PX, H, W, rendered, to_uint8
+
+
+def test_default_band():
+    assert default_band_px("pancam") >= 4.0  # the paper saw up to 4 px off the epipolar line on pancams
+    assert default_band_px("navcam") == DEFAULT_BAND_PX["navcam"]
+    assert default_band_px("something") == 6.0
+
+
+POINTS = [(256.0, 300.0), (100.4, 350.2), (420.7, 330.9), (300.2, 220.6), (150.0, 200.0)]
+
+
+@pytest.mark.parametrize("kind", ["CAHV", "CAHVOR", "CAHVORE"])
+def test_point_stereo_recovers_3d_point(kind):
+    scene, left, right, L, R = rendered(kind)
+    for uv in POINTS:
+        X_true = scene.point_at(left, uv)[0]
+        res = point_stereo(to_uint8(L), to_uint8(R), left, right, uv, band_px=3.0)
+        assert res.ok, (uv, res.reason)
+        r_true = np.linalg.norm(X_true - left.C)
+        err = np.linalg.norm(res.xyz - X_true)
+        # the error is within the range uncertainty propagated from 0.25 px of disparity error
+        assert err < res.range_sigma_m, f"{kind} {uv}: error {err * 1000:.1f} mm at {r_true:.2f} m (sigma {res.range_sigma_m * 1000:.1f} mm)"
+        assert res.range_m == pytest.approx(np.linalg.norm(res.xyz - left.C))
+        assert abs(res.epipolar_offset_px) < 0.1
+        assert res.miss_distance_m < 1e-3
+        assert res.score > 0.9
+        uv_r_true = right.project(X_true)
+        # the window is sheared between the views of the slanted ground: allow the assumed 0.25 px sigma
+        assert np.abs(res.uv_right - uv_r_true).max() < 0.25
+
+
+def test_range_sigma_matches_disparity_formula():
+    """Fronto-parallel CAHV pair: range ~ f B / d, so d(range)/d(d) = r^2 / (f B)."""
+    scene, left, right, L, R = rendered("CAHV")
+    uv = (256.0, 300.0)
+    res = point_stereo(L, R, left, right, uv, disparity_sigma_px=0.25)
+    assert res.ok
+    r = res.range_m
+    # depth along A vs range: the pixel ray makes a small angle with A, correct for it
+    o, d = left.unproject(np.array([uv]))
+    expected = r**2 / (F_PX * BASELINE_M) * 0.25 / np.dot(d[0], left.A)
+    assert res.range_sigma_m == pytest.approx(expected, rel=0.05)
+
+
+@pytest.mark.parametrize("pitch_px", [3.0, -2.0])
+def test_epipolar_offset_measures_misaligned_right_model(pitch_px):
+    """Rotate the right model about its x axis by ``pitch_px`` pixels: the match sits that far off the curve."""
+    scene, left, right, L, R = rendered("CAHV")
+    T = camera_frame(right)
+    ang = pitch_px / F_PX
+    rot = RigidTransform.rotation_about_line(T.R[:, 0], right.C, ang)
+    right_bad = right.transformed(rot)
+    uv = (300.2, 280.6)
+    X = scene.point_at(left, uv)[0]
+    # truth: the real match is at right.project(X); the (wrong) curve passes through right_bad.project(X)
+    expected = float(right.project(X)[1] - right_bad.project(X)[1])
+    assert abs(expected) > 1.5
+    res = point_stereo(L, R, left, right_bad, uv, band_px=6.0)
+    assert res.ok, res.reason
+    assert res.epipolar_offset_px == pytest.approx(expected, abs=0.15)
+    narrow = point_stereo(L, R, left, right_bad, uv, band_px=1.0)
+    assert not narrow.ok
+    assert "edge of the epipolar band" in narrow.reason
+
+
+def test_point_stereo_near_image_border():
+    scene, left, right, L, R = rendered("CAHV")
+    uv = (W - 4.2, 300.4)  # the window is clipped by the right border of the left image
+    X_true = scene.point_at(left, uv)[0]
+    res = point_stereo(L, R, left, right, uv, band_px=3.0)
+    assert res.ok, res.reason
+    assert np.linalg.norm(res.xyz - X_true) < res.range_sigma_m
+
+
+def test_point_stereo_failures():
+    scene, left, right, L, R = rendered("CAHV")
+    L8, R8 = to_uint8(L), to_uint8(R)
+    uv = (256.0, 300.0)
+    assert point_stereo(L8, R8, left, right, (-3.0, 10.0)).reason == "pixel outside image"
+    assert point_stereo(L8, R8, left, right, (100.0, H + 1.0)).reason == "pixel outside image"
+    sat = L8.copy()
+    sat[280:321, 236:277] = 255
+    r = point_stereo(sat, R8, left, right, uv)
+    assert not r.ok and r.reason.startswith("saturated window")
+    flat = L8.copy()
+    flat[280:321, 236:277] = 90
+    r = point_stereo(flat, R8, left, right, uv)
+    assert not r.ok and r.reason.startswith("textureless window")
+    # a right image that shows something else (fine noise): nothing correlates
+    rng = np.random.default_rng(5)
+    other = np.clip(rng.normal(120.0, 30.0, (H, W)), 0, 255).astype(np.uint8)
+    r = point_stereo(L8, other, left, right, uv)
+    assert not r.ok and r.reason.startswith("no match above threshold")
+    assert r.score < 0.6
+
+
+def test_point_stereo_behind_camera():
+    """A right image shifted the wrong way (negative disparity): the rays meet behind the cameras."""
+    scene, left, right, L, R = rendered("CAHV")
+    v, u = np.mgrid[0:H, 0:W].astype(float)
+    wrong = L[:, np.clip(np.arange(W) - 3, 0, W - 1)]  # content moves right by 3 px
+    res = point_stereo(L, wrong, left, right, (256.0, 150.0), band_px=6.0, max_range_m=1e4)
+    assert not res.ok
+    assert res.reason in ("intersection behind a camera", "rays do not converge")
+
+
+def test_point_stereo_gain_difference():
+    """Left and right cameras with different gain and offset give the same match."""
+    scene, left, right, L, R = rendered("CAHV")
+    uv = (300.2, 220.6)
+    a = point_stereo(L, R, left, right, uv)
+    b = point_stereo(L, 0.45 * R + 60.0, left, right, uv)
+    assert a.ok and b.ok
+    assert np.abs(a.uv_right - b.uv_right).max() < 1e-3
+
+
+def test_point_stereo_bad_inputs_raise():
+    scene, left, right, L, R = rendered("CAHV")
+    with pytest.raises(ValueError):
+        point_stereo(L, R, left, right, (1.0, 2.0, 3.0))
+    with pytest.raises(ValueError):
+        point_stereo(L[..., None], R, left, right, (1.0, 2.0))
+    with pytest.raises(ValueError):
+        point_stereo(L, R, left, right, (10.0, 20.0), min_range_m=5.0, max_range_m=1.0)
+    with pytest.raises(ValueError):
+        point_stereo(L, R, left, "not a model", (10.0, 20.0))
