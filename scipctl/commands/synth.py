@@ -20,8 +20,9 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from ..model import InputError
+from ..errors import InputError
 from ..jsonutil import json_default
+from .output import emit_json, stderr_console
 
 
 def regenerate_command(scenario: str, seed: int, container: str, run: str, no_errors: bool,
@@ -94,7 +95,7 @@ def record_json(record: dict) -> str:
 _plain = json_default
 
 
-def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
+def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
         rover: str = "default", rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
         texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5) -> None:
     from ..sim.scenarios import SCENARIOS, list_runs
@@ -137,8 +138,6 @@ def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str]
     written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample,
                          rover=sim_rover, texture=texture, extra_args=" ".join(extra))
     if json_out:
-        from ..cli import emit_json
-
         emit_json({"scenario": scenario, "seed": seed, "container": container, "no_errors": no_errors, "runs": written})
     else:
         for w in written:
@@ -197,8 +196,6 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
     from ..sim.scenarios import build_run, default_errors
 
     out.mkdir(parents=True, exist_ok=True)
-    from ..cli import stderr_console
-
     console = stderr_console()
     written = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
