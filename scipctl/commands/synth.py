@@ -64,14 +64,36 @@ def load_rover(rover: str, rover_dir: Optional[Path]):
         if rover_dir is not None:
             raise InputError("synth", "--rover-dir", "only with --rover m2020")
         return None
-    from ..io.m2020_geometry import m2020_sim_rover
-
     folder = rover_dir if rover_dir is not None else _default_m2020_dir()
     if folder is None:
         raise InputError("synth", "--rover-dir", "no Mars 2020 models folder given and no shared/real/12_* beside the checkout")
     if not Path(folder).is_dir():
         raise InputError(str(folder), "--rover-dir", "not a folder")
     return m2020_sim_rover(folder)
+
+
+def m2020_sim_rover(folder, **config_kwargs):
+    """The Mars 2020 rover for the simulator's scenarios (:class:`~scipctl.sim.rover.SimRover`), from the two files
+    in ``folder`` (:func:`scipctl.io.m2020_geometry.m2020_rover_files`); :class:`InputError` naming the folder if
+    the configuration does not fit the simulator."""
+    from ..io.m2020_geometry import MODELS_FILE, m2020_rover_files
+    from ..sim.rover import sim_rover_from_config
+
+    config, wheels, inputs, notes = m2020_rover_files(folder, **config_kwargs)
+    try:
+        return sim_rover_from_config("m2020", config, wheels, inputs, notes)
+    except ValueError as e:
+        raise InputError(str(folder), MODELS_FILE, str(e)) from None
+
+
+def read_texture_sources(folder, crop_frac=None, pixel_m=None):
+    """:class:`~scipctl.sim.texture.TextureSources` from the pictures under ``folder`` (``--texture-from``):
+    :func:`scipctl.io.texture_sources.iter_texture_pictures` reads them,
+    :func:`scipctl.sim.texture.texture_sources_from_pictures` chooses the usable ones."""
+    from ..io.texture_sources import iter_texture_pictures
+    from ..sim.texture import texture_sources_from_pictures
+
+    return texture_sources_from_pictures(folder, iter_texture_pictures(folder), crop_frac, pixel_m)
 
 
 def parse_crop(text: Optional[str]) -> Optional[tuple]:
@@ -128,8 +150,6 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
     if sim_rover is not None:
         extra.append(f"--rover {rover}" + (f" --rover-dir {rover_dir}" if rover_dir is not None else ""))
     if texture_from is not None:
-        from ..io.texture_sources import read_texture_sources
-
         texture = read_texture_sources(texture_from, crop, texture_pixel_mm * 1e-3)
         extra.append(f"--texture-from {texture_from}" + (f" --texture-crop {texture_crop}" if texture_crop else "")
                      + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
