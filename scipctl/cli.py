@@ -1,14 +1,14 @@
 """The ``scipctl`` command line (thin layer: parse, call, print).
 
 Exit codes: 0 ok; 1 the answer is "no" (failure detected, rule broken, no
-reliable match); 2 bad input or usage. Heavy modules (cv2, open3d) are
-imported inside the commands so that ``scipctl --help`` stays fast.
+reliable match); 2 bad input or usage (:mod:`scipctl.commands.output`, which
+also holds what the commands print with). Each command here calls the function
+of the same name in ``scipctl.commands.<module>``, imported inside the command,
+as are the heavy modules (cv2, open3d), so that ``scipctl --help`` stays fast.
 """
 
 from __future__ import annotations
 
-import functools
-import json
 import os
 import sys
 
@@ -21,8 +21,7 @@ from typing import List, Optional
 import typer
 
 from . import __version__
-from .errors import CommandFailed  # noqa: F401  (re-exported for the commands)
-from .jsonutil import json_default
+from .commands.output import guarded
 
 app = typer.Typer(
     name="scipctl",
@@ -35,74 +34,12 @@ app = typer.Typer(
     rich_markup_mode=None,
 )
 
-EXIT_OK, EXIT_NO, EXIT_BAD_INPUT = 0, 1, 2
-
-
-
-def _err(msg: str) -> None:
-    sys.stderr.write(f"scipctl: error: {msg}\n")
-
-
-def note(msg: str) -> None:
-    """One line on stderr for something the operator should know (e.g. where products went)."""
-    sys.stderr.write(f"scipctl: note: {msg}\n")
-
 
 def _products_dir_option():
     return typer.Option(
         None, "--products-dir", envvar="SCIPCTL_PRODUCTS_DIR",
         help="Write (and also look for) products of raw downlinks and workspaces in DIR/<name>-<hash>/ "
         "instead of beside them (docs/workspace.md).")
-
-
-def guarded(fn):
-    """Map exceptions to one-line errors and exit codes; never a traceback."""
-
-    @functools.wraps(fn)
-    def wrapper(*a, **kw):
-        from .model import InputError
-
-        try:
-            return fn(*a, **kw)
-        except typer.Exit:
-            raise
-        except InputError as e:
-            _err(str(e))
-            raise typer.Exit(EXIT_BAD_INPUT)
-        except CommandFailed as e:
-            if e.payload is not None and kw.get("json_out"):
-                sys.stdout.write(json.dumps(e.payload, indent=2, sort_keys=True, default=_json_default) + "\n")
-            _err(str(e))
-            raise typer.Exit(EXIT_NO)
-        except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as e:
-            _err(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}")
-            raise typer.Exit(EXIT_BAD_INPUT)
-        except KeyboardInterrupt:
-            _err("interrupted")
-            raise typer.Exit(130)
-        except Exception as e:  # a bug: still one line, but say it is ours
-            _err(f"internal error ({type(e).__name__}): {e}. Please report it with the command line.")
-            raise typer.Exit(3)
-
-    return wrapper
-
-
-_json_default = json_default
-
-
-def stderr_console():
-    """The rich console for tables and progress: stderr; wide (160 columns) when stderr is not a terminal,
-    so that logs of operations scripts keep whole table rows."""
-    from rich.console import Console
-
-    con = Console(stderr=True)
-    if not con.is_terminal:
-        con = Console(stderr=True, width=160)
-    return con
-
-
-def emit_json(doc) -> None:
-    sys.stdout.write(json.dumps(doc, indent=2, sort_keys=True, default=_json_default) + "\n")
 
 
 def _version_cb(value: bool):
@@ -129,9 +66,9 @@ def ingest(
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Read and validate a downlink into a workspace, and summarise it."""
-    from .commands.ingest import run
+    from .commands import ingest as command
 
-    run(src, out, json_out, force=force)
+    command.ingest(src, out, json_out, force=force)
 
 
 @app.command()
@@ -142,9 +79,9 @@ def info(
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Validate and summarise a downlink or workspace without writing anything."""
-    from .commands.ingest import run_info
+    from .commands import ingest as command
 
-    run_info(src, json_out, products_root=products_dir)
+    command.info(src, json_out, products_root=products_dir)
 
 
 @app.command()
@@ -167,9 +104,9 @@ def synth(
     texture_pixel_mm: float = typer.Option(2.5, "--texture-pixel-mm", help="Ground size of one texture pixel, mm."),
 ):
     """Render synthetic downlinks with exact truth."""
-    from .commands.synth import run
+    from .commands import synth as command
 
-    run(scenario, seed, out, container, runs, no_errors, json_out, rover=rover, rover_dir=rover_dir,
+    command.synth(scenario, seed, out, container, runs, no_errors, json_out, rover=rover, rover_dir=rover_dir,
         texture_from=texture_from, texture_crop=texture_crop, texture_pixel_mm=texture_pixel_mm)
 
 
@@ -186,9 +123,9 @@ def designate(
     json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
 ):
     """Designate a 3-D target from a pixel in a left stereo image."""
-    from .commands.designate import run
+    from .commands import designate as command
 
-    run(src, product, camera, pixel, target_id, band_px, json_out, products_root=products_dir)
+    command.designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=products_dir)
 
 
 @app.command("simulate-handoff")
@@ -209,9 +146,9 @@ def simulate_handoff(
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
     """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline."""
-    from .commands.handoff import run
+    from .commands import handoff as command
 
-    run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
+    command.simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
         products_root=products_dir)
 
 
@@ -230,9 +167,9 @@ def sequence(
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
     """Emit the uplink command sequence for the single-cycle approach."""
-    from .commands.sequence import run
+    from .commands import sequence as command
 
-    run(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
+    command.sequence(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
         products_root=products_dir)
 
 
@@ -249,9 +186,9 @@ def report(
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
 ):
     """Write a self-contained HTML diagnostic report."""
-    from .commands.report import run
+    from .commands import report as command
 
-    run(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
+    command.report(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
         products_root=products_dir)
 
 

@@ -2,7 +2,9 @@
 
 Plain data shared by the readers/writers (``scipctl.io``), the simulator and
 the commands. No file access here: images are kept as the PNG bytes that
-arrived (so MCAP -> directory -> MCAP is lossless) and decoded on demand.
+arrived (so MCAP -> directory -> MCAP is lossless) and decoded on demand
+(:func:`scipctl.io.images.decode_png`, which imports nothing from here).
+:class:`InputError` lives in :mod:`scipctl.errors`; it is re-exported here.
 """
 
 from __future__ import annotations
@@ -14,28 +16,9 @@ import numpy as np
 
 from .core.camera import CameraModel
 from .core.kinematics import RoverConfig, RoverPose
+from .errors import InputError, one_line  # noqa: F401  (re-exported: many modules import them from here)
 
 FORMAT_VERSION = "1"
-
-
-def one_line(text) -> str:
-    """``str(text)`` with line breaks and other unprintable characters escaped as in ``repr`` (``\\n``, ``\\x00``)."""
-    s = str(text)
-    return s if s.isprintable() else "".join(c if c.isprintable() else repr(c)[1:-1] for c in s)
-
-
-class InputError(Exception):
-    """Bad input: one line naming the product (or file) and the field. CLI exit code 2.
-
-    The attributes keep the text as given; ``str()`` escapes line breaks and other control characters
-    (a product id, path or value read from the input may contain them), so it is always one line.
-    """
-
-    def __init__(self, product: str, field: str, message: str):
-        self.product = product
-        self.field = field
-        self.message = message
-        super().__init__(f"{one_line(product)}: {one_line(field)}: {one_line(message)}")
 
 
 @dataclass(frozen=True)

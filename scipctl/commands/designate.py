@@ -5,14 +5,15 @@ from __future__ import annotations
 import math
 import sys
 
-from ..cli import CommandFailed, emit_json, note, stderr_console
-from ..model import InputError
+from ..errors import CommandFailed, InputError
+from .output import emit_json, note, stderr_console
 
 
-def run(src, product, camera, pixel, target_id, band_px, json_out, products_root=None):
+def designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=None):
+    """``scipctl designate``: the 3-D target at ``pixel`` of a left product, added to ``targets.json``."""
     from ..io.provenance import provenance
     from ..io.workspace import open_source
-    from ..pipeline.designate import designate, parse_pixel, pick_left_product
+    from ..pipeline.designate import designate as designate_target, parse_pixel, pick_left_product
 
     uv = parse_pixel(pixel)
     source = open_source(src, products_root=products_root)
@@ -28,7 +29,7 @@ def run(src, product, camera, pixel, target_id, band_px, json_out, products_root
         target_id = f"d{n}"
     if band_px is not None and not (math.isfinite(band_px) and band_px > 0):
         raise InputError("--band-px", "band_px", f"must be a positive finite number, got {band_px}")
-    rec = designate(dl, left, uv, band_px=band_px, target_id=target_id)
+    rec = designate_target(dl, left, uv, band_px=band_px, target_id=target_id)
     rec["provenance"] = provenance({"downlink": str(src)})
     if not rec["ok"]:
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec['reason']}",

@@ -5,25 +5,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..cli import emit_json, note, stderr_console
-from ..model import InputError
-
-# the paper's Table 1 (Rocky8, 18 targets): mean +- std (range), px; refined: successes / failures
-PAPER_TABLE1 = {
-    ("pure-kinematic", "near"): "100%  13±3 (9-23)",
-    ("pure-kinematic", "far"): "100%  107±58 (63-182)",
-    ("alt-pure-kinematic", "near"): "100%  22±5 (15-35)",
-    ("alt-pure-kinematic", "far"): "83%  102±27 (68-152)",
-    ("refined-kinematic", "near"): "55%  1±1 / 99±76 (0-3 / 18-214)",
-    ("refined-kinematic", "far"): "67%  2±1 / 83±52 (0-4 / 16-166)",
-    ("pure-geometric", "near"): "100%  9±6 (1-22)",
-    ("pure-geometric", "far"): "100%  54±21 (20-95)",
-    ("refined-geometric", "near"): "50%  1±1 / 109±77 (0-3 / 8-261)",
-    ("refined-geometric", "far"): "17%  2±1 / 52±55 (1-3 / 19-231)",
-    ("mesh-registration", "near"): "100%  28±11 (8-58)",
-    ("mesh-registration", "far"): "100%  124±57 (36-226)",
-}
-
+from ..errors import InputError
+from .output import emit_json, note, stderr_console
 
 def _parse_methods(methods):
     """``--methods`` -> (method names in order, navcams in use, the (method, navcam) pairs to run).
@@ -60,8 +43,10 @@ def _fmt_stats(s):
     return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
 
 
-def run(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=False,
-        products_root=None):
+def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
+                     fast=False, products_root=None):
+    """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
+    (and the chains with ``chain``); one JSON document on stdout with ``json_out``."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.provenance import provenance
@@ -172,6 +157,8 @@ def _chains(dl, name, only):
 
 def _print_table(con, rows, records):
     from rich.table import Table
+
+    from ..pipeline.paper_table1 import PAPER_TABLE1
 
     tab = Table(title=f"Handoff accuracy ({len({(r.downlink, r.target) for r in records})} targets) — compare the paper's Table 1")
     for c in ("method", "navcam", "success", "answered", "mean±std (range) px", "successes / failures px", "paper"):

@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..model import Downlink, InputError
+from ..errors import InputError
+from ..model import Downlink
+from .output import emit_json, note, stderr_console
 
 
 def _deg(x):
@@ -107,8 +109,6 @@ def print_summary(s: dict, title: str) -> None:
     from rich.markup import escape as esc
     from rich.table import Table
 
-    from ..cli import stderr_console
-
     con = stderr_console()
     con.print(f"[bold]{esc(title)}[/bold]: mission {esc(str(s['mission']))}, sol {s['sol']}, "
               f"{s['counts']['images']} images, {s['counts']['positions']} positions, {s['counts']['targets']} targets")
@@ -161,8 +161,8 @@ def _check_paths(src: Path, out: Path) -> None:
         raise InputError(str(out), "output", f"contains the source {src}; replacing it would delete the source")
 
 
-def run(src: Path, out: Path, json_out: bool, force: bool = False) -> None:
-    from ..cli import emit_json, note
+def ingest(src: Path, out: Path, json_out: bool, force: bool = False) -> None:
+    """``scipctl ingest``: read and validate ``src``, write the workspace ``out``, print its summary."""
     from ..io.downlink import read_downlink
     from ..io.workspace import write_workspace
 
@@ -184,9 +184,8 @@ def run(src: Path, out: Path, json_out: bool, force: bool = False) -> None:
         print_summary(summary, f"Ingested {src} -> workspace {out}")
 
 
-def run_info(src: Path, json_out: bool, products_root=None) -> None:
-    """Summarise ``src`` and list its products (each with the file it is read from); writes nothing."""
-    from ..cli import emit_json
+def info(src: Path, json_out: bool, products_root=None) -> None:
+    """``scipctl info``: summarise ``src`` and list its products (each with the file it is read from); writes nothing."""
     from ..io.workspace import open_source
 
     source = open_source(Path(src), products_root=products_root)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..cli import emit_json, stderr_console
-from ..model import InputError
+from ..errors import InputError
+from .output import emit_json, stderr_console
 
 
 def build(source, progress=None, params=None):
@@ -14,9 +14,9 @@ def build(source, progress=None, params=None):
     from ..io.provenance import provenance
     from ..io.report_html import render_report
     from ..pipeline.report_data import ReportParams, collect
+    from ..pipeline.paper_table1 import PAPER_TABLE1
     from ..pipeline.sequence import format_seqn
-    from .handoff import PAPER_TABLE1
-    from .sequence import document_for
+    from ..pipeline.target_sequence import document_for
 
     dl = source.downlink
     targets_doc = source.load_json("targets.json")
@@ -72,16 +72,17 @@ def _summary(data, sequences) -> dict:
     }
 
 
-def run(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
-
+def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
+    """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
+    (and stdout with ``--json``)."""
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
 
     out = Path(out)
     if out.exists() and out.is_dir():
         raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
+    from ..pipeline.operator_sigmas import uncertainty_params
     from ..pipeline.report_data import ReportParams
-    from .sequence import uncertainty_params
 
     unc = uncertainty_params(sigma_position_m, sigma_yaw_deg).uncertainty
     params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad)

@@ -5,75 +5,20 @@ from __future__ import annotations
 
 import sys
 
-from ..cli import CommandFailed, emit_json, stderr_console
-from ..model import InputError
+from ..errors import CommandFailed, InputError
+from .output import emit_json, stderr_console
 
 FORMATS = ("seqn", "json", "text")
 
 
-def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None):
-    """Everything the command does short of writing: returns ``(doc or None, checks, prediction, record)``.
-
-    ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
-    """
-    from ..pipeline.predict import predict_target, resolve_target
-
-    dl = source.downlink
-    if pred is None or record is None:
-        targets_doc = source.load_json("targets.json")
-        if targets_doc is not None and not isinstance(targets_doc, dict):
-            raise InputError(str(source.read_from["targets.json"]), "targets",
-                             "expected a JSON object with a 'targets' list")
-        record, now = resolve_target(dl, target, targets_doc)
-        if not record.get("ok", True) or record.get("xyz_site_m") is None:
-            raise CommandFailed(f"{target}: no reliable 3-D position for the target "
-                                f"({record.get('reason') or 'no stereo match'}); no sequence",
-                                payload={"target": target, "designation": record})
-        pred = predict_target(dl, record, params, designated_now=now)
-    handoff_doc = source.load_json("handoff.json")
-    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
-    doc, checks = document_for(dl, record, pred, rows, rules)
-    return doc, checks, pred, record
-
-
-def document_for(dl, record, pred, table1_rows=None, rules=None):
-    """(sequence document or None when a blocking rule is broken, rule checks) for a prediction."""
-    from ..io.provenance import provenance
-    from ..pipeline.sequence import (broken, build_commands, canonical_hash, check_rules, choose_handoff,
-                                     sequence_document, _exposures)
-
-    checks = check_rules(pred, dl.rover_config, rules)
-    if broken(checks):
-        return None, checks
-    handoff = choose_handoff(table1_rows)
-    inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash(record)}
-    if table1_rows:
-        inputs["handoff_results"] = canonical_hash(table1_rows)
-    prov = provenance(inputs, deterministic=True)
-    cmds = build_commands(pred, record, handoff, _exposures(dl, dl.product(record["product_id"]).position))
-    return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol), checks
-
-
-def uncertainty_params(sigma_position_m=None, sigma_yaw_deg=None):
-    """PredictParams with the operator's pose-error sigmas (None: from the downlink); InputError if not > 0."""
-    import math
-    from dataclasses import replace
-
-    from ..pipeline.predict import PredictParams
-
-    for name, v in (("--sigma-position-m", sigma_position_m), ("--sigma-yaw-deg", sigma_yaw_deg)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            raise InputError(name, name.lstrip("-").replace("-", "_"), f"must be a positive number, got {v}")
-    p = PredictParams()
-    u = replace(p.uncertainty, sigma_position_m=sigma_position_m,
-                sigma_yaw_rad=None if sigma_yaw_deg is None else math.radians(sigma_yaw_deg))
-    return replace(p, uncertainty=u)
-
-
-def run(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
+def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
+    """``scipctl sequence``: write the sequence (``out`` or stdout) and print the rule checks; CommandFailed
+    (exit 1, no sequence) when a flight rule is broken."""
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
+    from ..pipeline.operator_sigmas import uncertainty_params
     from ..pipeline.sequence import FORMATTERS, broken
+    from ..pipeline.target_sequence import make_sequence
 
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:

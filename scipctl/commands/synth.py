@@ -20,8 +20,9 @@ import sys
 from pathlib import Path
 from typing import Optional
 
-from ..model import InputError
+from ..errors import InputError
 from ..jsonutil import json_default
+from .output import emit_json, stderr_console
 
 
 def regenerate_command(scenario: str, seed: int, container: str, run: str, no_errors: bool,
@@ -63,14 +64,36 @@ def load_rover(rover: str, rover_dir: Optional[Path]):
         if rover_dir is not None:
             raise InputError("synth", "--rover-dir", "only with --rover m2020")
         return None
-    from ..io.m2020_geometry import m2020_sim_rover
-
     folder = rover_dir if rover_dir is not None else _default_m2020_dir()
     if folder is None:
         raise InputError("synth", "--rover-dir", "no Mars 2020 models folder given and no shared/real/12_* beside the checkout")
     if not Path(folder).is_dir():
         raise InputError(str(folder), "--rover-dir", "not a folder")
     return m2020_sim_rover(folder)
+
+
+def m2020_sim_rover(folder, **config_kwargs):
+    """The Mars 2020 rover for the simulator's scenarios (:class:`~scipctl.sim.rover.SimRover`), from the two files
+    in ``folder`` (:func:`scipctl.io.m2020_geometry.m2020_rover_files`); :class:`InputError` naming the folder if
+    the configuration does not fit the simulator."""
+    from ..io.m2020_geometry import MODELS_FILE, m2020_rover_files
+    from ..sim.rover import sim_rover_from_config
+
+    config, wheels, inputs, notes = m2020_rover_files(folder, **config_kwargs)
+    try:
+        return sim_rover_from_config("m2020", config, wheels, inputs, notes)
+    except ValueError as e:
+        raise InputError(str(folder), MODELS_FILE, str(e)) from None
+
+
+def read_texture_sources(folder, crop_frac=None, pixel_m=None):
+    """:class:`~scipctl.sim.texture.TextureSources` from the pictures under ``folder`` (``--texture-from``):
+    :func:`scipctl.io.texture_sources.iter_texture_pictures` reads them,
+    :func:`scipctl.sim.texture.texture_sources_from_pictures` chooses the usable ones."""
+    from ..io.texture_sources import iter_texture_pictures
+    from ..sim.texture import texture_sources_from_pictures
+
+    return texture_sources_from_pictures(folder, iter_texture_pictures(folder), crop_frac, pixel_m)
 
 
 def parse_crop(text: Optional[str]) -> Optional[tuple]:
@@ -94,7 +117,7 @@ def record_json(record: dict) -> str:
 _plain = json_default
 
 
-def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
+def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
         rover: str = "default", rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
         texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5) -> None:
     from ..sim.scenarios import SCENARIOS, list_runs
@@ -127,8 +150,6 @@ def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str]
     if sim_rover is not None:
         extra.append(f"--rover {rover}" + (f" --rover-dir {rover_dir}" if rover_dir is not None else ""))
     if texture_from is not None:
-        from ..io.texture_sources import read_texture_sources
-
         texture = read_texture_sources(texture_from, crop, texture_pixel_mm * 1e-3)
         extra.append(f"--texture-from {texture_from}" + (f" --texture-crop {texture_crop}" if texture_crop else "")
                      + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
@@ -137,8 +158,6 @@ def run(scenario: str, seed: int, out: Path, container: str, runs: Optional[str]
     written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample,
                          rover=sim_rover, texture=texture, extra_args=" ".join(extra))
     if json_out:
-        from ..cli import emit_json
-
         emit_json({"scenario": scenario, "seed": seed, "container": container, "no_errors": no_errors, "runs": written})
     else:
         for w in written:
@@ -197,8 +216,6 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
     from ..sim.scenarios import build_run, default_errors
 
     out.mkdir(parents=True, exist_ok=True)
-    from ..cli import stderr_console
-
     console = stderr_console()
     written = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),

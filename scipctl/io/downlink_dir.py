@@ -19,7 +19,7 @@ from urllib.parse import quote
 import yaml
 
 from ..model import Downlink, InputError
-from . import downlink as P
+from . import downlink_records as P
 from .cmodfile import read_cmod
 
 YAML_NAME = "downlink.yaml"

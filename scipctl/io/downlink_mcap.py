@@ -19,7 +19,9 @@ import json
 from pathlib import Path
 
 from ..model import Downlink, InputError
-from . import downlink as P
+from . import downlink_records as P
+
+MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 TOPIC_IMAGE = "/downlink/image"
 TOPIC_ROVER_CONFIG = "/downlink/rover_config"
@@ -140,7 +142,7 @@ def _raw_records(name: str, data: bytes):
     from mcap.records import Channel, Message, Metadata
     from mcap.stream_reader import StreamReader
 
-    if not data.startswith(P.MCAP_MAGIC):
+    if not data.startswith(MCAP_MAGIC):
         raise InputError(name, "file", "not an MCAP file (bad magic bytes)")
     messages = {t: [] for t in TOPIC_SCHEMAS}
     metadata = []

@@ -7,7 +7,7 @@ import zlib
 
 import numpy as np
 
-from ..model import InputError
+from ..errors import InputError
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 

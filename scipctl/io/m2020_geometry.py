@@ -176,10 +176,11 @@ def wheels_xy_from_urdf(joints: dict) -> np.ndarray:
     return np.array(out)
 
 
-def m2020_sim_rover(folder, **config_kwargs):
-    """The Mars 2020 rover for the simulator's scenarios (:class:`~scipctl.sim.rover.SimRover`): the configuration
-    of :func:`m2020_rover_config`, the URDF's wheel hubs, and the SHA-256 of the two files read."""
-    from ..sim.rover import sim_rover_from_config
+def m2020_rover_files(folder, **config_kwargs) -> tuple:
+    """What the simulator's Mars 2020 rover is made of, read from ``folder``: ``(config, wheels_xy_m, inputs,
+    notes)`` -- the configuration of :func:`m2020_rover_config`, the URDF's wheel hubs ``(6, 2)`` m, the SHA-256 of
+    the two files read (``((name, sha256), ...)``) and notes on the choices made. :class:`InputError` if a file
+    is missing. :func:`scipctl.sim.rover.sim_rover_from_config` makes the :class:`~scipctl.sim.rover.SimRover`."""
     from .provenance import sha256_file
 
     folder = Path(folder)
@@ -192,7 +193,4 @@ def m2020_sim_rover(folder, **config_kwargs):
     notes = ("pancam is Mastcam-Z (MCAM_Z_LEFT/RIGHT at zoom " + config_kwargs.get("pancam_zoom", "Z034")
              + "): Mars 2020 has no pancam; Mastcam-Z rides the same RSM head",
              "navcam/hazcam: NAVL/NAVR and front HAZFL/HAZFR string A, 4x pixel averaging (1280 x 960)")
-    try:
-        return sim_rover_from_config("m2020", config, wheels, inputs, notes)
-    except ValueError as e:
-        raise InputError(str(folder), MODELS_FILE, str(e)) from None
+    return config, wheels, inputs, notes

@@ -92,8 +92,9 @@ def png_for(json_path: Path) -> Path:
 
 
 def read_m2020_json(path: Path):
-    """One raw-image JSON (and the PNG beside it) -> :class:`~scipctl.io.pds_products.ProductRead`."""
-    from .pds_products import ProductRead, read_picture
+    """One raw-image JSON (and the PNG beside it) -> :class:`~scipctl.io.product_read.ProductRead`."""
+    from .product_pixels import read_picture
+    from .product_read import ProductRead
 
     try:
         d = json.loads(Path(path).read_text(encoding="utf-8"))

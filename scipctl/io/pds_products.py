@@ -35,7 +35,6 @@ from __future__ import annotations
 import hashlib
 import re
 import warnings
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Optional
 
@@ -46,6 +45,8 @@ from ..core.kinematics import JointAxis, MastGeometry, RoverConfig, RoverPose
 from ..core.transforms import RigidTransform
 from ..model import Downlink, ImageProduct, InputError, MastAngles
 from .pds_label import ProductGeometry, geometry_from_tree, tree_from_mapping, tree_from_vicar_items
+from .product_pixels import read_picture, to_single_channel as _to_single_channel
+from .product_read import ProductRead
 
 ROVER_FRAMES = ("ROVER_NAV_FRAME", "ROVER_FRAME", "ROVER_MECH_FRAME")
 MAST_CAMERAS = {"navcam", "pancam", "mastcam", "mastcamz"}
@@ -58,17 +59,6 @@ _CAMERA_PATTERNS = (
     (re.compile(r"^(MCZ|MASTCAMZ|MASTCAM_Z|ZCAM)"), "mastcamz"),
     (re.compile(r"^(MAST_|MASTCAM)"), "mastcam"),
 )
-
-
-@dataclass
-class ProductRead:
-    """One product as read: its geometry, pixels ``(H, W)`` uint8/uint16, and the files it used."""
-
-    geometry: ProductGeometry
-    pixels: np.ndarray
-    files: list = field(default_factory=list)
-    pose_source: str = ""
-    sigma_yaw_rad: Optional[float] = None
 
 
 # --------------------------------------------------------------------------- sniffing
@@ -106,54 +96,6 @@ def is_product_path(path) -> bool:
     if p.is_dir() and not (p / "downlink.yaml").exists():
         return any(sniff(f) is not None for f in sorted(p.iterdir()) if f.is_file())
     return False
-
-
-# --------------------------------------------------------------------------- pixels
-def _to_single_channel(arr: np.ndarray, product: str, field_name: str, what: str) -> np.ndarray:
-    """``(H, W)``, ``(1, H, W)``, ``(3, H, W)`` or ``(H, W, 3)`` integer pixels -> ``(H, W)`` uint8/uint16.
-
-    Colour (3 bands) becomes luminance (OpenCV RGB->GRAY weights); 12-bit data
-    in 16-bit words stays 16-bit. Negative or floating-point samples are an error.
-    """
-    import cv2
-
-    a = np.asarray(arr)
-    if a.ndim == 3 and a.shape[0] in (1, 3) and a.shape[2] not in (1, 3):
-        a = np.moveaxis(a, 0, -1)  # band-sequential -> interleaved
-    if a.ndim == 3 and a.shape[2] == 1:
-        a = a[..., 0]
-    if a.dtype.kind == "f":
-        raise InputError(product, field_name, f"{what}: floating-point samples are not supported (the downlink carries 8/16-bit images)")
-    if a.dtype.kind not in "iu":
-        raise InputError(product, field_name, f"{what}: unsupported sample type {a.dtype}")
-    if a.size and a.dtype.kind == "i" and int(a.min()) < 0:
-        raise InputError(product, field_name, f"{what}: negative sample values (min {int(a.min())})")
-    top = int(a.max()) if a.size else 0
-    if a.dtype.itemsize == 1:
-        a = a.astype(np.uint8)
-    elif top <= 0xFFFF:
-        a = a.astype(np.uint16)
-    else:
-        raise InputError(product, field_name, f"{what}: samples above 65535 (max {top})")
-    if a.ndim == 3 and a.shape[2] == 3:
-        a = cv2.cvtColor(np.ascontiguousarray(a), cv2.COLOR_RGB2GRAY)
-    if a.ndim != 2:
-        raise InputError(product, field_name, f"{what}: expected one or three bands, got shape {tuple(arr.shape)}")
-    return np.ascontiguousarray(a)
-
-
-def read_picture(path: Path, product: str, field_name: str) -> np.ndarray:
-    """A PNG/JPEG picture -> ``(H, W)`` uint8/uint16 (colour as luminance)."""
-    import cv2
-
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        raise InputError(product, field_name, f"cannot decode the picture {path.name}")
-    if img.ndim == 3 and img.shape[2] == 4:
-        img = img[..., :3]
-    if img.ndim == 3:
-        img = img[..., ::-1]  # OpenCV's BGR -> RGB
-    return _to_single_channel(img, product, field_name, path.name)
 
 
 def _browse_for(label: Path, product_id: str) -> Optional[Path]:
@@ -378,7 +320,7 @@ def product_from_read(pr: ProductRead) -> ImageProduct:
         raise InputError(pid, "SPACECRAFT_CLOCK_START_COUNT", "missing: no acquisition time")
     T_site_rover = g.T_reference_rover
     if g.rover_quat_wxyz is not None:  # keep the label's quaternion digits for writing (downlink.quat_for)
-        from .downlink import _remember_quat
+        from .downlink_records import _remember_quat
 
         _remember_quat(T_site_rover.R, list(g.rover_quat_wxyz))
     pose = RoverPose(T_site_rover, pr.pose_source or f"{g.label_flavour} label", None, pr.sigma_yaw_rad)

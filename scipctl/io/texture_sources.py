@@ -4,7 +4,8 @@ Every file under ``DIR`` (recursively, sorted by relative path, hidden files ski
 or a product the scipctl readers read (PDS3, VICAR, PDS4 with its data or browse file) becomes a grey picture
 (colour as luminance) in fractions of full scale (8-bit: /255; 16-bit holding 12-bit data: /4095; else /65535).
 Pictures with the same pixels (a product and its detached label, a raw-image JSON and its PNG) are used once.
-Pictures whose crop holds no textured, unsaturated patch are skipped, with the reason recorded. The repository
+Pictures whose crop holds no textured, unsaturated patch are skipped (by
+:func:`scipctl.sim.texture.texture_sources_from_pictures`), with the reason recorded. The repository
 keeps no copy of any of them; the simulation record lists every file used with its SHA-256.
 """
 
@@ -18,7 +19,6 @@ import numpy as np
 from ..model import InputError
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
-MAX_IMAGES = 64
 
 
 def _full_scale(px: np.ndarray) -> float:
@@ -30,7 +30,8 @@ def _full_scale(px: np.ndarray) -> float:
 def _read_one(path: Path, label: str):
     """``(H, W)`` integer pixels, or None if the file is not a picture or product (raises InputError if it is but
     cannot be read)."""
-    from .pds_products import read_picture, read_product_file, sniff
+    from .pds_products import read_product_file, sniff
+    from .product_pixels import read_picture
 
     if path.suffix.lower() in PICTURE_SUFFIXES:
         return read_picture(path, label, "pixels")
@@ -40,50 +41,39 @@ def _read_one(path: Path, label: str):
     return None
 
 
-def read_texture_sources(folder, crop_frac=None, pixel_m=None):
-    """:class:`~scipctl.sim.texture.TextureSources` from the pictures under ``folder``.
+def iter_texture_pictures(folder):
+    """The pictures under ``folder`` for a simulator texture, in order, lazily: yields ``(name, sha256, pixels)``
+    for a picture (``name``: path relative to ``folder``; ``pixels``: ``(H, W)`` float32 fractions of full scale)
+    or ``(name, None, reason)`` for a file seen and skipped (unreadable, same pixels as one already given).
+    Files that are not pictures or products are passed over in silence.
 
-    :class:`InputError` (naming the folder and ``--texture-from``) if it is not a folder or holds no usable picture.
+    :class:`InputError` (naming the folder and ``--texture-from``) if ``folder`` is not a folder.
+    :func:`scipctl.sim.texture.texture_sources_from_pictures` chooses the usable ones.
     """
-    from ..sim.texture import DEFAULT_CROP, TEXTURE_PIXEL_M, TextureImage, TextureSources, usable_reason
     from .provenance import sha256_file
 
-    crop_frac = tuple(DEFAULT_CROP if crop_frac is None else crop_frac)
-    pixel_m = TEXTURE_PIXEL_M if pixel_m is None else float(pixel_m)
     root = Path(folder)
     if not root.is_dir():
         raise InputError(str(folder), "--texture-from", "not a folder")
     files = sorted((p for p in root.rglob("*") if p.is_file() and not any(part.startswith(".") for part in p.relative_to(root).parts)),
                    key=lambda p: p.relative_to(root).as_posix())
-    images, skipped, seen = [], [], set()
+    seen = set()
     for p in files:
         rel = p.relative_to(root).as_posix()
         try:
             px = _read_one(p, rel)
         except InputError as e:
-            skipped.append((rel, f"unreadable: {e.field}: {e.message}"))
+            yield rel, None, f"unreadable: {e.field}: {e.message}"
             continue
         except Exception as e:  # a reader library's own failure on a damaged file: skip it, say why
-            skipped.append((rel, f"unreadable: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"))
+            yield rel, None, f"unreadable: {type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''}"
             continue
         if px is None:
             continue  # not a picture or product (labels without data, models, text)
         key = hashlib.sha256(px.tobytes() + repr((px.shape, px.dtype.str)).encode()).hexdigest()
         if key in seen:
-            skipped.append((rel, "same pixels as a file already used"))
+            yield rel, None, "same pixels as a file already used"
             continue
         seen.add(key)
         gray = (px.astype(np.float32) / np.float32(_full_scale(px))).astype(np.float32)
-        why = usable_reason(gray, crop_frac)
-        if why:
-            skipped.append((rel, why))
-            continue
-        if len(images) >= MAX_IMAGES:
-            skipped.append((rel, f"beyond the first {MAX_IMAGES} usable pictures"))
-            continue
-        images.append(TextureImage(rel, sha256_file(p), gray))
-    if not images:
-        detail = "; ".join(f"{n}: {r}" for n, r in skipped[:3])
-        raise InputError(str(folder), "--texture-from", "no usable picture (PNG/JPEG or PDS3/VICAR/PDS4 product with a textured "
-                         f"crop of at least 128 x 128 px){' -- ' + detail if detail else ''}")
-    return TextureSources(str(folder), tuple(images), crop_frac, pixel_m, tuple(skipped))
+        yield rel, sha256_file(p), gray

@@ -645,7 +645,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     (e.g. 0.125: 1024 -> 128 px for the default rover; it must give whole sizes for every camera of the rover);
     ``render=False`` skips the pixels (black images, still exact marks and truth); ``bits`` maps camera -> 8 or 12;
     ``progress(done, total, product_id)`` is called per image. ``rover``: a :class:`~scipctl.sim.rover.SimRover`
-    (None: the default ``rocky8-sim``; e.g. ``io.m2020_geometry.m2020_sim_rover(folder)``); ``texture``: a
+    (None: the default ``rocky8-sim``; e.g. ``commands.synth.m2020_sim_rover(folder)``); ``texture``: a
     :class:`~scipctl.sim.texture.TextureSources` draped on the terrain (None: procedural albedo). The record gains
     ``rover`` / ``texture`` entries only when they are not the defaults.
     """

@@ -1,4 +1,5 @@
-"""Real Mars texture draped on the simulated terrain (pure numerics; ``io/texture_sources.py`` reads the files).
+"""Real Mars texture draped on the simulated terrain (pure numerics; ``io/texture_sources.py`` reads the files,
+:func:`texture_sources_from_pictures` chooses among the pictures).
 
 The texture is a property of the **surface**, not of an image: a periodic atlas of relative albedo
 ``T(x, y)`` (dimensionless, mean ~0) in the site plane, sampled at every ray hit on the terrain, so every view
@@ -48,6 +49,7 @@ CONTRAST_RANGE = (-0.9, 2.0)
 MIN_PATCH_STD = 0.02
 MAX_BAD_FRACTION = 0.01
 DRAWS_PER_CELL = 60
+MAX_IMAGES = 64  # usable source pictures at most
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,39 @@ def usable_reason(pixels: np.ndarray, crop_frac) -> str:
     if not _grid_patches(relative_contrast(pixels), _bad_mask(pixels), box):
         return "no patch of the crop is textured and unsaturated"
     return ""
+
+
+def texture_sources_from_pictures(source_dir: str, pictures, crop_frac=None, pixel_m=None) -> TextureSources:
+    """:class:`TextureSources` from ``pictures``, an iterable of ``(name, sha256, pixels)`` (``pixels`` ``(H, W)``
+    float32 fractions of full scale) or ``(name, None, reason)`` for a file skipped before
+    (:func:`scipctl.io.texture_sources.iter_texture_pictures`), in order.
+
+    A picture whose crop holds no usable patch (:func:`usable_reason`) is skipped with the reason, as is any beyond
+    the first ``MAX_IMAGES`` usable ones. :class:`InputError` naming
+    ``source_dir`` and ``--texture-from`` if no picture is usable.
+    """
+    from ..errors import InputError
+
+    crop_frac = tuple(DEFAULT_CROP if crop_frac is None else crop_frac)
+    pixel_m = TEXTURE_PIXEL_M if pixel_m is None else float(pixel_m)
+    images, skipped = [], []
+    for name, sha256, pixels in pictures:
+        if sha256 is None:
+            skipped.append((name, pixels))
+            continue
+        why = usable_reason(pixels, crop_frac)
+        if why:
+            skipped.append((name, why))
+            continue
+        if len(images) >= MAX_IMAGES:
+            skipped.append((name, f"beyond the first {MAX_IMAGES} usable pictures"))
+            continue
+        images.append(TextureImage(name, sha256, pixels))
+    if not images:
+        detail = "; ".join(f"{n}: {r}" for n, r in skipped[:3])
+        raise InputError(str(source_dir), "--texture-from", "no usable picture (PNG/JPEG or PDS3/VICAR/PDS4 product with a "
+                         f"textured crop of at least 128 x 128 px){' -- ' + detail if detail else ''}")
+    return TextureSources(str(source_dir), tuple(images), crop_frac, pixel_m, tuple(skipped))
 
 
 @dataclass(frozen=True)

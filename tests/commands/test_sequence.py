@@ -86,16 +86,10 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, slab_dir):
     assert r.exit_code == 2 and r.stderr.count("\n") == 1
 
 
-def test_pose_sigma_flags_reach_the_monte_carlo_and_are_checked():
-    import math
-
+def test_bad_pose_sigma_flag_is_exit_2():
     from typer.testing import CliRunner
 
     from scipctl.cli import app
-    from scipctl.commands.sequence import uncertainty_params
 
-    u = uncertainty_params(0.05, 2.0).uncertainty
-    assert u.sigma_position_m == 0.05 and math.isclose(u.sigma_yaw_rad, math.radians(2.0))
-    assert uncertainty_params().uncertainty.sigma_position_m is None  # from the downlink
     r = CliRunner().invoke(app, ["sequence", "whatever.mcap", "--target", "t1", "--sigma-position-m", "-1"])
     assert r.exit_code == 2 and "sigma" in r.stderr

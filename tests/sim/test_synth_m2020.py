@@ -8,8 +8,9 @@ import pytest
 from typer.testing import CliRunner
 
 from scipctl.cli import app
+from scipctl.commands.synth import m2020_sim_rover
 from scipctl.io.downlink import read_downlink
-from scipctl.io.m2020_geometry import m2020_rover_config, m2020_sim_rover
+from scipctl.io.m2020_geometry import m2020_rover_config
 from scipctl.sim.rover import scale_model
 from scipctl.sim.scenarios import plan_run, scene_for
 from tests.io.real_data import real

@@ -10,10 +10,10 @@ import pytest
 from typer.testing import CliRunner
 
 from scipctl.cli import app
+from scipctl.commands.synth import read_texture_sources
 from scipctl.core.camera import cahv_from_intrinsics
 from scipctl.core.transforms import RigidTransform
 from scipctl.io.downlink import read_downlink
-from scipctl.io.texture_sources import read_texture_sources
 from scipctl.sim import scenarios
 from scipctl.sim.render import render_radiance
 from scipctl.sim.scene import MAT_TERRAIN, make_scene

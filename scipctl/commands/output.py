@@ -1,0 +1,83 @@
+"""What the commands print, and the exit codes.
+
+* stdout carries the answer: one JSON document (``--json``, :func:`emit_json`) or the product itself;
+* stderr carries everything for people: rich tables (:func:`stderr_console`), ``scipctl: note: ...`` lines
+  (:func:`note`) and one ``scipctl: error: ...`` line on failure (:func:`guarded`).
+
+Exit codes: :data:`EXIT_OK` 0 ok; :data:`EXIT_NO` 1 the answer is "no" (:class:`~scipctl.errors.CommandFailed`:
+failure detected, rule broken, no reliable match); :data:`EXIT_BAD_INPUT` 2 bad input or usage
+(:class:`~scipctl.errors.InputError`, a missing/unreadable file); 3 a bug (:data:`EXIT_BUG`); 130 interrupted.
+Import-light (the CLI loads this at start-up): rich is imported when a console is made.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+
+import typer
+
+from ..errors import CommandFailed, InputError
+from ..jsonutil import json_default
+
+EXIT_OK, EXIT_NO, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+
+
+def error(msg: str) -> None:
+    """The one ``scipctl: error:`` line on stderr."""
+    sys.stderr.write(f"scipctl: error: {msg}\n")
+
+
+def note(msg: str) -> None:
+    """One line on stderr for something the operator should know (e.g. where products went)."""
+    sys.stderr.write(f"scipctl: note: {msg}\n")
+
+
+def stderr_console():
+    """The rich console for tables and progress: stderr; wide (160 columns) when stderr is not a terminal,
+    so that logs of operations scripts keep whole table rows."""
+    from rich.console import Console
+
+    con = Console(stderr=True)
+    if not con.is_terminal:
+        con = Console(stderr=True, width=160)
+    return con
+
+
+def emit_json(doc) -> None:
+    """``doc`` as one JSON document on stdout (sorted keys, numpy values as plain numbers)."""
+    sys.stdout.write(json.dumps(doc, indent=2, sort_keys=True, default=json_default) + "\n")
+
+
+def guarded(fn):
+    """Map exceptions to one-line errors and exit codes; never a traceback.
+
+    A :class:`CommandFailed` with a payload still prints the payload as JSON when the command was called
+    with ``json_out=True``."""
+
+    @functools.wraps(fn)
+    def wrapper(*a, **kw):
+        try:
+            return fn(*a, **kw)
+        except typer.Exit:
+            raise
+        except InputError as e:
+            error(str(e))
+            raise typer.Exit(EXIT_BAD_INPUT)
+        except CommandFailed as e:
+            if e.payload is not None and kw.get("json_out"):
+                emit_json(e.payload)
+            error(str(e))
+            raise typer.Exit(EXIT_NO)
+        except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as e:
+            error(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}")
+            raise typer.Exit(EXIT_BAD_INPUT)
+        except KeyboardInterrupt:
+            error("interrupted")
+            raise typer.Exit(EXIT_INTERRUPTED)
+        except Exception as e:  # a bug: still one line, but say it is ours
+            error(f"internal error ({type(e).__name__}): {e}. Please report it with the command line.")
+            raise typer.Exit(EXIT_BUG)
+
+    return wrapper

@@ -1,0 +1,45 @@
+"""scipctl/commands/output.py: exit codes, the one error line, JSON on stdout."""
+
+import json
+
+import numpy as np
+import pytest
+import typer
+
+from scipctl.commands.output import EXIT_BAD_INPUT, EXIT_BUG, EXIT_NO, emit_json, guarded
+from scipctl.errors import CommandFailed, InputError
+
+
+def _raising(exc):
+    @guarded
+    def cmd(json_out=False):
+        raise exc
+
+    return cmd
+
+
+@pytest.mark.parametrize("exc, code", [
+    (InputError("p1", "field", "bad\nvalue"), EXIT_BAD_INPUT),
+    (CommandFailed("no match"), EXIT_NO),
+    (FileNotFoundError(2, "No such file or directory", "x.mcap"), EXIT_BAD_INPUT),
+    (RuntimeError("oops"), EXIT_BUG),
+])
+def test_exception_becomes_exit_code_and_one_stderr_line(capsys, exc, code):
+    with pytest.raises(typer.Exit) as e:
+        _raising(exc)()
+    out, err = capsys.readouterr()
+    assert e.value.exit_code == code
+    assert out == "" and err.startswith("scipctl: error: ") and err.count("\n") == 1
+
+
+def test_command_failed_payload_goes_to_stdout_with_json(capsys):
+    with pytest.raises(typer.Exit) as e:
+        _raising(CommandFailed("no", payload={"ok": False}))(json_out=True)
+    out, err = capsys.readouterr()
+    assert e.value.exit_code == EXIT_NO and json.loads(out) == {"ok": False} and err.count("\n") == 1
+
+
+def test_emit_json_writes_numpy_as_plain_numbers(capsys):
+    emit_json({"b": np.float64(1.5), "a": np.arange(2)})
+    out = capsys.readouterr().out
+    assert json.loads(out) == {"a": [0, 1], "b": 1.5} and out.index('"a"') < out.index('"b"')
