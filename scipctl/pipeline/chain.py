@@ -542,11 +542,12 @@ def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-
 
 
 def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):
+    from ..core.handoff import run_method
     from .handoff import build_setup
 
     setup = build_setup(dl, hazcam=haz.product_id, near=nav.product_id)
     case = setup.cases["near"]
-    res = case.run(method, nav_uv)
+    res = run_method(case, method, nav_uv)
     uv = res.uv if res.uv is not None and np.all(np.isfinite(res.uv)) else None
     ps = _stereo(dl, haz, uv) if uv is not None else None
     return step(haz, "handoff", None, uv, ps, res.diagnostics.get("ncc_peak"), ok=uv is not None,

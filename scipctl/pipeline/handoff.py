@@ -14,12 +14,12 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..core.handoff import ALL_METHODS, PAPER_METHODS, HandoffCase, HandoffParams, StereoView
+from ..core.handoff import ALL_METHODS, PAPER_METHODS, HandoffCase, HandoffParams, Method, StereoView, run_method
 from ..core.kinematics import T_roverB_roverA
 from ..core.transforms import RigidTransform
 from ..model import Downlink, ImageProduct, InputError
 
-REFINED = {"refined-kinematic", "refined-geometric"}
+REFINED = {Method.REFINED_KINEMATIC, Method.REFINED_GEOMETRIC}
 
 
 @dataclass
@@ -148,7 +148,8 @@ def run_targets(
                 near_case = setup.cases.get("near")
                 if (phase == "others" and "far" in navcams and "refined-kinematic" in methods and near_case is not None
                         and src.get("near") is not None):
-                    near_pk = near_case.run("pure-kinematic", src["near"])  # the far refined search centre (the paper's)
+                    # the far refined search centre (the paper's), passed to every method of the target
+                    near_pk = run_method(near_case, Method.PURE_KINEMATIC, src["near"])
                 for nc, case in cases.items():
                     nav_uv = src.get(nc)
                     for m in methods:
@@ -156,7 +157,7 @@ def run_targets(
                             continue
                         if progress:
                             progress(f"{downlink_name} {target_id} {m} {nc}")
-                        results[(target_id, nc, m)] = case.run(m, nav_uv, near_hint=near_pk)
+                        results[(target_id, nc, m)] = run_method(case, m, nav_uv, near_hint=near_pk)
     records = []
     for target_id, src, truth in targets:
         for nc, case in cases.items():

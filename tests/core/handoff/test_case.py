@@ -1,0 +1,68 @@
+"""scipctl/core/handoff/case.py and params.py: the shared products are computed once; registration in a
+worker thread gives what it gives in the caller's thread; parameters are checked."""
+
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from scipctl.core.handoff import HandoffCase, HandoffParams, NoAnswer, run_method
+
+
+def test_point_stereo_and_clouds_are_cached(handoff_scene):
+    case = handoff_scene.cases["near"]
+    uv = handoff_scene.targets[0].nav_uv["near"]
+    assert case.point_stereo(uv) is case.point_stereo(np.array(uv) + 1e-9)
+    assert case.nav_cloud_in_haz() is case.nav_cloud_in_haz()
+    assert case.haz_cloud() is case.haz_cloud()
+    assert case.haz_in_nav() is case.haz_in_nav()
+
+
+def test_memo_raises_the_same_no_answer_again(handoff_scene):
+    case = handoff_scene.cases["far"]
+    calls = []
+
+    def compute():
+        calls.append(1)
+        raise NoAnswer("none")
+
+    for _ in range(2):
+        with pytest.raises(NoAnswer, match="none"):
+            case.memo(("test", 1), compute)
+    assert calls == [1]
+    assert case.memo(("test", 2), lambda: 5) == 5 and case.memo(("test", 2), lambda: 6) == 5
+
+
+def test_threaded_registration_equals_serial(make_handoff_scene):
+    threaded, serial = make_handoff_scene(), make_handoff_scene()
+    t = threaded.targets[0]
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        for nc in ("far", "near"):
+            threaded.cases[nc].start_registration(pool)
+        for nc in ("near", "far"):
+            a = run_method(threaded.cases[nc], "mesh-registration", t.nav_uv[nc])
+            b = run_method(serial.cases[nc], "mesh-registration", t.nav_uv[nc])
+            np.testing.assert_array_equal(a.uv, b.uv)
+            assert a.diagnostics["icp_fitness"] == b.diagnostics["icp_fitness"]
+            assert "whole_reg_future" not in threaded.cases[nc]._cache
+
+
+@pytest.mark.parametrize("change,name", [
+    ({"template_half_px": 0}, "template_half_px"), ({"search_radius_px": -1.0}, "search_radius_px"),
+    ({"dense_downsample": 1.5}, "dense_downsample"), ({"far_window_warp": "affine"}, "far_window_warp"),
+    ({"haz_point_stereo_range_frac": 1.0}, "haz_point_stereo_range_frac"),
+    ({"consensus_agree_px": float("nan")}, "consensus_agree_px"), ({"refined_min_score": 2.0}, "refined_min_score"),
+])
+def test_params_check_names_the_bad_parameter(change, name):
+    with pytest.raises(ValueError, match=rf"HandoffParams\.{name} "):
+        HandoffParams(**change).check()
+
+
+def test_params_defaults_and_fast_pass_and_a_case_checks_them(handoff_scene):
+    assert HandoffParams().check() == HandoffParams()
+    HandoffParams(dense_downsample=2).check()
+    case = handoff_scene.cases["near"]
+    with pytest.raises(ValueError, match="geometric_iterations"):
+        HandoffCase("near", case.nav, case.haz, case.T_haz_nav, HandoffParams(geometric_iterations=0))
+    with pytest.raises(ValueError, match="label"):
+        HandoffCase("middle", case.nav, case.haz, case.T_haz_nav)
