@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from scipctl.core.handoff import HandoffCase, HandoffParams, NoAnswer, run_method
-from tests.core.handoff.conftest import build_scene
 
 
 def test_point_stereo_and_clouds_are_cached(handoff_scene):
@@ -34,8 +33,8 @@ def test_memo_raises_the_same_no_answer_again(handoff_scene):
     assert case.memo(("test", 2), lambda: 5) == 5 and case.memo(("test", 2), lambda: 6) == 5
 
 
-def test_threaded_registration_equals_serial():
-    threaded, serial = build_scene(), build_scene()
+def test_threaded_registration_equals_serial(make_handoff_scene):
+    threaded, serial = make_handoff_scene(), make_handoff_scene()
     t = threaded.targets[0]
     with ThreadPoolExecutor(max_workers=1) as pool:
         for nc in ("far", "near"):

@@ -5,7 +5,6 @@ import numpy as np
 
 from scipctl.core.handoff import HandoffParams
 from scipctl.core.handoff.geometric import pure_geometric, refined_geometric
-from tests.core.handoff.conftest import build_scene
 
 
 def test_pure_geometric_is_cached_and_returned_as_a_copy(handoff_scene):
@@ -20,13 +19,14 @@ def test_pure_geometric_is_cached_and_returned_as_a_copy(handoff_scene):
     assert r.diagnostics["start_uv"] == b.uv.tolist()
 
 
-def test_pure_geometric_refinement_is_used_and_without_it_the_dense_answer_is_kept(handoff_scene):
+def test_pure_geometric_refinement_is_used_and_without_it_the_dense_answer_is_kept(handoff_scene,
+                                                                                    make_handoff_scene):
     t = handoff_scene.targets[1]
     case = handoff_scene.cases["near"]
     r = pure_geometric(case, t.nav_uv["near"], case.params)
     assert r.diagnostics["refined_by"] == "hazcam point stereo"
     assert r.diagnostics["refinement_residual_navcam_px"] <= case.params.geometric_max_residual_px
-    dense_only = build_scene(HandoffParams(haz_point_stereo_window_px=0)).cases["near"]
+    dense_only = make_handoff_scene(HandoffParams(haz_point_stereo_window_px=0)).cases["near"]
     d = pure_geometric(dense_only, t.nav_uv["near"], dense_only.params)
     assert d.diagnostics["refined_by"] is None
     np.testing.assert_allclose(d.uv, d.diagnostics["dense_uv"])
