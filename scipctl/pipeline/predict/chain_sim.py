@@ -11,16 +11,11 @@ import numpy as np
 
 from ...core.camera import CameraModel
 from ...core.kinematics import RoverConfig
-# chain window sizes (kept identical to the on-board chain simulation)
-from ..chain import SEARCH_RADIUS_PX, TEMPLATE_HALF_PX
 from .geometry import perturb_pose
 from .montecarlo import McResult
 from .params import FOV_MARGIN_PX, LOST_M, MIN_SUCCESS_PX, SUCCESS_M, PredictParams
 from .planning import ApproachPlan
 from .terrain import Terrain
-
-HANDOFF_TEMPLATE_HALF_PX = 15  # navcam -> hazcam expected window (HandoffParams default)
-HANDOFF_SEARCH_RADIUS_PX = 60.0
 
 
 @dataclass
@@ -72,7 +67,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     navcam->hazcam handoff takes the tracked navcam pixel to 3-D on the
     terrain, projects it into the hazcam, and refines it by tracking an
     expected window draped from the navcam view. A step succeeds when the
-    tracked pixel lies within ``SUCCESS_PX`` of the projection of the target's
+    tracked pixel lies within :func:`success_px` of the projection of the target's
     surface point; a failed step loses the target for the rest of the chain.
     """
     from ...core.tracking import extract_window, scale_window, track, window_scale_for_handoff
@@ -141,9 +136,9 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                     res = _hazcam_handoff(terrain, nav_view, m_true, uv_true, params)
                 else:
                     rng_new = float(np.linalg.norm(Xr_est - m_bel.C))
-                    radius = float(SEARCH_RADIUS_PX.get(sh.camera, 60.0))
+                    radius = float(params.chain.search_radius(sh.camera))
                     res = _track_step(terrain, prev, m_true, uv_pred, uv_true, rng_new, radius,
-                                      TEMPLATE_HALF_PX.get(sh.camera, 15), params,
+                                      params.chain.template_half(sh.camera), params,
                                       extract_window, scale_window, track, window_scale_for_handoff)
                 uv_tr, ncc, reason, view = res
                 rec["ncc"] = None if ncc is None or not np.isfinite(ncc) else float(ncc)
@@ -246,7 +241,7 @@ def _hazcam_handoff(terrain, nav, m_haz_true, uv_true, params):
     uv_k = m_haz_true.project(hit.points[0][None])[0]
     if not np.all(np.isfinite(uv_k)):
         return None, None, "target does not project into the hazcam", None
-    k = HANDOFF_TEMPLATE_HALF_PX
+    k = params.handoff.template_half_px
     c = np.round(uv_k)
     # expected window: hazcam rays -> terrain -> navcam view intensities
     us, vs = np.meshgrid(np.arange(c[0] - k, c[0] + k + 1), np.arange(c[1] - k, c[1] + k + 1))
@@ -263,12 +258,12 @@ def _hazcam_handoff(terrain, nav, m_haz_true, uv_true, params):
         return None, None, "expected hazcam window mostly empty", None
     tpl = _fill(tpl)
     off = float(np.abs(uv_true - uv_k).max())
-    radius = HANDOFF_SEARCH_RADIUS_PX
+    radius = params.handoff.search_radius_px
     if off > radius:
         return None, None, "outside the search region", None
     r_eff = min(radius, off + params.search_margin_px)
     half = int(math.ceil(r_eff + k + 2))
-    half = max(half, int(math.ceil(off + 3 * TEMPLATE_HALF_PX.get("hazcam", 15) + 4)))
+    half = max(half, int(math.ceil(off + 3 * params.chain.template_half("hazcam") + 4)))
     view = _crop_render(terrain, m_haz_true, uv_k, half)
     img = _fill(view.image)
     tc = uv_k - (c - k)

@@ -12,8 +12,8 @@ import numpy as np
 from ...core.camera import CameraModel
 from ...core.kinematics import RoverConfig, RoverPose
 from ...core.transforms import RigidTransform
-# chain window sizes (kept identical to the on-board chain simulation)
-from ..chain import SEARCH_RADIUS_PX, TEMPLATE_HALF_PX
+# the planned shots carry the on-board chain's window sizes
+from ..chain import ChainParams
 from .geometry import _wrap, pose_on_plane, tilt_of, yaw_of
 from .params import FOV_MARGIN_PX, ApproachParams, RoverBody
 from .terrain import Terrain
@@ -33,8 +33,8 @@ class CameraShot:
     occluded: Optional[bool] = None
     texture_std: Optional[float] = None
     coverage: Optional[float] = None
-    template_half_px: int = 15
-    search_radius_px: float = 60.0
+    template_half_px: int = ChainParams.other_template_half_px
+    search_radius_px: float = float(ChainParams.other_search_radius_px)
     note: str = ""
 
     def to_dict(self) -> dict:
@@ -217,7 +217,8 @@ def clearance_of(poses_xy_yaw: list, rocks_xy: np.ndarray, target_xy: np.ndarray
 
 
 def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], rover_config: RoverConfig,
-                  params: Optional[ApproachParams] = None, designation_camera: str = "pancam") -> ApproachPlan:
+                  params: Optional[ApproachParams] = None, designation_camera: str = "pancam",
+                  chain_params: Optional[ChainParams] = None) -> ApproachPlan:
     """Plan the stops from ``start`` to the final pose in front of ``target_site_m`` (3,) (site frame).
 
     Tries the direct approach bearing, then the detour bearings in order, and
@@ -225,8 +226,12 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
     and the target (``target_keep_out_m``); if none does, the direct plan is
     returned with its (failing) clearance figures. Without a ``terrain`` the
     ground is taken as the start pose's plane and no rocks are known.
+    ``params`` is checked; each planned shot carries the window size and
+    search radius of ``chain_params`` (the on-board chain's, default
+    :class:`~scipctl.pipeline.chain.ChainParams`).
     """
-    p = params or ApproachParams()
+    p = (params or ApproachParams()).check()
+    chain_params = chain_params or ChainParams()
     T = np.asarray(target_site_m, float).reshape(3)
     S = start.T_site_rover.t[:2]
     d_start = float(np.linalg.norm(T[:2] - S))
@@ -237,14 +242,16 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
     for db in p.detour_bearings_rad:
         if d_start <= p.pancam_handoff_m and abs(db) > 1e-9:
             continue  # too close for a detour leg
-        plan = _plan_bearing(start, T, terrain, rover_config, p, direct + db, db, rocks, designation_camera)
+        plan = _plan_bearing(start, T, terrain, rover_config, p, direct + db, db, rocks, designation_camera,
+                             chain_params)
         candidates.append(plan)
         if not plan.clearance["blocked"]:
             return plan
     return candidates[0]
 
 
-def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, designation_camera) -> ApproachPlan:
+def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, designation_camera,
+                  chain_params: ChainParams) -> ApproachPlan:
     S = start.T_site_rover.t[:2].copy()
     u = np.array([math.cos(bearing), math.sin(bearing)])
     d_start = float(np.linalg.norm(T[:2] - S))
@@ -307,7 +314,7 @@ def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, de
     plan = ApproachPlan(T, start, float(bearing), float(detour), stops, path_xy, _polyline_length(path_xy), cl, p,
                         designation_camera)
     for st in plan.stops[1:]:
-        st.cameras = [_shot(rover_config, st, c, T) for c in _cameras_for(st.kind)]
+        st.cameras = [_shot(rover_config, st, c, T, chain_params) for c in _cameras_for(st.kind)]
     return plan
 
 
@@ -335,7 +342,8 @@ def camera_model_at(rover_config: RoverConfig, camera: str, eye: str, pan_rad, t
     return rover_config.camera_model(camera, eye, pan_rad or 0.0, tilt_rad or 0.0).transformed(T_site_rover)
 
 
-def _shot(rover_config: RoverConfig, stop: PlannedStop, camera: str, target_site) -> CameraShot:
+def _shot(rover_config: RoverConfig, stop: PlannedStop, camera: str, target_site,
+          chain_params: ChainParams) -> CameraShot:
     Xr = stop.T_site_rover.inverse().apply(np.asarray(target_site, float))
     cam = rover_config.cameras.get(camera)
     if cam is None:
@@ -355,5 +363,5 @@ def _shot(rover_config: RoverConfig, stop: PlannedStop, camera: str, target_site
     ok = bool(np.all(np.isfinite(uv)) and margin <= uv[0] <= spec.width - 1 - margin
               and margin <= uv[1] <= spec.height - 1 - margin)
     return CameraShot(camera, pan, tilt, uv.tolist() if np.all(np.isfinite(uv)) else None, rng, ok,
-                      template_half_px=TEMPLATE_HALF_PX.get(camera, 15),
-                      search_radius_px=float(SEARCH_RADIUS_PX.get(camera, 60.0)), note=note)
+                      template_half_px=chain_params.template_half(camera),
+                      search_radius_px=float(chain_params.search_radius(camera)), note=note)

@@ -63,18 +63,39 @@ def confidence_of(mc: Optional[McResult], chain: Optional[ChainResult]) -> float
     return float(p * frac)
 
 
+@dataclass(frozen=True)
+class Designation:
+    """Today's designation of the target, as the prediction uses it."""
+
+    image: np.ndarray  # (H, W) float32: the left image the target was designated in
+    model_site: CameraModel  # that image's camera model, site frame
+    uv: np.ndarray  # (2,) the designated pixel
+    target_site_m: np.ndarray  # (3,) the designated 3-D target, site frame
+    range_sigma_m: float = 0.0  # 1-sigma error of the designation's range (along its line of sight)
+
+
+@dataclass(frozen=True)
+class PoseSigmas:
+    """The pose-estimate error of the approach's first leg (see :func:`sigmas_for`) and where it came from."""
+
+    position_m: float
+    yaw_rad: float
+    source: str  # e.g. "position: downlink, yaw: default"
+
+
 def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig,
-                   designation_img, designation_model_site: CameraModel, designation_uv, target_site_m,
-                   sigma_position_m: float, sigma_yaw_rad: float, sigma_source: str,
-                   designation_range_sigma_m: float = 0.0, params: Optional[PredictParams] = None) -> Prediction:
-    """Views, Monte Carlo, chain simulation and risks for a planned approach (pure: arrays in, results out)."""
+                   designation: Designation, sigmas: PoseSigmas, params: Optional[PredictParams] = None) -> Prediction:
+    """Views, Monte Carlo, chain simulation and risks for a planned approach (pure: arrays in, results out).
+
+    ``params`` (default :class:`PredictParams`) is checked first.
+    """
     import time
 
-    params = params or PredictParams()
+    params = (params or PredictParams()).check()
     notes, secs = [], {}
-    X_T = np.asarray(target_site_m, float)
+    X_T = np.asarray(designation.target_site_m, float)
     # the target's point on the terrain surface: today's designation ray cast into the mesh
-    o, d = designation_model_site.unproject(np.asarray(designation_uv, float)[None])
+    o, d = designation.model_site.unproject(np.asarray(designation.uv, float)[None])
     Xs = terrain.surface_point(o[0], d[0])
     if Xs is None or np.linalg.norm(Xs - X_T) > max(0.1, 0.05 * np.linalg.norm(X_T - o[0])):
         notes.append("the designation ray misses today's stereo surface near the target; using the designated point")
@@ -83,13 +104,13 @@ def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_c
     views = check_views(plan, terrain, rover_config, Xs, params)
     secs["views"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigma_position_m, sigma_yaw_rad,
-                     designation_range_sigma_m, params.occlusion_tol_m)
+    mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigmas.position_m, sigmas.yaw_rad,
+                     designation.range_sigma_m, params.occlusion_tol_m)
     secs["monte_carlo"] = time.perf_counter() - t0
     chain = None
     if params.run_chain:
         t0 = time.perf_counter()
-        chain = simulate_chain(plan, terrain, rover_config, designation_img, designation_model_site, designation_uv,
+        chain = simulate_chain(plan, terrain, rover_config, designation.image, designation.model_site, designation.uv,
                                Xs, mc, params)
         secs["chain"] = time.perf_counter() - t0
     risks = assess_risks(plan, mc, chain, params)
@@ -111,8 +132,8 @@ def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_c
                "mean_final_error_m": float(np.mean(kept)) if kept else None,
                "max_final_error_m": float(np.max(kept)) if kept else None, "samples_kept": len(kept),
                "goal_m": SUCCESS_M["hazcam"]}
-    return Prediction(target_id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigma_source, notes, secs,
-                      acc, terrain)
+    return Prediction(target_id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigmas.source, notes,
+                      secs, acc, terrain)
 
 
 def predict_target(dl, record: dict, params: Optional[PredictParams] = None, designated_now: bool = False,
@@ -120,7 +141,7 @@ def predict_target(dl, record: dict, params: Optional[PredictParams] = None, des
     """Plan and predict tomorrow's approach to a designated target from today's downlink (the designation's position)."""
     import time
 
-    params = params or PredictParams()
+    params = (params or PredictParams()).check()
     ctx = target_context(dl, record, designated_now)
     t0 = time.perf_counter()
     if terrain is None:
@@ -130,11 +151,11 @@ def predict_target(dl, record: dict, params: Optional[PredictParams] = None, des
     t_terrain = time.perf_counter() - t0
     t0 = time.perf_counter()
     plan = plan_approach(ctx.start, ctx.target_site_m, terrain, dl.rover_config, params.approach,
-                         designation_camera=ctx.product.camera)
+                         designation_camera=ctx.product.camera, chain_params=params.chain)
     t_plan = time.perf_counter() - t0
     sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
-    pred = run_prediction(record["id"], plan, terrain, dl.rover_config, ctx.product.pixels_float(),
-                          ctx.product.camera_model.transformed(ctx.start.T_site_rover), record["pixel_uv"],
-                          ctx.target_site_m, sp, sy, src, float(record.get("range_sigma_m") or 0.0), params)
+    designation = Designation(ctx.product.pixels_float(), ctx.product.camera_model.transformed(ctx.start.T_site_rover),
+                              record["pixel_uv"], ctx.target_site_m, float(record.get("range_sigma_m") or 0.0))
+    pred = run_prediction(record["id"], plan, terrain, dl.rover_config, designation, PoseSigmas(sp, sy, src), params)
     pred.seconds.update({"terrain": t_terrain, "plan": t_plan})
     return pred
