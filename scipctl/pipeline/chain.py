@@ -9,7 +9,7 @@ view through the local surface plane (which takes out the change of scale and
 perspective), SIFT features of the rendering are matched against the whole
 new image and a RANSAC model maps the target's place in the rendering into it
 (the coarse position); a template rendered through that model is then
-NCC-tracked within ``FEATURE_FINE_RADIUS_PX`` of it. When no feature model is
+NCC-tracked within ``ChainParams.feature_fine_radius_px`` of it. When no feature model is
 found, the older NCC path (a large context window over the search region) gives
 an answer that is reported as unverified. At the same stop, the pancam window
 is shrunk by the IFOV ratio and tracked into the navcam image (the paper's
@@ -26,36 +26,107 @@ from typing import Optional
 
 import numpy as np
 
+from ..core.point_stereo import DEFAULT_BAND_PX
 from ..model import Downlink, ImageProduct, InputError
+from .plane_warp import local_normals_site, plane_warped_template, plane_warped_view, render_through_plane
 from ..jsonutil import finite_or_none
 
-TEMPLATE_HALF_PX = {"pancam": 20, "navcam": 15, "hazcam": 15}
-# pointing error from the pose estimate: pancam IFOV is 1/3 of navcam's, so it needs 3x the radius in pixels
-SEARCH_RADIUS_PX = {"pancam": 300.0, "navcam": 100.0, "hazcam": 80.0}
-# fallback when no feature match is found: half-size of the NCC context window that first finds the pose error,
-# and the target search radius after it
-CONTEXT_HALF_PX = {"pancam": 100, "navcam": 60, "hazcam": 60}
-FINE_RADIUS_PX = 20.0
-# feature-guided step (_feature_track): the previous view rendered into the new view covers +-VIEW_REACH_PX new
-# pixels around the prediction
-VIEW_REACH_PX = 300
-# the rendering's pixel = this many previous-image pixels (1: its own resolution); the coarser one is tried when
-# nothing was confirmed at the finer one (smooth 10 m sand against the 4.5 m image's fine speckle)
-FEATURE_STEP_FACTORS = (1.0, 1.5)
-# candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
-# the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
-FEATURE_CANDIDATES = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
-                      (1.0, "homography", 12))
-FEATURE_FINE_RADIUS_PX = 20.0  # NCC refinement radius around a feature-guided coarse position
-FEATURE_LOCAL_PX = 75.0  # inliers within this many new pixels of the target are counted as local
-# NCC must land within this of the feature match to confirm it; an unconfirmed match with fewer local inliers
-# than FEATURE_MIN_LOCAL is reported as a failed step (measured on the simulated runs: all such were > 10 px off)
-FEATURE_CONFIRM_PX = 8.0
-FEATURE_MIN_LOCAL = 5
-# confirmed candidates whose NCC positions lie within this of the best-scoring one are pooled (weighted by score)
-FEATURE_AGREE_PX = 2.0
-BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
-STEREO_WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
+def _per_camera(name: str, values: dict, fallback, minimum, integer: bool = False) -> None:
+    """Raise ValueError unless every value of ``values`` (camera -> number) and ``fallback`` is >= ``minimum``."""
+    if not isinstance(values, dict) or not values:
+        raise ValueError(f"ChainParams.{name}: expected a non-empty {{camera: value}} dict, got {values!r}")
+    for cam, v in list(values.items()) + [("other cameras", fallback)]:
+        ok = isinstance(v, (int, np.integer)) if integer else isinstance(v, (int, float, np.number))
+        if not ok or not np.isfinite(v) or v < minimum:
+            kind = "an integer" if integer else "a number"
+            raise ValueError(f"ChainParams.{name}[{cam!r}]: must be {kind} >= {minimum}, got {v!r}")
+
+
+@dataclass(frozen=True)
+class ChainParams:
+    """Window sizes, search radii and feature-matching settings of the tracking chain (:func:`run_chain`).
+
+    Per-camera values are ``{camera: value}`` dicts; a camera not in a dict
+    takes the ``other_*`` fallback. The pre-uplink prediction
+    (``scipctl.pipeline.predict``) runs the chain on rendered views with the
+    same windows.
+    """
+
+    template_half_px: dict = field(default_factory=lambda: {"pancam": 20, "navcam": 15, "hazcam": 15})
+    # pointing error from the pose estimate: pancam IFOV is 1/3 of navcam's, so it needs 3x the radius in pixels
+    search_radius_px: dict = field(default_factory=lambda: {"pancam": 300.0, "navcam": 100.0, "hazcam": 80.0})
+    # fallback when no feature match is found: half-size of the NCC context window that first finds the pose
+    # error, and the target search radius after it
+    context_half_px: dict = field(default_factory=lambda: {"pancam": 100, "navcam": 60, "hazcam": 60})
+    fine_radius_px: float = 20.0
+    # feature-guided step (_feature_track): the previous view rendered into the new view covers +-view_reach_px
+    # new pixels around the prediction
+    view_reach_px: int = 300
+    # the rendering's pixel = this many previous-image pixels (1: its own resolution); the coarser one is tried
+    # when nothing was confirmed at the finer one (smooth 10 m sand against the 4.5 m image's fine speckle)
+    feature_step_factors: tuple = (1.0, 1.5)
+    # candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
+    # the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
+    feature_candidates: tuple = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
+                                 (1.0, "homography", 12))
+    feature_fine_radius_px: float = 20.0  # NCC refinement radius around a feature-guided coarse position
+    feature_local_px: float = 75.0  # inliers within this many new pixels of the target are counted as local
+    # NCC must land within this of the feature match to confirm it; an unconfirmed match is reported as a weak
+    # step, never the next stop's reference
+    feature_confirm_px: float = 8.0
+    # confirmed candidates whose NCC positions lie within this of the best-scoring one are pooled (weighted by score)
+    feature_agree_px: float = 2.0
+    # point stereo at each tracked pixel: epipolar band half-widths (one home: core.point_stereo.DEFAULT_BAND_PX)
+    band_px: dict = field(default_factory=lambda: dict(DEFAULT_BAND_PX))
+    stereo_window_px: dict = field(default_factory=lambda: {"pancam": 21, "navcam": 21, "hazcam": 21})
+    other_template_half_px: int = 15
+    other_search_radius_px: float = 60.0
+    other_context_half_px: int = 100
+    other_band_px: float = 4.0
+    other_stereo_window_px: int = 11
+
+    def check(self) -> "ChainParams":
+        """Raise ValueError naming the first bad field; return self."""
+        _per_camera("template_half_px", self.template_half_px, self.other_template_half_px, 1, integer=True)
+        _per_camera("search_radius_px", self.search_radius_px, self.other_search_radius_px, 0.0)
+        _per_camera("context_half_px", self.context_half_px, self.other_context_half_px, 1, integer=True)
+        _per_camera("band_px", self.band_px, self.other_band_px, 0.0)
+        _per_camera("stereo_window_px", self.stereo_window_px, self.other_stereo_window_px, 3, integer=True)
+        for name in ("fine_radius_px", "feature_fine_radius_px", "feature_local_px", "feature_confirm_px",
+                     "feature_agree_px"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+                raise ValueError(f"ChainParams.{name}: must be a number > 0, got {v!r}")
+        if not (isinstance(self.view_reach_px, int) and self.view_reach_px >= 1):
+            raise ValueError(f"ChainParams.view_reach_px: must be an integer >= 1, got {self.view_reach_px!r}")
+        if not self.feature_step_factors or not all(
+                isinstance(f, (int, float)) and np.isfinite(f) and f >= 1.0 for f in self.feature_step_factors):
+            raise ValueError(f"ChainParams.feature_step_factors: must be a non-empty tuple of numbers >= 1, "
+                             f"got {self.feature_step_factors!r}")
+        for cand in self.feature_candidates:
+            ok = (isinstance(cand, tuple) and len(cand) == 3 and isinstance(cand[0], (int, float)) and 0 < cand[0] <= 1
+                  and cand[1] in ("similarity", "homography") and isinstance(cand[2], int) and cand[2] >= 2)
+            if not ok:
+                raise ValueError(f"ChainParams.feature_candidates: each must be (reach in (0, 1], 'similarity' or "
+                                 f"'homography', min inliers >= 2), got {cand!r}")
+        if not self.feature_candidates:
+            raise ValueError("ChainParams.feature_candidates: must not be empty")
+        return self
+
+    def template_half(self, camera: str) -> int:
+        return self.template_half_px.get(camera, self.other_template_half_px)
+
+    def search_radius(self, camera: str) -> float:
+        return self.search_radius_px.get(camera, self.other_search_radius_px)
+
+    def context_half(self, camera: str) -> int:
+        return self.context_half_px.get(camera, self.other_context_half_px)
+
+    def band(self, camera: str) -> float:
+        return self.band_px.get(camera, self.other_band_px)
+
+    def stereo_window(self, camera: str) -> int:
+        return self.stereo_window_px.get(camera, self.other_stereo_window_px)
 
 
 @dataclass
@@ -86,101 +157,20 @@ class ChainStep:
 _f = finite_or_none
 
 
-def _stereo(dl: Downlink, left: ImageProduct, uv):
+def _stereo(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
     from ..core.point_stereo import point_stereo
 
     right = dl.stereo_pair(left)
     if right is None:
         return None
     return point_stereo(left.pixels_float(), right.pixels_float(), left.camera_model, right.camera_model,
-                        np.asarray(uv, float), band_px=BAND_PX.get(left.camera, 4.0),
-                        window_px=STEREO_WINDOW_PX.get(left.camera, 11))
-
-
-def _local_normal_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, range_m: float):
-    """Surface normals (site frame) at ``X_rover`` from half-resolution dense stereo of ``prod``'s pair.
-
-    Returns ``(local, ground)``: the plane fitted within ``max(0.05, 0.025
-    range)`` m (the target's own surface, e.g. a rock face) and within
-    ``max(0.2, 0.1 range)`` m (mostly the surrounding ground); each ``(3,)`` or None.
-    """
-    from ..core.dense_stereo import dense_stereo
-    from .designate import surface_normal
-
-    right = dl.stereo_pair(prod)
-    if right is None:
-        return None, None
-    try:
-        ds = dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
-                          min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
-    except Exception:
-        return None, None
-    xyz = ds.xyz.reshape(-1, 3)
-    out = []
-    for radius_m in (max(0.05, 0.025 * range_m), max(0.2, 0.1 * range_m)):
-        n, npts = surface_normal(xyz, X_rover, radius_m=radius_m)
-        out.append(None if n is None else prod.pose.T_site_rover.rotate(n))
-    return tuple(out)
-
-
-def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
-    """``prev``'s image seen at ``prod``'s pixels ``uv`` (..., 2) through the plane (X_site, n_site), site frame.
-
-    Each pixel's ray (``prod``'s camera at its pose estimate) meets the plane
-    through ``X_site`` (3,) with normal ``n_site`` (3,); the point is projected
-    into ``prev`` (its pose estimate) and ``prev``'s image is sampled there
-    (bilinear). Returns float32 (...) with NaN where ``prev`` did not see it.
-    """
-    from ..core.expected import bilinear_sample
-
-    uv = np.asarray(uv, float)
-    shape = uv.shape[:-1]
-    o, d = prod.camera_model.unproject(uv.reshape(-1, 2))
-    T_new = prod.pose.T_site_rover
-    o_s, d_s = T_new.apply(o), T_new.rotate(d)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
-    P_s = o_s + t[:, None] * d_s
-    P_s[~(t > 0)] = np.nan
-    P_prev = prev.pose.T_site_rover.inverse().apply(P_s)
-    uv_prev = prev.camera_model.project(P_prev)
-    return bilinear_sample(prev.pixels_float(), uv_prev).reshape(shape)
-
-
-def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,
-                      step_px: float = 1.0):
-    """``prod``'s view of the window around ``centre_uv`` rendered from ``prev``'s image through a plane.
-
-    See :func:`render_through_plane`. View pixel ``(i, j)`` is ``prod`` pixel
-    ``c + step_px * ((i, j) - half)`` with ``c`` = ``centre_uv`` rounded
-    (``step_px > 1``: a coarser rendering, e.g. at ``prev``'s own
-    resolution). Returns ``(view (2h+1, 2h+1) float32 with NaN where ``prev``
-    did not see the plane, centre_in_view_uv (2,))``: ``centre_uv`` in the
-    view's pixel coordinates.
-    """
-    c = np.round(np.asarray(centre_uv, float))
-    g = np.arange(-half, half + 1) * float(step_px)
-    us, vs = np.meshgrid(c[0] + g, c[1] + g)
-    vals = render_through_plane(prev, prod, X_site, n_site, np.stack([us, vs], -1))
-    return vals, (np.asarray(centre_uv, float) - c) / float(step_px) + half
-
-
-def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int):
-    """The window of ``prod`` around ``centre_uv`` as ``prev`` saw it, through the local plane (X_site, n_site).
-
-    Each template pixel's ray (new camera, new pose estimate) meets the plane;
-    the point is projected into the previous image and sampled. Returns
-    ``(template (2h+1, 2h+1) float32 or None, template_center_uv (2,))``.
-    """
-    vals, tc = plane_warped_view(prev, prod, X_site, n_site, centre_uv, half)
-    if np.isfinite(vals).mean() < 0.9:
-        return None, None
-    vals = np.where(np.isfinite(vals), vals, np.nanmean(vals)).astype(np.float32)
-    return vals, tc
+                        np.asarray(uv, float), band_px=params.band(left.camera),
+                        window_px=params.stereo_window(left.camera))
 
 
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
-              handoff_method: str = "consensus", template_mode: str = "plane", handoff_at: str = "every") -> list:
+              handoff_method: str = "consensus", template_mode: str = "plane", handoff_at: str = "every",
+              params: Optional[ChainParams] = None) -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
     ``template_mode``: ``"plane"`` (default) renders the previous stop's image
@@ -202,7 +192,9 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     ``"first"`` (the chain ends at the first such stop). A step with
     ``ok=False`` whose ``reason`` starts ``weak match`` or ``unverified`` has a
     pixel that is reported but not used as the next stop's reference.
+    ``params``: window sizes and feature settings (:class:`ChainParams`, checked).
     """
+    params = (params or ChainParams()).check()
     if template_mode not in ("plane", "scale"):
         raise ValueError(f"template_mode must be 'plane' or 'scale', got {template_mode!r}")
     if handoff_at not in ("every", "last", "first"):
@@ -248,7 +240,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
 
     steps = []
     uv = np.asarray(start_uv, float)
-    ps = _stereo(dl, start, uv)
+    ps = _stereo(dl, start, uv, params)
     if ps is None or not ps.ok:
         reason = "no right eye" if ps is None else ps.reason
         raise InputError(start.product_id, "pixel", f"designation has no stereo: {reason}")
@@ -278,7 +270,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 steps.append(step(prod, "track", None, None, None, ok=False, reason="target behind the camera"))
                 continue
             scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, prev_range, 1.0 / prod.camera_model.hs, rng_new)
-            half = TEMPLATE_HALF_PX.get(c, 15)
+            half = params.template_half(c)
             kind = "handoff" if c != prev.camera else "track"
             tpl, tc, mode = None, None, "scale"
             radius_override, search_uv = None, None
@@ -288,7 +280,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             if template_mode == "plane" and (kind == "track" or prev.position != prod.position):
                 if normal_from is not prev:
                     X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
-                    (normal, ground), normal_from = _local_normal_site(dl, prev, X_prev, prev_range), prev
+                    (normal, ground), normal_from = local_normals_site(dl, prev, X_prev, prev_range), prev
                 # the surface plane at the target (or the rover's ground plane when dense stereo gave no normal)
                 # renders the template; the coarse step also tries the surrounding ground's plane
                 up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
@@ -296,7 +288,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 planes = [n_view]
                 if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > 5.0:
                     planes.append(ground)
-                tr, finfo = _feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats)
+                tr, finfo = _feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params)
                 extra.update(finfo)
                 if tr is not None:
                     mode = "plane, feature-guided"
@@ -304,11 +296,11 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     extra["coarse"] = "ncc context (features failed)"
                     # fallback: a large window of the previous view, warped through the local plane, found over
                     # the whole search region by NCC; then the target window near it
-                    big_half = CONTEXT_HALF_PX.get(c, 100)
+                    big_half = params.context_half(c)
                     tpl_big, tc_big = plane_warped_template(prev, prod, X_site, normal, pred, big_half)
                     tr_big = None
                     if tpl_big is not None:
-                        tr_big = track(tpl_big, prod.pixels_float(), pred, SEARCH_RADIUS_PX.get(c, 60.0),
+                        tr_big = track(tpl_big, prod.pixels_float(), pred, params.search_radius(c),
                                        template_center_uv=tc_big, min_score=0.3)
                     # the template shows the previous view of the plane around the target, built around the
                     # pose-estimate prediction (where the warp puts the target at the template's centre)
@@ -316,7 +308,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     mode = "plane"
                     if tr_big is not None and tr_big.ok and np.all(np.isfinite(tr_big.uv)):
                         search_uv = tr_big.uv  # searched for near the prediction corrected for the pose error
-                        radius_override = FINE_RADIUS_PX
+                        radius_override = params.fine_radius_px
                         mode = "plane, context-corrected"
             if tr is None:
                 if tpl is None:
@@ -325,7 +317,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     tpl = scale_window(win, scale)
                     tc = None
                 img = prod.pixels_float()
-                radius = radius_override or SEARCH_RADIUS_PX.get(c, 60.0)
+                radius = radius_override or params.search_radius(c)
                 search_uv = search_uv if radius_override else pred
                 tr = track(tpl, img, search_uv, radius, template_center_uv=tc, min_score=0.3)
                 # a pointed mast camera was aimed at the target by the rover: its image centre is a second guess
@@ -337,7 +329,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             if not tr.ok or not np.all(np.isfinite(tr.uv)):
                 steps.append(step(prod, kind, pred, None, None, tr.score, ok=False, reason=f"track: {tr.reason}"))
                 continue
-            ps = _stereo(dl, prod, tr.uv)
+            ps = _stereo(dl, prod, tr.uv, params)
             ok = ps is not None and ps.ok
             reasons = [] if ok else ["no right eye" if ps is None else f"stereo: {ps.reason}"]
             weak = False
@@ -372,7 +364,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             prev, prev_uv, cam = prod, tr.uv, c
         if "hazcam" in lefts and cam == "navcam" and prev.position == pos:
             if handoff_at != "last" or pos == haz_positions[-1]:
-                steps.append(_hazcam_handoff(dl, prev, prev_uv, lefts["hazcam"], handoff_method, step))
+                steps.append(_hazcam_handoff(dl, prev, prev_uv, lefts["hazcam"], handoff_method, step, params))
             if handoff_at == "first":
                 break
     handoffs = [s for s in steps if s.camera == "hazcam" and s.kind == "handoff"]
@@ -403,7 +395,7 @@ def _mark_after_unverified(steps: list) -> None:
 
 
 def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
-                   half: int, feats: dict):
+                   half: int, feats: dict, params: ChainParams):
     """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
 
     For each plane normal in ``view_normals`` (site frame, planes through
@@ -416,11 +408,11 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
     near the target are matched against those of the whole new image
     (area-downsampled by the same factor, so that both have the same blur) and
     a homography ``G`` (pose-estimate pixels of ``prod`` -> real pixels) is
-    fitted by RANSAC, with keypoints from a few reaches and models (``FEATURE_CANDIDATES``)
+    fitted by RANSAC, with keypoints from a few reaches and models (``params.feature_candidates``)
     around the target. For each ``G``, the template (half-size ``half``) is
     rendered through the target's plane ``n_site`` at the pixels ``G^-1``
     maps the new image's to, so that it carries the rotation of the pose
-    error too, and NCC-tracked within ``FINE_RADIUS_PX`` of the mapped
+    error too, and NCC-tracked within ``params.feature_fine_radius_px`` of the mapped
     prediction; the best NCC wins. ``feats`` caches the new images' keypoints
     by ``(product id, downsampling)``. ``info`` records the path, the
     winner's inlier counts and the coarse position.
@@ -436,13 +428,13 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
 
     def confirmed(cd):
         loc, tr = cd[0], cd[1]
-        return tr.ok and np.all(np.isfinite(tr.uv)) and np.linalg.norm(tr.uv - loc.uv) <= FEATURE_CONFIRM_PX
+        return tr.ok and np.all(np.isfinite(tr.uv)) and np.linalg.norm(tr.uv - loc.uv) <= params.feature_confirm_px
 
-    for factor in FEATURE_STEP_FACTORS:
+    for factor in params.feature_step_factors:
         if any(confirmed(cd) for cd in cands):
             break  # a coarser rendering only when nothing was confirmed at the finer one
         step_px = float(np.clip(scale * factor, 1.0, 4.0 * factor))
-        vhalf = int(round(VIEW_REACH_PX / step_px))
+        vhalf = int(round(params.view_reach_px / step_px))
         key = (prod.product_id, round(step_px, 2))
         if key not in feats:
             feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
@@ -455,10 +447,10 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
                 reasons.append(f"plane {k}: the previous view does not cover the prediction")
                 continue
             ref = detect_features(view)
-            for reach, model, min_inliers in FEATURE_CANDIDATES:
+            for reach, model, min_inliers in params.feature_candidates:
                 loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model=model,
                                          ransac_threshold_px=2.0 * step_px, min_inliers=min_inliers,
-                                         local_radius_px=FEATURE_LOCAL_PX / step_px)
+                                         local_radius_px=params.feature_local_px / step_px)
                 if not loc.ok:
                     reasons.append(f"x{factor:g} plane {k} reach {reach:g}: {loc.reason}")
                     continue
@@ -478,7 +470,7 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
                 if np.isfinite(tpl).mean() < 0.9:
                     continue
                 tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
-                tr = track(tpl, img, loc.uv, FEATURE_FINE_RADIUS_PX, template_center_uv=loc.uv - (cc - half),
+                tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
                            min_score=0.3)
                 cands.append((loc, tr, k, reach, factor))
     if not cands:
@@ -488,12 +480,12 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
     # Several candidates (planes, reaches, resolutions) measure the same position. A candidate is confirmed when
     # NCC refines it to a peak near its feature match. The answer pools the candidates instead of taking the
     # single best, so that which candidate scores a hair higher does not move the answer by their spread:
-    # confirmed -> the score-weighted mean of the confirmed NCC positions within FEATURE_AGREE_PX of the best one;
+    # confirmed -> the score-weighted mean of the confirmed NCC positions within params.feature_agree_px of the best one;
     # none confirmed -> the inlier-weighted geometric median of the feature matches (reported as such).
     good = [cd for cd in cands if confirmed(cd)]
     if good:
         best = max(good, key=lambda cd: (cd[1].score, -cd[2], cd[3], cd[4]))
-        near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= FEATURE_AGREE_PX]
+        near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= params.feature_agree_px]
         w = np.array([max(cd[1].score, 1e-3) for cd in near])
         uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
         loc, tr, k, reach, factor = best
@@ -541,7 +533,7 @@ def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-
     return x
 
 
-def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):
+def _hazcam_handoff(dl, nav, nav_uv, haz, method, step, params: ChainParams):
     from ..core.handoff import run_method
     from .handoff import build_setup
 
@@ -549,6 +541,6 @@ def _hazcam_handoff(dl, nav, nav_uv, haz, method, step):
     case = setup.cases["near"]
     res = run_method(case, method, nav_uv)
     uv = res.uv if res.uv is not None and np.all(np.isfinite(res.uv)) else None
-    ps = _stereo(dl, haz, uv) if uv is not None else None
+    ps = _stereo(dl, haz, uv, params) if uv is not None else None
     return step(haz, "handoff", None, uv, ps, res.diagnostics.get("ncc_peak"), ok=uv is not None,
                 reason=res.reason, extra={"method": method, "navcam": "near", "reference": nav.product_id})

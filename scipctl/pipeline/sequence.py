@@ -198,7 +198,7 @@ def _exposures(dl, position) -> dict:
 
 def build_commands(pred: Prediction, record: dict, handoff: dict, exposures: dict, timing: Optional[Timing] = None) -> list:
     """The command list for the planned approach (see the module docstring; stems are notional)."""
-    from .chain import BAND_PX
+    from .chain import ChainParams
 
     tm = timing or Timing()
     plan = pred.plan
@@ -266,7 +266,7 @@ def build_commands(pred: Prediction, record: dict, handoff: dict, exposures: dic
                 cmds.append(Command("TRK_TRACK", [("camera", ("enum", cam.upper())), ("template_half_px", sh.template_half_px),
                                                   ("search_radius_px", sh.search_radius_px), ("min_ncc", 0.3)],
                                     tm.track_s, "window scaled by the range ratio", st.index))
-            cmds.append(Command("TRK_STEREO_UPDATE", [("camera", ("enum", cam.upper())), ("band_px", BAND_PX.get(cam, 4.0))],
+            cmds.append(Command("TRK_STEREO_UPDATE", [("camera", ("enum", cam.upper())), ("band_px", ChainParams().band(cam))],
                                 tm.stereo_s, "re-range the tracked target", st.index))
     fin = plan.final
     cmds.append(Command("ARM_PLACE_AT_TARGET", [("instrument", ("enum", "CONTACT")), ("approach", ("enum", "SURFACE_NORMAL")),
@@ -277,9 +277,9 @@ def build_commands(pred: Prediction, record: dict, handoff: dict, exposures: dic
 
 
 def _half(camera):
-    from .chain import TEMPLATE_HALF_PX
+    from .chain import ChainParams
 
-    return TEMPLATE_HALF_PX.get(camera, 15)
+    return ChainParams().template_half(camera)
 
 
 def _enum(s: str) -> str:

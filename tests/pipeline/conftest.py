@@ -4,7 +4,7 @@ import pytest
 
 from scipctl.pipeline import predict as P
 from tests.pipeline import scene as S
-from tests.pipeline.test_predict import flat, heightfield_source
+from tests.pipeline.predict.helpers import flat, heightfield_source
 
 
 @pytest.fixture(scope="module")

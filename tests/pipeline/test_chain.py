@@ -8,7 +8,8 @@ import pytest
 from scipctl.core.tracking import track
 from scipctl.core.windows import extract_window, scale_window, window_scale_for_handoff
 from scipctl.io.downlink import read_downlink
-from scipctl.pipeline.chain import FEATURE_AGREE_PX, FEATURE_CONFIRM_PX, plane_warped_template, run_chain
+from scipctl.pipeline.chain import ChainParams, run_chain
+from scipctl.pipeline.plane_warp import plane_warped_template
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = [ROOT / "sample_sols/mcap/paper-s1-straight.mcap", ROOT / "sample_sols/mcap/paper-s1-arc.mcap"]
@@ -146,11 +147,11 @@ def test_chain_lands_on_the_marks_at_every_stop(dl, chains):
             assert s.extra["feature_status"] in ("confirmed", "unconfirmed")
             assert s.extra["feature_inliers"] >= 6
         # a confirmed track: NCC refined the feature match within the confirmation radius, and the answer pools the
-        # confirmed candidates within FEATURE_AGREE_PX of the best one
+        # confirmed candidates within ChainParams.feature_agree_px of the best one
         for s in steps[1:5]:
             if s.extra.get("feature_status") == "confirmed":
-                assert np.linalg.norm(np.subtract(s.extra["ncc_uv"], s.extra["coarse_uv"])) <= FEATURE_CONFIRM_PX
-                assert np.linalg.norm(np.subtract(s.tracked_uv, s.extra["ncc_uv"])) <= FEATURE_AGREE_PX
+                assert np.linalg.norm(np.subtract(s.extra["ncc_uv"], s.extra["coarse_uv"])) <= ChainParams().feature_confirm_px
+                assert np.linalg.norm(np.subtract(s.tracked_uv, s.extra["ncc_uv"])) <= ChainParams().feature_agree_px
                 assert s.extra["feature_pooled"] >= 1
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from scipctl.pipeline import predict as P
 from scipctl.pipeline import sequence as Q
-from tests.pipeline.test_predict import box_fn, flat, heightfield_source, start_pose
+from tests.pipeline.predict.helpers import box_fn, flat, heightfield_source, start_pose
 
 TARGET = np.array([9.0, 0.0, 0.0])
 RECORD = {"id": "t1", "ok": True, "product_id": "pancam_left_1_0", "camera": "pancam", "pixel_uv": [127.5, 127.5],

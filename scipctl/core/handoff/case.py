@@ -61,7 +61,7 @@ class HandoffCase:
     # ----------------------------------------------------------- navcam side
     def point_stereo(self, nav_uv) -> object:
         """Navcam point stereo at the navcam-left pixel ``nav_uv`` (2,) (cached per pixel):
-        a :func:`~scipctl.core.stereo.point_stereo` result, point in the navcam rover frame."""
+        a :func:`~scipctl.core.point_stereo.point_stereo` result, point in the navcam rover frame."""
         key = ("ps", tuple(np.round(np.asarray(nav_uv, float), 6)))
         if key not in self._cache:
             from ..point_stereo import point_stereo

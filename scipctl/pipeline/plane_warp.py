@@ -1,0 +1,90 @@
+"""Rendering one image into another's view through a local surface plane (the chain's templates), and the
+local surface normals it needs (site frame; each image through its own pose estimate)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..model import Downlink, ImageProduct
+
+
+def local_normals_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, range_m: float):
+    """Surface normals (site frame) at ``X_rover`` from half-resolution dense stereo of ``prod``'s pair.
+
+    Returns ``(local, ground)``: the plane fitted within ``max(0.05, 0.025
+    range)`` m (the target's own surface, e.g. a rock face) and within
+    ``max(0.2, 0.1 range)`` m (mostly the surrounding ground); each ``(3,)`` or None.
+    """
+    from ..core.dense_stereo import dense_stereo
+    from .designate import surface_normal
+
+    right = dl.stereo_pair(prod)
+    if right is None:
+        return None, None
+    try:
+        ds = dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
+                          min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
+    except Exception:
+        return None, None
+    xyz = ds.xyz.reshape(-1, 3)
+    out = []
+    for radius_m in (max(0.05, 0.025 * range_m), max(0.2, 0.1 * range_m)):
+        n, npts = surface_normal(xyz, X_rover, radius_m=radius_m)
+        out.append(None if n is None else prod.pose.T_site_rover.rotate(n))
+    return tuple(out)
+
+
+def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
+    """``prev``'s image seen at ``prod``'s pixels ``uv`` (..., 2) through the plane (X_site, n_site), site frame.
+
+    Each pixel's ray (``prod``'s camera at its pose estimate) meets the plane
+    through ``X_site`` (3,) with normal ``n_site`` (3,); the point is projected
+    into ``prev`` (its pose estimate) and ``prev``'s image is sampled there
+    (bilinear). Returns float32 (...) with NaN where ``prev`` did not see it.
+    """
+    from ..core.expected import bilinear_sample
+
+    uv = np.asarray(uv, float)
+    shape = uv.shape[:-1]
+    o, d = prod.camera_model.unproject(uv.reshape(-1, 2))
+    T_new = prod.pose.T_site_rover
+    o_s, d_s = T_new.apply(o), T_new.rotate(d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
+    P_s = o_s + t[:, None] * d_s
+    P_s[~(t > 0)] = np.nan
+    P_prev = prev.pose.T_site_rover.inverse().apply(P_s)
+    uv_prev = prev.camera_model.project(P_prev)
+    return bilinear_sample(prev.pixels_float(), uv_prev).reshape(shape)
+
+
+def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,
+                      step_px: float = 1.0):
+    """``prod``'s view of the window around ``centre_uv`` rendered from ``prev``'s image through a plane.
+
+    See :func:`render_through_plane`. View pixel ``(i, j)`` is ``prod`` pixel
+    ``c + step_px * ((i, j) - half)`` with ``c`` = ``centre_uv`` rounded
+    (``step_px > 1``: a coarser rendering, e.g. at ``prev``'s own
+    resolution). Returns ``(view (2h+1, 2h+1) float32 with NaN where ``prev``
+    did not see the plane, centre_in_view_uv (2,))``: ``centre_uv`` in the
+    view's pixel coordinates.
+    """
+    c = np.round(np.asarray(centre_uv, float))
+    g = np.arange(-half, half + 1) * float(step_px)
+    us, vs = np.meshgrid(c[0] + g, c[1] + g)
+    vals = render_through_plane(prev, prod, X_site, n_site, np.stack([us, vs], -1))
+    return vals, (np.asarray(centre_uv, float) - c) / float(step_px) + half
+
+
+def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int):
+    """The window of ``prod`` around ``centre_uv`` as ``prev`` saw it, through the local plane (X_site, n_site).
+
+    Each template pixel's ray (new camera, new pose estimate) meets the plane;
+    the point is projected into the previous image and sampled. Returns
+    ``(template (2h+1, 2h+1) float32 or None, template_center_uv (2,))``.
+    """
+    vals, tc = plane_warped_view(prev, prod, X_site, n_site, centre_uv, half)
+    if np.isfinite(vals).mean() < 0.9:
+        return None, None
+    vals = np.where(np.isfinite(vals), vals, np.nanmean(vals)).astype(np.float32)
+    return vals, tc

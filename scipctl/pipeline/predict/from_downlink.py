@@ -1,0 +1,123 @@
+"""What a prediction reads from today's downlink: the designated target (from targets.json or its mark),
+the stereo terrain sources at the rover's position and the pose-error sigmas."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from ...core.kinematics import RoverPose
+from .params import UncertaintyParams
+from .terrain import TerrainSource
+
+
+STEREO_CAMERAS = ("pancam", "navcam", "hazcam")
+_PRIORITY = {"pancam": 0, "navcam": 1, "hazcam": 2}
+
+
+def resolve_target(dl, target_id: str, targets_doc: Optional[dict], with_normal: bool = True) -> tuple:
+    """The designation record for ``target_id``: from ``targets.json`` (``targets_doc``) if designated there,
+    else designated on the fly from its mark in the first left pancam image (or navcam if there is no pancam).
+
+    Returns ``(record, designated_now: bool)``. Raises ``InputError`` when the id is neither designated nor
+    marked, or the mark is in no usable image.
+    """
+    from ...model import InputError
+
+    for rec in (targets_doc or {}).get("targets", []) or []:
+        if isinstance(rec, dict) and rec.get("id") == target_id:
+            return rec, False
+    known = sorted({r.get("id") for r in (targets_doc or {}).get("targets", []) or [] if isinstance(r, dict)} |
+                   {t.id for t in dl.targets})
+    marks = next((t for t in dl.targets if t.id == target_id), None)
+    if marks is None:
+        raise InputError(target_id, "--target", "not designated (targets.json) and not a marked target in the downlink"
+                         + (f"; known: {', '.join(str(k) for k in known)}" if known else ""))
+    from ..designate import designate
+
+    for cam in ("pancam", "navcam"):
+        lefts = sorted((im for im in dl.images if im.camera == cam and im.eye == "left"), key=lambda i: i.time_s)
+        for im in lefts:
+            mk = marks.mark_in(im.product_id)
+            if mk is not None and dl.stereo_pair(im) is not None:
+                rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal)
+                rec["designated_from"] = "mark"
+                return rec, True
+        if lefts:
+            break
+    raise InputError(target_id, "marks", "the target is marked in no left pancam/navcam image with a stereo pair")
+
+
+def terrain_sources(dl, position, cameras=STEREO_CAMERAS, downsample: int = 2, target_range_m: Optional[float] = None):
+    """Dense stereo of every left/right pair of ``cameras`` at ``position`` -> list of :class:`TerrainSource` (site frame)."""
+    from ...core.dense_stereo import dense_stereo
+
+    out = []
+    for im in sorted(dl.images_at(position, eye="left"), key=lambda i: (_PRIORITY.get(i.camera, 9), i.time_s)):
+        if im.camera not in cameras:
+            continue
+        right = dl.stereo_pair(im)
+        if right is None or (right.width, right.height) != (im.width, im.height):
+            continue
+        if im.camera == "pancam":
+            r = target_range_m or 10.0
+            lo, hi = max(1.0, 0.3 * r), 2.5 * r + 5.0
+        elif im.camera == "hazcam":
+            lo, hi = 0.3, 6.0
+        else:
+            lo, hi = 0.8, 40.0
+        L = im.pixels_float()
+        ds = dense_stereo(L, right.pixels_float(), im.camera_model, right.camera_model,
+                          min_range_m=lo, max_range_m=hi, downsample=downsample)
+        T = im.pose.T_site_rover
+        xyz = ds.xyz
+        flat = xyz.reshape(-1, 3)
+        ok = np.all(np.isfinite(flat), axis=1)
+        xs = np.full_like(flat, np.nan)
+        xs[ok] = T.apply(flat[ok])
+        out.append(TerrainSource(im.product_id, im.camera, xs.reshape(xyz.shape), L, im.camera_model.transformed(T),
+                                 T.apply(ds.rectified.left_model.C), _PRIORITY.get(im.camera, 9)))
+    return out
+
+
+def sigmas_for(product, params: UncertaintyParams) -> tuple:
+    """(sigma_position_m, sigma_yaw_rad, source text): override, else the downlink pose's, else the defaults."""
+    sp, sy = params.sigma_position_m, params.sigma_yaw_rad
+    src = []
+    if sp is None:
+        sp = product.pose.sigma_position_m
+        src.append("position: downlink" if sp is not None else "position: default")
+        if sp is None:
+            sp = params.default_sigma_position_m
+    else:
+        src.append("position: parameter")
+    if sy is None:
+        sy = product.pose.sigma_yaw_rad
+        src.append("yaw: downlink" if sy is not None else "yaw: default")
+        if sy is None:
+            sy = params.default_sigma_yaw_rad
+    else:
+        src.append("yaw: parameter")
+    return float(sp), float(sy), ", ".join(src)
+
+
+@dataclass
+class TargetContext:
+    """What a prediction needs from the downlink for one target."""
+
+    record: dict
+    designated_now: bool
+    product: object  # ImageProduct of the designation
+    start: RoverPose
+    target_site_m: np.ndarray
+
+
+def target_context(dl, record: dict, designated_now: bool = False) -> TargetContext:
+    from ...model import InputError
+
+    if not record.get("ok", True) or record.get("xyz_site_m") is None:
+        raise InputError(str(record.get("id")), "designation", f"the target has no 3-D position ({record.get('reason') or 'no stereo'})")
+    prod = dl.product(record["product_id"])
+    return TargetContext(record, designated_now, prod, prod.pose, np.asarray(record["xyz_site_m"], float))

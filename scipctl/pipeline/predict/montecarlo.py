@@ -1,0 +1,182 @@
+"""Monte Carlo over the pose-estimate error of a planned approach: P(in field of view), P(inside the
+tracker's search region), P(not occluded) per view, P(in the arm workspace) at the final pose."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from ...core.kinematics import RoverConfig
+from ...core.transforms import RigidTransform
+from .params import FOV_MARGIN_PX, UncertaintyParams
+from .planning import ApproachPlan
+from .terrain import Terrain
+
+
+@dataclass
+class McView:
+    stop: int
+    camera: str
+    p_in_fov: float
+    p_in_search: float
+    p_visible: float  # not occluded
+    p_ok: float  # all three
+    p_chain: float  # this and every earlier view ok
+    offset_px_rms: float  # rms distance predicted -> true pixel
+
+    def to_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class McResult:
+    n_samples: int
+    sigma_position_m: float
+    sigma_yaw_rad: float
+    views: list  # McView
+    p_arm_workspace: float
+    p_success_geometry: float  # every view ok and the target in the arm workspace
+    samples_ok: np.ndarray = field(repr=False, default=None)  # (n,) bool
+    errors: dict = field(repr=False, default_factory=dict)  # per stop: (dxy (n, 2), dyaw (n,))
+
+    def to_dict(self) -> dict:
+        return {"n_samples": self.n_samples, "sigma_position_m": self.sigma_position_m,
+                "sigma_yaw_rad": self.sigma_yaw_rad, "views": [v.to_dict() for v in self.views],
+                "p_arm_workspace": self.p_arm_workspace, "p_success_geometry": self.p_success_geometry}
+
+
+def _stereo_sigma_range(rover_config: RoverConfig, camera: str, range_m: float, sigma_d_px: float) -> float:
+    cam = rover_config.cameras[camera]
+    b = float(np.linalg.norm(cam.right.model.C - cam.left.model.C))
+    f = cam.left.model.hs
+    if b <= 0:
+        return 0.0
+    return float(range_m * range_m * sigma_d_px / (f * b))
+
+
+def sample_pose_errors(plan: ApproachPlan, up: UncertaintyParams, sigma_position_m: float, sigma_yaw_rad: float,
+                       rng: np.random.Generator, n: int) -> dict:
+    """Per stop index: ``(dxy (n, 2), dyaw (n,))`` rover-frame error of the true pose w.r.t. the believed pose.
+
+    A random walk: each leg adds ``N(0, sigma_leg^2)`` per axis with
+    ``sigma_leg^2 = sigma_position_m^2 + (drive_error_frac * leg)^2`` and a yaw
+    step with ``sigma^2 = sigma_yaw_rad^2 + (yaw_error_rad_per_m * leg)^2``.
+    Stop 0 (today) has no error: the plan is made in today's estimated frame.
+    """
+    out = {0: (np.zeros((n, 2)), np.zeros(n))}
+    dxy = np.zeros((n, 2))
+    dyaw = np.zeros(n)
+    for st in plan.stops[1:]:
+        sp = math.hypot(sigma_position_m, up.drive_error_frac * st.leg_m)
+        sy = math.hypot(sigma_yaw_rad, up.yaw_error_rad_per_m * st.leg_m)
+        # the increment is expressed in the rover frame of the previous stop: rotate by the accumulated yaw
+        inc = rng.standard_normal((n, 2)) * sp
+        c, s = np.cos(dyaw), np.sin(dyaw)
+        dxy = dxy + np.stack([c * inc[:, 0] - s * inc[:, 1], s * inc[:, 0] + c * inc[:, 1]], axis=1)
+        dyaw = dyaw + rng.standard_normal(n) * sy
+        out[st.index] = (dxy.copy(), dyaw.copy())
+    return out
+
+
+def _true_pose_arrays(T_believed: RigidTransform, dxy, dyaw):
+    """R (n, 3, 3), t (n, 3) of ``T_believed @ Exp(dxy, dyaw)``."""
+    n = len(dyaw)
+    c, s = np.cos(dyaw), np.sin(dyaw)
+    Rz = np.zeros((n, 3, 3))
+    Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
+    R = T_believed.R[None] @ Rz
+    t = T_believed.t[None] + np.c_[dxy, np.zeros(n)] @ T_believed.R.T
+    return R, t
+
+
+def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: RoverConfig, target_true_site,
+                up: UncertaintyParams, sigma_position_m: float, sigma_yaw_rad: float,
+                designation_range_sigma_m: float = 0.0, occlusion_tol_m: float = 0.04) -> McResult:
+    """Monte Carlo over the pose-estimate error (see :func:`sample_pose_errors`).
+
+    Per sample and stop: the rover believes it is at the planned pose; it
+    points each camera at its current target estimate (the previous stop's
+    stereo re-estimate, carried through the believed poses); the true target
+    ``target_true_site`` (3,) lands at ``uv_true``; the estimate at
+    ``uv_pred``. Pointing is the nominal one plus the re-pointing shift
+    ``uv_pred - uv_nominal`` (first order in the small pointing change).
+    A view is ok when the re-pointed true pixel is inside the image (margin
+    ``FOV_MARGIN_PX``), within the tracker's search radius of ``uv_pred``
+    (square region), and the line of sight is not occluded by the terrain.
+    At the final pose the rover drives so that its estimate sits at the
+    workspace centre; the true target must be inside the arm workspace.
+    """
+    n = int(up.n_samples)
+    rng = np.random.default_rng(up.seed)
+    X_T = np.asarray(target_true_site, float).reshape(3)
+    errors = sample_pose_errors(plan, up, sigma_position_m, sigma_yaw_rad, rng, n)
+    # designation error along today's line of sight
+    start = plan.start.T_site_rover
+    C0 = start.apply(rover_config.camera_model(plan.designation_camera, "left").C) if plan.designation_camera in rover_config.cameras else start.t
+    los = (X_T - C0) / np.linalg.norm(X_T - C0)
+    X_est = X_T[None] + rng.standard_normal(n)[:, None] * designation_range_sigma_m * los[None]  # believed site frame
+    ok_all = np.ones(n, bool)
+    views = []
+    for st in plan.stops[1:]:
+        dxy, dyaw = errors[st.index]
+        R_true, t_true = _true_pose_arrays(st.T_site_rover, dxy, dyaw)
+        Tinv_b = st.T_site_rover.inverse()
+        X_true_rover = np.einsum("nji,nj->ni", R_true, X_T[None] - t_true)  # R^T (X - t)
+        last_est = None
+        for sh in st.cameras:
+            if sh.uv is None:
+                views.append(McView(st.index, sh.camera, 0.0, 0.0, 0.0, 0.0, 0.0, float("nan")))
+                ok_all[:] = False
+                continue
+            spec = rover_config.spec(sh.camera, "left")
+            m = rover_config.camera_model(sh.camera, "left", sh.pan_rad or 0.0, sh.tilt_rad or 0.0)
+            uv_pred = m.project(Tinv_b.apply(X_est))
+            uv_true = m.project(X_true_rover)
+            uv_nom = np.asarray(sh.uv, float)
+            shift = uv_pred - uv_nom
+            rep = uv_true - shift
+            margin = FOV_MARGIN_PX.get(sh.camera, 20)
+            fin = np.all(np.isfinite(rep), axis=1) & np.all(np.isfinite(uv_pred), axis=1)
+            with np.errstate(invalid="ignore"):
+                in_fov = fin & (rep[:, 0] >= margin) & (rep[:, 0] <= spec.width - 1 - margin) & \
+                    (rep[:, 1] >= margin) & (rep[:, 1] <= spec.height - 1 - margin)
+                off = np.abs(uv_true - uv_pred).max(axis=1)
+                in_search = fin & (off <= sh.search_radius_px)
+            C_true = np.einsum("nij,j->ni", R_true, m.C) + t_true
+            if terrain is not None:
+                vis = ~terrain.occluded(C_true, np.broadcast_to(X_T, C_true.shape), occlusion_tol_m)
+            else:
+                vis = np.ones(n, bool)
+            ok = in_fov & in_search & vis
+            ok_all &= ok
+            with np.errstate(invalid="ignore"):
+                rms = float(np.sqrt(np.nanmean(np.sum((uv_true - uv_pred) ** 2, axis=1))))
+            views.append(McView(st.index, sh.camera, float(in_fov.mean()), float(in_search.mean()), float(vis.mean()),
+                                float(ok.mean()), float(ok_all.mean()), rms))
+            # stereo re-estimate from this camera: truth + range noise along its line of sight, into the believed frame
+            sig_r = _stereo_sigma_range(rover_config, sh.camera, float(sh.range_m or 0.0), up.disparity_sigma_px)
+            los_t = X_T[None] - C_true
+            los_t /= np.linalg.norm(los_t, axis=1, keepdims=True)
+            X_meas_true = X_T[None] + rng.standard_normal(n)[:, None] * sig_r * los_t
+            X_meas_rover = np.einsum("nji,nj->ni", R_true, X_meas_true - t_true)
+            last_est = st.T_site_rover.apply(X_meas_rover)
+        if last_est is not None:
+            X_est = last_est
+    # final pose: the rover puts its estimate at the workspace centre; truth relative to the true final pose
+    fin_st = plan.stops[-1]
+    dxy, dyaw = errors[fin_st.index]
+    R_true, t_true = _true_pose_arrays(fin_st.T_site_rover, dxy, dyaw)
+    # the believed final pose is shifted so that the estimate lands where the truth was planned
+    est_rover = fin_st.T_site_rover.inverse().apply(X_est)
+    planned_rover = fin_st.T_site_rover.inverse().apply(X_T)
+    corr = est_rover - planned_rover[None]  # the rover moves by this (its own frame) to centre the estimate
+    t_true = t_true + corr @ fin_st.T_site_rover.R.T
+    X_final = np.einsum("nji,nj->ni", R_true, X_T[None] - t_true)
+    in_arm = plan.params.arm.contains(X_final[:, :2])
+    p_arm = float(in_arm.mean())
+    ok_all &= in_arm
+    return McResult(n, float(sigma_position_m), float(sigma_yaw_rad), views, p_arm, float(ok_all.mean()),
+                    ok_all, errors)

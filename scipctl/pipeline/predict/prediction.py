@@ -1,0 +1,161 @@
+"""The whole prediction (orchestration): views, Monte Carlo, chain on rendered views, risks and the
+confidence for a planned approach (:func:`run_prediction`), and from a downlink (:func:`predict_target`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from ...core.camera import CameraModel
+from ...core.kinematics import RoverConfig
+from .chain_sim import ChainResult, simulate_chain
+from .from_downlink import sigmas_for, target_context, terrain_sources
+from .montecarlo import McResult, monte_carlo
+from .params import SUCCESS_M, PredictParams
+from .planning import ApproachPlan, plan_approach
+from .risks import Risk, assess_risks, foreshortening_changes
+from .terrain import Terrain
+from .views import check_views
+
+
+@dataclass
+class Prediction:
+    target_id: str
+    plan: ApproachPlan
+    mc: Optional[McResult]
+    chain: Optional[ChainResult]
+    risks: list
+    views: dict  # (stop, camera) -> RenderedView (reduced size)
+    surface_point_site: np.ndarray
+    confidence: float  # P(success): geometry MC x tracking on expected views (given visible)
+    sigma_source: str
+    notes: list = field(default_factory=list)
+    seconds: dict = field(default_factory=dict)
+    accuracy: dict = field(default_factory=dict)  # predicted final placement error (m): nominal, mean, max over kept samples
+    terrain: Optional[Terrain] = field(default=None, repr=False)  # today's terrain the views were rendered from
+
+    def to_dict(self) -> dict:
+        return {
+            "target": self.target_id, "plan": self.plan.to_dict(), "accuracy": self.accuracy,
+            "monte_carlo": None if self.mc is None else self.mc.to_dict(),
+            "chain": None if self.chain is None else self.chain.to_dict(),
+            "risks": [r.to_dict() for r in self.risks], "confidence": self.confidence,
+            "surface_point_site_m": self.surface_point_site.tolist(), "sigma_source": self.sigma_source,
+            "notes": self.notes, "seconds": self.seconds,
+        }
+
+
+def confidence_of(mc: Optional[McResult], chain: Optional[ChainResult]) -> float:
+    """Predicted P(success) = P(geometry ok: every view in field, in search, visible; arm reaches) from the Monte
+    Carlo, times the fraction of the rendered chain samples that were geometrically ok and tracked the target
+    to the end within tolerance (the nominal chain when no sample was geometrically ok)."""
+    p = 1.0 if mc is None else mc.p_success_geometry
+    if chain is None:
+        return float(p)
+    runs = [s for s in chain.samples if s.sample >= 0]
+    if mc is not None and mc.samples_ok is not None:
+        runs = [s for s in runs if mc.samples_ok[s.sample]]
+    if not runs:
+        runs = [s for s in chain.samples if s.sample < 0]
+    frac = float(np.mean([s.ok for s in runs])) if runs else 1.0
+    return float(p * frac)
+
+
+@dataclass(frozen=True)
+class Designation:
+    """Today's designation of the target, as the prediction uses it."""
+
+    image: np.ndarray  # (H, W) float32: the left image the target was designated in
+    model_site: CameraModel  # that image's camera model, site frame
+    uv: np.ndarray  # (2,) the designated pixel
+    target_site_m: np.ndarray  # (3,) the designated 3-D target, site frame
+    range_sigma_m: float = 0.0  # 1-sigma error of the designation's range (along its line of sight)
+
+
+@dataclass(frozen=True)
+class PoseSigmas:
+    """The pose-estimate error of the approach's first leg (see :func:`sigmas_for`) and where it came from."""
+
+    position_m: float
+    yaw_rad: float
+    source: str  # e.g. "position: downlink, yaw: default"
+
+
+def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig,
+                   designation: Designation, sigmas: PoseSigmas, params: Optional[PredictParams] = None) -> Prediction:
+    """Views, Monte Carlo, chain simulation and risks for a planned approach (pure: arrays in, results out).
+
+    ``params`` (default :class:`PredictParams`) is checked first.
+    """
+    import time
+
+    params = (params or PredictParams()).check()
+    notes, secs = [], {}
+    X_T = np.asarray(designation.target_site_m, float)
+    # the target's point on the terrain surface: today's designation ray cast into the mesh
+    o, d = designation.model_site.unproject(np.asarray(designation.uv, float)[None])
+    Xs = terrain.surface_point(o[0], d[0])
+    if Xs is None or np.linalg.norm(Xs - X_T) > max(0.1, 0.05 * np.linalg.norm(X_T - o[0])):
+        notes.append("the designation ray misses today's stereo surface near the target; using the designated point")
+        Xs = X_T
+    t0 = time.perf_counter()
+    views = check_views(plan, terrain, rover_config, Xs, params)
+    secs["views"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigmas.position_m, sigmas.yaw_rad,
+                     designation.range_sigma_m, params.occlusion_tol_m)
+    secs["monte_carlo"] = time.perf_counter() - t0
+    chain = None
+    if params.run_chain:
+        t0 = time.perf_counter()
+        chain = simulate_chain(plan, terrain, rover_config, designation.image, designation.model_site, designation.uv,
+                               Xs, mc, params)
+        secs["chain"] = time.perf_counter() - t0
+    risks = assess_risks(plan, mc, chain, params)
+    for (si, cam), ratio in sorted(foreshortening_changes(plan).items()):
+        if not (1.0 / params.max_foreshortening_change <= ratio <= params.max_foreshortening_change):
+            msg = f"too oblique a change of view: the target's foreshortening changes x{ratio:.2f} from the previous image"
+            r = next((r for r in risks if r.stop == si and r.camera == cam), None)
+            if r is None:
+                risks.append(Risk(si, cam, "view", None, [msg]))
+            else:
+                r.reasons.append(msg)
+    risks.sort(key=lambda r: (r.stop, r.camera))
+    conf = confidence_of(mc, chain)
+    acc = {}
+    if chain is not None:
+        nom = [s for s in chain.samples if s.sample < 0]
+        kept = [s.final_error_m for s in chain.samples if s.sample >= 0 and s.ok and s.final_error_m is not None]
+        acc = {"nominal_final_error_m": nom[0].final_error_m if nom else None,
+               "mean_final_error_m": float(np.mean(kept)) if kept else None,
+               "max_final_error_m": float(np.max(kept)) if kept else None, "samples_kept": len(kept),
+               "goal_m": SUCCESS_M["hazcam"]}
+    return Prediction(target_id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigmas.source, notes,
+                      secs, acc, terrain)
+
+
+def predict_target(dl, record: dict, params: Optional[PredictParams] = None, designated_now: bool = False,
+                   terrain: Optional[Terrain] = None) -> Prediction:
+    """Plan and predict tomorrow's approach to a designated target from today's downlink (the designation's position)."""
+    import time
+
+    params = (params or PredictParams()).check()
+    ctx = target_context(dl, record, designated_now)
+    t0 = time.perf_counter()
+    if terrain is None:
+        srcs = terrain_sources(dl, ctx.product.position, downsample=params.stereo_downsample,
+                               target_range_m=record.get("range_m"))
+        terrain = Terrain(srcs, params.max_edge_ratio, params.min_edge_m, params.smooth_sigma_px)
+    t_terrain = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    plan = plan_approach(ctx.start, ctx.target_site_m, terrain, dl.rover_config, params.approach,
+                         designation_camera=ctx.product.camera, chain_params=params.chain)
+    t_plan = time.perf_counter() - t0
+    sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
+    designation = Designation(ctx.product.pixels_float(), ctx.product.camera_model.transformed(ctx.start.T_site_rover),
+                              record["pixel_uv"], ctx.target_site_m, float(record.get("range_sigma_m") or 0.0))
+    pred = run_prediction(record["id"], plan, terrain, dl.rover_config, designation, PoseSigmas(sp, sy, src), params)
+    pred.seconds.update({"terrain": t_terrain, "plan": t_plan})
+    return pred

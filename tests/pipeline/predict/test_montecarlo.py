@@ -1,0 +1,57 @@
+"""scipctl.pipeline.predict.montecarlo: the pose-error random walk and the view probabilities."""
+
+import numpy as np
+import pytest
+
+from scipctl.pipeline import predict as P
+from tests.pipeline.predict.helpers import box_fn, heightfield_source, start_pose
+
+
+def test_pose_errors_are_a_random_walk_with_the_stated_variance(rc):
+    plan = P.plan_approach(start_pose(), np.array([9.0, 0.0, 0.0]), None, rc)
+    up = P.UncertaintyParams(drive_error_frac=0.02, yaw_error_rad_per_m=0.0)
+    errs = P.sample_pose_errors(plan, up, 0.03, 0.0, np.random.default_rng(0), 40000)
+    var = 0.0
+    for st in plan.stops[1:]:
+        var += 0.03 ** 2 + (0.02 * st.leg_m) ** 2
+        dxy, dyaw = errs[st.index]
+        assert np.var(dxy[:, 0]) == pytest.approx(var, rel=0.05)
+        assert np.var(dxy[:, 1]) == pytest.approx(var, rel=0.05)
+        assert np.all(dyaw == 0.0)
+
+
+def test_monte_carlo_without_error_keeps_everything_in_view(rc, flat_terrain):
+    T = np.array([9.0, 0.5, 0.0])
+    plan = P.plan_approach(start_pose(), T, flat_terrain, rc)
+    up = P.UncertaintyParams(n_samples=200, drive_error_frac=0.0, yaw_error_rad_per_m=0.0, disparity_sigma_px=0.0)
+    mc = P.monte_carlo(plan, flat_terrain, rc, T, up, 0.0, 0.0)
+    for v in mc.views:
+        assert v.p_ok == 1.0 and v.offset_px_rms < 1e-6
+    assert mc.p_arm_workspace == 1.0 and mc.p_success_geometry == 1.0
+
+
+def test_monte_carlo_probability_falls_with_the_pose_error(rc, flat_terrain):
+    T = np.array([9.0, 0.5, 0.0])
+    plan = P.plan_approach(start_pose(), T, flat_terrain, rc)
+    up = P.UncertaintyParams(n_samples=400)
+    small = P.monte_carlo(plan, flat_terrain, rc, T, up, 0.02, 0.003)
+    big = P.monte_carlo(plan, flat_terrain, rc, T, up, 0.5, 0.15)
+    p_small = min(v.p_in_search for v in small.views)
+    p_big = min(v.p_in_search for v in big.views)
+    assert p_big < p_small and p_big < 0.9
+    assert big.p_success_geometry < small.p_success_geometry
+    assert max(v.offset_px_rms for v in big.views) > 3 * max(v.offset_px_rms for v in small.views)
+
+
+def test_occlusion_by_a_wall_is_seen_in_the_views_the_monte_carlo_and_the_risks(rc):
+    T = np.array([9.0, 0.0, 0.0])
+    wall = (8.4, -1.0, 8.6, 1.0, 2.5)  # 2.5 m high, in front of the target
+    ter = P.Terrain([heightfield_source(box_fn([wall]))], smooth_sigma_px=0)
+    assert ter.occluded(np.array([[5.0, 0.0, -1.5]]), T[None])[0]
+    assert not ter.occluded(np.array([[9.5, 0.0, -1.5]]), T[None])[0]
+    plan = P.plan_approach(start_pose(), T, None, rc)  # plan without the terrain (no detour)
+    mc = P.monte_carlo(plan, ter, rc, T, P.UncertaintyParams(n_samples=50), 0.02, 0.003)
+    far = [v for v in mc.views if plan.stops[v.stop].distance_m > 1.5]
+    assert far and all(v.p_visible == 0.0 for v in far)
+    risks = P.assess_risks(plan, mc, None, P.PredictParams())
+    assert any("occlusion" in " ".join(r.reasons) for r in risks)

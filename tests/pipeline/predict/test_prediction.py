@@ -1,0 +1,24 @@
+"""scipctl.pipeline.predict.prediction: run_prediction on its grouped inputs gives predict_target's answer."""
+
+import numpy as np
+
+from scipctl.pipeline import predict as P
+from tests.pipeline import scene as S
+
+
+def test_run_prediction_on_a_designation_and_sigmas_is_predict_target(slab_case):
+    _, dl, ter = slab_case
+    rec = S.designation_record(dl, "t_slab")
+    params = P.PredictParams(run_chain=False, uncertainty=P.UncertaintyParams(n_samples=60))
+    via_target = P.predict_target(dl, rec, params, terrain=ter)
+    ctx = P.target_context(dl, rec)
+    plan = P.plan_approach(ctx.start, ctx.target_site_m, ter, dl.rover_config, params.approach,
+                           designation_camera=ctx.product.camera)
+    des = P.Designation(ctx.product.pixels_float(), ctx.product.camera_model.transformed(ctx.start.T_site_rover),
+                        np.asarray(rec["pixel_uv"], float), ctx.target_site_m, float(rec.get("range_sigma_m") or 0.0))
+    sig = P.PoseSigmas(*P.sigmas_for(ctx.product, params.uncertainty))
+    direct = P.run_prediction(rec["id"], plan, ter, dl.rover_config, des, sig, params)
+    a, b = via_target.to_dict(), direct.to_dict()
+    a.pop("seconds"), b.pop("seconds")
+    assert a == b
+    assert direct.sigma_source == sig.source and direct.mc.sigma_position_m == sig.position_m

@@ -1,0 +1,111 @@
+"""scipctl.pipeline.predict.terrain (and geometry): meshing, smoothing, rendering, casting, ground and rocks, on exact truth."""
+
+import math
+
+import numpy as np
+
+from scipctl.core.camera import cahv_from_intrinsics
+from scipctl.core.transforms import RigidTransform
+from scipctl.pipeline import predict as P
+from tests.pipeline import scene as S
+from tests.pipeline.predict.helpers import box_fn, heightfield_source
+
+
+def _pinhole_grid(h, w, ranges):
+    m = cahv_from_intrinsics(100.0, 100.0, (w - 1) / 2, (h - 1) / 2, RigidTransform.identity())
+    us, vs = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
+    o, d = m.unproject(np.stack([us, vs], -1).reshape(-1, 2))
+    return (o + ranges.reshape(-1, 1) * d).reshape(h, w, 3)
+
+
+def test_grid_mesh_keeps_a_surface_and_drops_a_depth_step():
+    h, w = 12, 16
+    smooth = _pinhole_grid(h, w, np.full((h, w), 5.0))
+    v, t, used = P.grid_mesh(smooth, np.zeros(3))
+    assert len(t) == 2 * (h - 1) * (w - 1) and len(v) == h * w
+    step = np.full((h, w), 5.0)
+    step[:, w // 2:] = 8.0  # a depth discontinuity between columns w/2 - 1 and w/2
+    _, t2, _ = P.grid_mesh(_pinhole_grid(h, w, step), np.zeros(3))
+    assert len(t2) == 2 * (h - 1) * (w - 1) - 2 * (h - 1)
+    holes = _pinhole_grid(h, w, np.full((h, w), 5.0))
+    holes[3, 4] = np.nan  # one invalid vertex removes the 6 triangles that use it
+    _, t3, _ = P.grid_mesh(holes, np.zeros(3))
+    assert len(t3) == 2 * (h - 1) * (w - 1) - 6
+
+
+def test_smooth_grid_reduces_range_noise_and_keeps_steps():
+    rng = np.random.default_rng(1)
+    h, w = 40, 40
+    r = np.full((h, w), 5.0)
+    r[:, 20:] = 8.0
+    noisy = r + rng.normal(0, 0.02, r.shape)
+    g = _pinhole_grid(h, w, noisy)
+    sm = P.smooth_grid(g, np.zeros(3), sigma_px=1.5, max_rel=0.03)
+    rs = np.linalg.norm(sm, axis=2)
+    inner = np.s_[5:-5, 5:15]
+    assert np.std(rs[inner] - 5.0) < 0.5 * np.std(noisy[inner] - 5.0)
+    assert np.all(np.abs(rs - r) < 0.1)  # no point is pulled across the 3 m step
+    # points only move along their own rays
+    d0 = g / np.linalg.norm(g, axis=2, keepdims=True)
+    d1 = sm / np.linalg.norm(sm, axis=2, keepdims=True)
+    assert np.max(np.abs(d0 - d1)) < 1e-12
+
+
+def test_render_through_the_source_camera_gives_the_source_image_back():
+    world, dl = S.cached("rock")
+    src = [s for s in S.oracle_sources(world, dl, cameras=("pancam",), step=1)]
+    ter = P.Terrain(src, smooth_sigma_px=0)
+    s = ter.sources[0]
+    view = ter.render(s.left_model_site, S.SIZE, S.SIZE)
+    ok = np.isfinite(view.image)
+    assert ok.mean() > 0.8
+    assert np.max(np.abs(view.image[ok] - s.left_img[ok])) < 1e-3
+    # and depth equals the distance to the true surface along each ray
+    us, vs = np.meshgrid(np.arange(S.SIZE, dtype=float), np.arange(S.SIZE, dtype=float))
+    o, d = s.left_model_site.unproject(np.stack([us, vs], -1).reshape(-1, 2))
+    t = world.cast(o, d).reshape(S.SIZE, S.SIZE)
+    good = ok & np.isfinite(t) & (t < 30)
+    assert np.median(np.abs(view.depth_m[good] - t[good])) < 0.01
+
+
+def test_cast_hits_a_plane_at_the_exact_distance(flat_terrain):
+    o = np.array([[1.0, 0.5, -2.0], [3.0, -1.0, -1.5], [7.2, 2.2, -0.3]])
+    d = np.array([[0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.6, 0.8]])
+    hits = flat_terrain.cast(o, d)
+    assert hits.hit.all()
+    assert np.allclose(hits.t_m, -o[:, 2] / d[:, 2], atol=1e-4)
+    assert np.allclose(hits.points[:, 2], 0.0, atol=1e-4)
+    assert np.allclose(np.abs(hits.normals[:, 2]), 1.0, atol=1e-6)
+    miss = flat_terrain.cast(np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, -1.0]]))
+    assert not miss.hit[0] and not np.isfinite(miss.t_m[0])
+
+
+def test_rock_cells_find_the_tall_box_and_not_the_low_one():
+    tall = (2.0, 0.0, 2.5, 0.5, 0.30)
+    low = (4.0, 1.0, 4.3, 1.3, 0.08)
+    ter = P.Terrain([heightfield_source(box_fn([tall, low]))], smooth_sigma_px=0)
+    cells = ter.rock_cells(cell_m=0.05, ground_window_m=1.0, min_height_m=0.15)
+    assert len(cells) > 0
+    x0, y0, x1, y1, _ = tall
+    inside = (cells[:, 0] > x0 - 0.06) & (cells[:, 0] < x1 + 0.06) & (cells[:, 1] > y0 - 0.06) & (cells[:, 1] < y1 + 0.06)
+    assert inside.all()
+    # the whole top is found (all cells whose centre is inside the box)
+    assert len(cells) >= int(round((x1 - x0) / 0.05)) * int(round((y1 - y0) / 0.05))
+    assert not np.any((cells[:, 0] > 3.9) & (cells[:, 0] < 4.4) & (cells[:, 1] > 0.9) & (cells[:, 1] < 1.4))
+
+
+def test_ground_plane_and_pose_on_plane_recover_a_tilted_slope():
+    a, b, c = 0.1, -0.05, 0.2
+    ter = P.Terrain([heightfield_source(lambda X, Y: -(a * X + b * Y + c))], smooth_sigma_px=0)
+    guess = P.pose_on_plane([5.0, 0.5], 0.3, (0.0, 0.0, 0.0))
+    body = P.RoverBody()
+    plane, n, frac = ter.ground_plane(guess, body)
+    assert plane is not None and frac > 0.9
+    assert np.allclose(plane, (a, b, c), atol=1e-6)
+    T = P.pose_on_plane([5.0, 0.5], 0.3, plane)
+    normal_down = np.array([-a, -b, 1.0]) / np.linalg.norm([-a, -b, 1.0])
+    assert np.allclose(T.R[:, 2], normal_down, atol=1e-9)
+    assert abs(T.t[2] - (a * 5.0 + b * 0.5 + c)) < 1e-9
+    assert abs(math.atan2(T.R[1, 0], T.R[0, 0]) - 0.3) < 0.01  # heading kept
+    assert abs(P.tilt_of(T) - math.acos(normal_down[2])) < 1e-12
+    assert np.allclose(T.R.T @ T.R, np.eye(3), atol=1e-12) and np.linalg.det(T.R) > 0
