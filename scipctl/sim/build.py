@@ -123,10 +123,10 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
         png = encode_png(px)
         exposure_ms = round(exposure * EXPOSURE_MS_PER_UNIT.get(p.camera, 25.0), 3)
         mast = MastAngles(p.pan_rad, p.tilt_rad) if p.pan_rad is not None else None
-        est = estimated_pose(p.T_est, p.cumulative_path_m, p.stop_index, errors)
+        est = estimated_pose(p.T_site_rover_est, p.cumulative_path_m, p.stop_index, errors)
         images.append(ImageProduct(p.product_id, p.camera, p.eye, float(p.time_s), 1, p.stop_index, est, p.model_cal,
                                    p.width, p.height, png, mast=mast, exposure_ms=exposure_ms, gain=1.0))
-        truths.append(ImageTruth(p.product_id, RoverPose(p.T_true, "truth"), p.model_true))
+        truths.append(ImageTruth(p.product_id, RoverPose(p.T_site_rover_true, "truth"), p.model_true))
         img_rec.append({"product_id": p.product_id, "exposure_ms": exposure_ms, "responsivity": resp, "washed_out": washed,
                         "bits": sensor.bits, "vibration_rotvec_rad": p.vibration_rotvec})
         if progress is not None:

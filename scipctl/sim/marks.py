@@ -44,7 +44,7 @@ def compute_marks(scene: Scene, products: list, targets: list) -> list[TargetMar
     X = np.array([t.xyz_site_m for t in targets]).reshape(-1, 3)
     vis_all = []
     for p in products:
-        T_rover_site = p.T_true.inverse()
+        T_rover_site = p.T_site_rover_true.inverse()
         uv = p.model_true.project(T_rover_site.apply(X))  # true model, true rover frame: the definition of a mark
         _, vis = project_visible(scene, p.model_true_site, p.width, p.height, X)
         vis_all.append((p.product_id, uv, vis))

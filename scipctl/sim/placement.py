@@ -38,13 +38,14 @@ def true_rover_pose(scene: Scene, xy_m, yaw_rad: float, wheels_xy_m=None) -> Rig
     return RigidTransform(R, np.array([xy_m[0], xy_m[1], -a0]))
 
 
-def _ref_point_xy(stop: StopPlan, T: RigidTransform, calibrated: RoverConfig, true_cfg: RoverConfig, aim_site) -> np.ndarray:
+def _ref_point_xy(stop: StopPlan, T_site_rover: RigidTransform, calibrated: RoverConfig, true_cfg: RoverConfig,
+                  aim_site) -> np.ndarray:
     """Site (x, y) of the middle of the stop's reference camera pair (true models; mast pointed at the aim)."""
     cam = stop.ref_camera
     pan = tilt = 0.0
     if calibrated.cameras[cam].mount == "mast":
-        pan, tilt = calibrated.point_at(cam, T.inverse().apply(aim_site))
-    c = [true_cfg.camera_model(cam, eye, pan, tilt).transformed(T).C for eye in ("left", "right")]
+        pan, tilt = calibrated.point_at(cam, T_site_rover.inverse().apply(aim_site))
+    c = [true_cfg.camera_model(cam, eye, pan, tilt).transformed(T_site_rover).C for eye in ("left", "right")]
     return 0.5 * (c[0][:2] + c[1][:2])
 
 
@@ -56,7 +57,7 @@ def place_on_terrain(scene: Scene, stop: StopPlan, calibrated: RoverConfig, true
     want = stop.ref_dist_m * np.array([np.cos(stop.bearing_rad), np.sin(stop.bearing_rad)]) + scene.target_rock.centre_xy_m
     xy = np.array(stop.xy_m, float)
     for _ in range(iterations):
-        T = true_rover_pose(scene, xy, stop.yaw_rad, wheels_xy_m)
-        xy = xy + (want - _ref_point_xy(stop, T, calibrated, true_cfg, aim_site))
+        T_site_rover = true_rover_pose(scene, xy, stop.yaw_rad, wheels_xy_m)
+        xy = xy + (want - _ref_point_xy(stop, T_site_rover, calibrated, true_cfg, aim_site))
     stop.xy_m = xy
     return true_rover_pose(scene, xy, stop.yaw_rad, wheels_xy_m)

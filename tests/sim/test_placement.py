@@ -19,8 +19,8 @@ def test_paper_distances_and_arc_angle(run_full_exact, run_exact):
         assert abs(d_mid - 4.5) < 0.1 and abs(d_p10 - 10.0) < 0.1
         # the rover faces the rock at the near stop
         near = next(p for p in sim.products if p.stop == "near")
-        fwd = near.T_true.R[:2, 0]
-        to_rock = rock_xy - near.T_true.t[:2]
+        fwd = near.T_site_rover_true.R[:2, 0]
+        to_rock = rock_xy - near.T_site_rover_true.t[:2]
         ang = np.degrees(np.arccos(fwd @ to_rock / np.linalg.norm(fwd) / np.linalg.norm(to_rock)))
         assert ang < 3.0
 

@@ -56,7 +56,7 @@ def test_errors_are_present_where_configured(run_errors):
 def test_drive_legs_and_pose_sigmas(run_errors, run_exact):
     # straight run: every leg is its chord; the arc run's last leg (far -> near) is an arc
     for sim, arcs in ((run_errors, set()), (run_exact, {"near"})):
-        by_stop = {p.stop: p.T_true for p in sim.products}
+        by_stop = {p.stop: p.T_site_rover_true for p in sim.products}
         labels = [s.label for s in sim.plan.stops]
         for a, b in zip(labels, labels[1:]):
             chord = np.linalg.norm(by_stop[b].t[:2] - by_stop[a].t[:2])
