@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from scipctl.core.camera import CameraModel, cahv_from_intrinsics, camera_frame
+from scipctl.core.camera import CameraModel, T_model_cam, cahv_from_intrinsics
 from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix
 
 WIDTH = HEIGHT = 1024
@@ -24,9 +24,9 @@ def cahv(f_px=1220.0, skew_free=True, **kw):
 
 
 def _tilted_axis(m, ang=0.004):
-    T = camera_frame(m)
+    T_rover_cam = T_model_cam(m)
     o = np.array([np.sin(ang), -np.sin(ang) * 0.5, 1.0])
-    return T.R @ (o / np.linalg.norm(o))
+    return T_rover_cam.R @ (o / np.linalg.norm(o))
 
 
 def cahvor(**kw):

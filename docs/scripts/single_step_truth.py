@@ -21,7 +21,8 @@ import numpy as np
 from scipctl.core.expected import bilinear_sample
 from scipctl.core.tracking import track
 from scipctl.io.downlink import read_downlink
-from scipctl.sim.scenarios import plan_run, scene_for
+from scipctl.sim.build import scene_for
+from scipctl.sim.scenarios import plan_run
 
 
 def main():

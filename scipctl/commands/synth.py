@@ -213,7 +213,8 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
     from ..io.downlink import write_downlink
     from ..io.provenance import sha256_path
     from ..sim.errors import ErrorSettings
-    from ..sim.scenarios import build_run, default_errors
+    from ..sim.build import build_run
+    from ..sim.scenarios import default_errors
 
     out.mkdir(parents=True, exist_ok=True)
     console = stderr_console()

@@ -498,8 +498,9 @@ def cahv_from_intrinsics(
     return CameraModel("CAHV", C=T_frame_cam.t, A=A, H=H, V=V)
 
 
-def camera_frame(model: CameraModel) -> RigidTransform:
-    """``T_frame_cam``: an orthonormal camera frame (x ~ h axis, y ~ v axis, z = A) at ``C``."""
+def T_model_cam(model: CameraModel) -> RigidTransform:
+    """``T_model_cam``: the orthonormal (OpenCV-style) camera frame ``cam`` (x ~ h axis, y ~ v axis, z = A, origin
+    ``C``) in the frame ``model`` is expressed in (e.g. ``T_rover_cam`` for a rover-frame model)."""
     z = model.A
     x = model.h_axis - np.dot(model.h_axis, z) * z
     x /= np.linalg.norm(x)

@@ -51,11 +51,11 @@ class FrameGraph:
         self._edges.append((frame, reference, T_reference_frame))
 
     def _neighbours(self, node: FrameRef):
-        for frame, ref, T in self._edges:
+        for frame, ref, T_ref_frame in self._edges:
             if frame.matches(node):
-                yield ref, T  # T maps node -> ref
+                yield ref, T_ref_frame  # node is frame: T_ref_node
             if ref.matches(node):
-                yield frame, T.inverse()  # maps node -> frame
+                yield frame, T_ref_frame.inverse()  # node is ref: T_frame_node
 
     def transform(self, to: FrameRef, frm: FrameRef) -> Optional[RigidTransform]:
         """``T_to_frm`` (maps points in ``frm`` into ``to``), or ``None`` if no chain of edges joins them."""

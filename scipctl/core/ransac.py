@@ -109,9 +109,9 @@ def _fit_affine(s, d):
 
 
 def _fit_homography(s, d):
-    Ts, Td = _normaliser(s), _normaliser(d)
-    sn = apply_model(Ts, s)
-    dn = apply_model(Td, d)
+    T_srcnorm_src, T_dstnorm_dst = _normaliser(s), _normaliser(d)  # pixels -> normalised pixels (3, 3)
+    sn = apply_model(T_srcnorm_src, s)
+    dn = apply_model(T_dstnorm_dst, d)
     n = len(s)
     A = np.zeros((2 * n, 9))
     A[0::2, 0:2], A[0::2, 2] = sn, 1.0
@@ -124,7 +124,7 @@ def _fit_homography(s, d):
     if n == 4 and sv[-2] < 1e-9 * sv[0]:  # a degenerate (e.g. collinear) sample has a 2-D null space
         return None
     Hn = Vt[-1].reshape(3, 3)
-    H = np.linalg.solve(Td, Hn @ Ts)
+    H = np.linalg.solve(T_dstnorm_dst, Hn @ T_srcnorm_src)
     if not np.all(np.isfinite(H)) or abs(H[2, 2]) < 1e-12:
         return None
     return H / H[2, 2]

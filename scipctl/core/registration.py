@@ -68,7 +68,7 @@ def _in_box(p: np.ndarray, box: tuple) -> np.ndarray:
 def register_clouds(
     source_m: np.ndarray,
     target_m: np.ndarray,
-    T_init: RigidTransform,
+    T_target_source_init: RigidTransform,
     method: str = "point-to-plane",
     scales_m: tuple = (0.04, 0.02, 0.01),
     crop_center_m: Optional[np.ndarray] = None,
@@ -79,7 +79,8 @@ def register_clouds(
     min_rmse_gain: float = 0.05,
     target_noise: Optional[tuple] = None,
 ) -> RegistrationResult:
-    """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_init`` (``T_target_source``).
+    """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_target_source_init`` (a first
+    estimate of ``T_target_source``).
 
     Coarse-to-fine ICP over voxel sizes ``scales_m``; the correspondence
     distance at each scale is ``max_corr_voxels`` voxels (1.5: wider lets
@@ -87,7 +88,7 @@ def register_clouds(
     simulated sols in docs/handoff.md). ``method`` is ``point-to-plane`` or
     ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
     frame) only points near the centre are used (both clouds, the source after
-    applying ``T_init``). Points that cannot pair up are left out: each cloud
+    applying ``T_target_source_init``). Points that cannot pair up are left out: each cloud
     outside the other's box widened by twice the coarsest correspondence
     distance, and at each scale the source points that, moved by the alignment
     so far, lie outside the target's box widened by twice that scale's
@@ -119,7 +120,7 @@ def register_clouds(
     # (selections copy only when they drop something: these clouds have up to a million points)
     src = select_rows(src, _finite_rows(src))
     tgt = select_rows(tgt, _finite_rows(tgt))
-    src_in_tgt = T_init.apply(src)
+    src_in_tgt = T_target_source_init.apply(src)
     if crop_center_m is not None and crop_radius_m is not None:
         c = np.asarray(crop_center_m, float)
         r2 = float(crop_radius_m) ** 2
@@ -139,7 +140,7 @@ def register_clouds(
     for voxel in sorted(scales_m):
         ps, pt = ps.voxel_down_sample(voxel), pt.voxel_down_sample(voxel)
         grids[voxel] = (ps, pt)
-    T = np.eye(4)
+    M_target_seeded = np.eye(4)
     reg = None
     n_s = n_t = 0
     for voxel in scales_m:
@@ -154,7 +155,8 @@ def register_clouds(
         # scale's correspondence distance cannot pair up at this scale: leave them out (far navcam clouds reach
         # well beyond the hazcam's; the finest scale has most points)
         s_pts = np.asarray(s.points)
-        keep = np.flatnonzero(_in_box(s_pts @ T[:3, :3].T + T[:3, 3], _box(np.asarray(t.points), 2.0 * radius)))
+        keep = np.flatnonzero(_in_box(s_pts @ M_target_seeded[:3, :3].T + M_target_seeded[:3, 3],
+                                      _box(np.asarray(t.points), 2.0 * radius)))
         if len(keep) < len(s_pts):
             s = s.select_by_index(keep)
         n_s, n_t = len(s.points), len(t.points)
@@ -165,14 +167,14 @@ def register_clouds(
             for pc in (s, t):
                 pc.estimate_covariances(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * voxel, max_nn=30))
             est = o3d.pipelines.registration.TransformationEstimationForGeneralizedICP()
-            reg = o3d.pipelines.registration.registration_generalized_icp(s, t, radius, T, est, crit)
+            reg = o3d.pipelines.registration.registration_generalized_icp(s, t, radius, M_target_seeded, est, crit)
         elif method == "point-to-plane":
             t.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=2.5 * voxel, max_nn=30))
             est = o3d.pipelines.registration.TransformationEstimationPointToPlane()
-            reg = o3d.pipelines.registration.registration_icp(s, t, radius, T, est, crit)
+            reg = o3d.pipelines.registration.registration_icp(s, t, radius, M_target_seeded, est, crit)
         else:
             raise ValueError(f"unknown registration method {method!r}")
-        T = np.asarray(reg.transformation)
+        M_target_seeded = np.asarray(reg.transformation)
     if reg is None:
         raise ValueError("registration had too few points at every scale")
     # keep the seed unless ICP fits the clouds measurably better at the finest scale: on noisy stereo clouds
@@ -181,16 +183,16 @@ def register_clouds(
     kept_seed = not (reg.fitness > seed_eval.fitness + min_fitness_gain
                      or reg.inlier_rmse < (1.0 - min_rmse_gain) * seed_eval.inlier_rmse)
     if kept_seed:
-        T, reg = np.eye(4), seed_eval
-    T_corr = RigidTransform.from_matrix(T)
+        M_target_seeded, reg = np.eye(4), seed_eval
+    T_target_seeded = RigidTransform.from_matrix(M_target_seeded)  # seeded: the source moved by T_target_source_init
     centre = np.asarray(crop_center_m, float) if crop_center_m is not None else tgt.mean(axis=0)
     return RegistrationResult(
-        T_target_source=T_corr @ T_init,
+        T_target_source=T_target_seeded @ T_target_source_init,
         fitness=float(reg.fitness),
         inlier_rmse_m=float(reg.inlier_rmse),
         n_source=n_s,
         n_target=n_t,
-        correction_rad=T_corr.rotation_angle_rad(),
-        correction_m=float(np.linalg.norm(T_corr.apply(centre) - centre)),
+        correction_rad=T_target_seeded.rotation_angle_rad(),
+        correction_m=float(np.linalg.norm(T_target_seeded.apply(centre) - centre)),
         kept_seed=kept_seed,
     )

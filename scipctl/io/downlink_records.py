@@ -65,12 +65,12 @@ def axis_for(j: JointAxis) -> list:
     return list(given) if given is not None else _fl(j.axis)
 
 
-def quat_for(T: RigidTransform) -> list:
-    """Quaternion ``[w, x, y, z]`` for ``T.R`` that reproduces it exactly when it came from a read quaternion."""
-    q = _QUAT_HINTS.get(np.ascontiguousarray(T.R).tobytes())
+def quat_for(T_a_b: RigidTransform) -> list:
+    """Quaternion ``[w, x, y, z]`` for ``T_a_b.R`` that reproduces it exactly when it came from a read quaternion."""
+    q = _QUAT_HINTS.get(np.ascontiguousarray(T_a_b.R).tobytes())
     if q is not None:
         return list(q)
-    return [float(x) for x in matrix_to_quat_wxyz(T.R)]
+    return [float(x) for x in matrix_to_quat_wxyz(T_a_b.R)]
 
 
 # --------------------------------------------------------------------------- field access

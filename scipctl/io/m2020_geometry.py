@@ -7,7 +7,7 @@ navcams in ``Body_RSM_EL``, the hazcams in ``Body_Chassis``, full 5120 x 3840 de
 Frames: ``Body_Chassis`` is taken as the rover navigation frame (the URDF root, under a floating joint at
 identity; the flight labels' RSM head origin agrees with the URDF's azimuth-joint origin to 1 mm).
 The mast chain is ``Body_Chassis -[RSM_AZ_ENC, revolute]-> Body_RSM_AZ -[RSM_EL_ENC, revolute]->
-Body_RSM_EL``; URDF joints are ``T_parent_child(q) = T_origin(xyz, rpy) . Rot(axis, q)`` with
+Body_RSM_EL``; URDF joints are ``T_parent_child(q) = T_parent_origin(xyz, rpy) . Rot(axis, q)`` with
 ``R(rpy) = Rz(yaw) Ry(pitch) Rx(roll)``. So ``T_rover_head(az, el) = O1 Rz(az) O2 Ry(el)`` equals the
 downlink contract's ``M = Rot(pan axis, pan) . Rot(tilt axis, tilt)`` applied to the zero-angle head
 ``O1 O2``, with pan = az about the line through ``O1.t`` along ``O1.R z`` and tilt = el about the line
@@ -64,9 +64,9 @@ def read_urdf_joints(path) -> dict:
         rpy = [float(x) for x in (o.get("rpy", "0 0 0") if o is not None else "0 0 0").split()]
         a = j.find("axis")
         axis = np.array([float(x) for x in (a.get("xyz", "1 0 0") if a is not None else "1 0 0").split()])
-        T = RigidTransform(euler_zyx_to_matrix(rpy[2], rpy[1], rpy[0]), np.array(xyz))
+        T_parent_origin = RigidTransform(euler_zyx_to_matrix(rpy[2], rpy[1], rpy[0]), np.array(xyz))
         child, parent = j.find("child").get("link"), j.find("parent").get("link")
-        out[child] = UrdfJoint(j.get("name"), j.get("type"), parent, child, T, axis / np.linalg.norm(axis))
+        out[child] = UrdfJoint(j.get("name"), j.get("type"), parent, child, T_parent_origin, axis / np.linalg.norm(axis))
     return out
 
 
@@ -87,14 +87,14 @@ def head_motion_from_urdf(joints: dict) -> tuple[MastGeometry, RigidTransform]:
     moving = [j for j in ch if j.kind in ("revolute", "continuous")]
     if [j.name for j in moving] != ["RSM_AZ_ENC", "RSM_EL_ENC"]:
         raise InputError(URDF_FILE, "joint", f"expected the RSM_AZ_ENC, RSM_EL_ENC chain, got {[j.name for j in moving]}")
-    T = RigidTransform.identity()
+    T_rover_link = RigidTransform.identity()
     axes = []
     for j in ch:
         if j in moving:
-            T_joint = T @ j.T_parent_origin  # the joint frame in the rover frame at zero angles
-            axes.append(JointAxis(T_joint.t, T_joint.R @ j.axis))
-        T = T @ j.T_parent_child(0.0)
-    return MastGeometry(axes[0], axes[1]), T
+            T_rover_joint = T_rover_link @ j.T_parent_origin  # the joint frame in the rover frame at zero angles
+            axes.append(JointAxis(T_rover_joint.t, T_rover_joint.R @ j.axis))
+        T_rover_link = T_rover_link @ j.T_parent_child(0.0)
+    return MastGeometry(axes[0], axes[1]), T_rover_link
 
 
 def _model(rec: dict, name: str) -> CameraModel:
@@ -140,14 +140,14 @@ def m2020_rover_config(folder, navcam_scale: int = 4, hazcam_scale: int = 4, haz
             raise InputError(MODELS_FILE, name, "no such camera in the static models")
         m, frame, w, h = models[name]
         if frame == HEAD_LINK:
-            T = T_rover_head0
+            T_rover_frame = T_rover_head0
         elif frame == ROVER_LINK:
-            T = RigidTransform.identity()
+            T_rover_frame = RigidTransform.identity()
         else:
-            T = RigidTransform.identity()
+            T_rover_frame = RigidTransform.identity()
             for j in chain(joints, ROVER_LINK, frame):
-                T = T @ j.T_parent_child(0.0)
-        m = subimage_model(m.transformed(T), 0.0, 0.0, scale)
+                T_rover_frame = T_rover_frame @ j.T_parent_child(0.0)
+        m = subimage_model(m.transformed(T_rover_frame), 0.0, 0.0, scale)
         return CameraSpec(m, w // scale, h // scale)
 
     cams = {
@@ -169,10 +169,10 @@ def wheels_xy_from_urdf(joints: dict) -> np.ndarray:
     them); :class:`InputError` if the URDF lacks a wheel link."""
     out = []
     for link in WHEEL_LINKS:
-        T = RigidTransform.identity()
+        T_rover_wheel = RigidTransform.identity()
         for j in chain(joints, ROVER_LINK, link):
-            T = T @ j.T_parent_child(0.0)
-        out.append(T.t[:2])
+            T_rover_wheel = T_rover_wheel @ j.T_parent_child(0.0)
+        out.append(T_rover_wheel.t[:2])
     return np.array(out)
 
 

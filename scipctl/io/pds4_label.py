@@ -305,10 +305,10 @@ def geometry_from_pds4(path: Path) -> tuple[ProductGeometry, Optional[Pds4Array]
             nq = float(np.linalg.norm(q))
             if abs(nq - 1.0) > 1e-3:
                 raise r.err(f"{f}.Quaternion_Plus_Direction", f"not a unit quaternion (norm {nq:.6g})")
-            T = RigidTransform.from_quat_wxyz(q, t)
-            graph.add(T, frame, ref)
+            T_ref_frame = RigidTransform.from_quat_wxyz(q, t)
+            graph.add(T_ref_frame, frame, ref)
             if rover_frame is None and frame.name.startswith("ROVER") and ref.name == "SITE_FRAME":
-                rover_frame, rover_ref, T_ref_rover, rover_q = frame, ref, T, tuple(float(x) for x in q)
+                rover_frame, rover_ref, T_ref_rover, rover_q = frame, ref, T_ref_frame, tuple(float(x) for x in q)
         if rover_frame is None:
             missing["pose"] = "geom:Coordinate_Space_Definition (ROVER_NAV_FRAME)"
         # mast angles

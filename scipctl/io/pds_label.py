@@ -393,10 +393,10 @@ def geometry_from_tree(tree: dict, product_hint: str, flavour: str) -> ProductGe
     rover_frame = rover_ref = T_ref_rover = None
     rover_group_names = set(ROVER_CS_GROUPS)
     rover_q = None
-    for cs_group, frame, ref, T, q in coordinate_systems(tree, product):
-        graph.add(T, frame, ref)
+    for cs_group, frame, ref, T_ref_frame, q in coordinate_systems(tree, product):
+        graph.add(T_ref_frame, frame, ref)
         if cs_group in rover_group_names and rover_frame is None:
-            rover_frame, rover_ref, T_ref_rover, rover_q = frame, ref, T, q
+            rover_frame, rover_ref, T_ref_rover, rover_q = frame, ref, T_ref_frame, q
             if not rover_frame.index:  # MSSS-camera labels: no index in the group; the motion counter has it
                 rmc = Group(tree, product, "").index("ROVER_MOTION_COUNTER")
                 if rmc:

@@ -289,11 +289,11 @@ def model_in_rover_frame(geom: ProductGeometry):
     if frm.name in ROVER_FRAMES and frm.name == rover.name and not frm.matches(rover):
         raise InputError(pid, "GEOMETRIC_CAMERA_MODEL.REFERENCE_COORD_SYSTEM_INDEX",
                          f"model is in {frm}, another rover position than the label's rover frame {rover}")
-    T = graph.transform(rover, frm)
-    if T is None:
+    T_rover_model = graph.transform(rover, frm)
+    if T_rover_model is None:
         raise InputError(pid, "GEOMETRIC_CAMERA_MODEL.REFERENCE_COORD_SYSTEM_NAME",
                          f"model is in {frm}, a frame the label does not relate to the rover frame {rover}")
-    return geom.model.transformed(T)
+    return geom.model.transformed(T_rover_model)
 
 
 def product_from_read(pr: ProductRead) -> ImageProduct:

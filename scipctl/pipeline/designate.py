@@ -97,11 +97,11 @@ def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = N
     }
     if not ps.ok:
         return rec
-    X = np.asarray(ps.xyz, float)
-    Xs = left.pose.T_site_rover.apply(X)
+    X_rover = np.asarray(ps.xyz, float)
+    X_site = left.pose.T_site_rover.apply(X_rover)
     rec.update({
-        "xyz_rover_m": X.tolist(),
-        "xyz_site_m": Xs.tolist(),
+        "xyz_rover_m": X_rover.tolist(),
+        "xyz_site_m": X_site.tolist(),
         "range_m": _f(ps.range_m),
         "range_sigma_m": _f(ps.range_sigma_m),
         "ray_miss_m": _f(getattr(ps, "miss_distance_m", None)),
@@ -115,7 +115,7 @@ def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = N
             ds = dense_stereo(L, R, left.camera_model, right.camera_model,
                               min_range_m=max(0.3, 0.5 * ps.range_m), max_range_m=2.0 * ps.range_m + 1.0)
             xyz = ds.xyz.reshape(-1, 3)
-            n, npts = surface_normal(xyz, X, radius_m=max(0.05, 0.02 * ps.range_m))
+            n, npts = surface_normal(xyz, X_rover, radius_m=max(0.05, 0.02 * ps.range_m))
         except Exception as e:  # dense stereo is a diagnostic here; the designation stands without it
             n, npts = None, 0
             warnings.append(f"no surface normal (dense stereo failed: {e})")
@@ -124,7 +124,7 @@ def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = N
         if n is None and npts < 10:
             warnings.append("no surface normal (too few dense-stereo points around the target)")
         else:
-            ray = X - left.camera_model.C
+            ray = X_rover - left.camera_model.C
             ray /= np.linalg.norm(ray)
             rec["incidence_deg"] = float(np.degrees(np.arccos(abs(float(np.dot(ray, n))))))
     return rec

@@ -233,15 +233,16 @@ def _mast_truth(dl: Downlink, cases) -> Optional[dict]:
     tn, th = dl.truth_for(nl.product_id), dl.truth_for(haz.product_id)
     if tn is None or th is None:
         return None
-    from ..core.camera import camera_frame
+    from ..core.camera import T_model_cam
 
-    def rel(mn, mh):
-        Rn, Rh = camera_frame(mn).R, camera_frame(mh).R
-        return Rh.T @ Rn
+    def R_hazcam_navcam(mn, mh):
+        R_rover_navcam, R_rover_hazcam = T_model_cam(mn).R, T_model_cam(mh).R
+        return R_rover_hazcam.T @ R_rover_navcam
 
-    E = rel(tn.camera_model, th.camera_model) @ rel(nl.camera_model, haz.camera_model).T  # true vs believed, hazcam frame
-    Rh = camera_frame(haz.camera_model).R
-    Er = Rh @ E @ Rh.T  # in the rover frame
+    # true vs believed navcam-to-hazcam rotation, hazcam frame
+    E = R_hazcam_navcam(tn.camera_model, th.camera_model) @ R_hazcam_navcam(nl.camera_model, haz.camera_model).T
+    R_rover_hazcam = T_model_cam(haz.camera_model).R
+    Er = R_rover_hazcam @ E @ R_rover_hazcam.T  # in the rover frame
     w = np.array([Er[2, 1] - Er[1, 2], Er[0, 2] - Er[2, 0], Er[1, 0] - Er[0, 1]]) / 2.0
     return {"rotation_rad": float(np.linalg.norm(w)), "about_rover_z_rad": float(w[2]), "about_rover_y_rad": float(w[1])}
 

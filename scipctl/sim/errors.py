@@ -140,12 +140,12 @@ def true_rover_config(calibrated: RoverConfig, e: ErrorSettings) -> RoverConfig:
     """
     mast = calibrated.mast
     off = np.asarray(e.mast_head_offset_m, float)
-    T_off = RigidTransform(np.eye(3), off)
+    T_offset_nominal = RigidTransform(np.eye(3), off)
     R_ax = axis_angle_to_matrix(mast.pan.axis, e.mast_tilt_axis_error_rad)
     tilt_true = JointAxis(mast.tilt.origin_m + off, R_ax @ mast.tilt.axis)
     P_dp = mast.pan.motion(e.mast_pan_offset_rad)
     tilt_conj = JointAxis(P_dp.apply(tilt_true.origin_m), P_dp.rotate(tilt_true.axis))
-    M0 = P_dp @ tilt_true.motion(e.mast_tilt_offset_rad) @ T_off
+    M0 = P_dp @ tilt_true.motion(e.mast_tilt_offset_rad) @ T_offset_nominal
     cams = {}
     for name, cam in calibrated.cameras.items():
         specs = []
@@ -166,7 +166,8 @@ def true_rover_config(calibrated: RoverConfig, e: ErrorSettings) -> RoverConfig:
 
 
 def vibration(rng: np.random.Generator, max_rad: float, pivot_m) -> tuple[RigidTransform, np.ndarray]:
-    """A random small rotation about ``pivot_m`` (3,) (rover frame): ``(T_true_nominal, rotvec (3,))``.
+    """A random small rotation about ``pivot_m`` (3,) (rover frame): ``(T_vibrated_nominal, rotvec (3,))``, a motion
+    in the rover frame (``model.transformed(T_vibrated_nominal)`` is the vibrated model).
 
     The angle is ``U(0.3, 1) * max_rad`` about a uniformly random axis; ``max_rad == 0`` gives the identity.
     """
@@ -204,20 +205,21 @@ def estimate_poses(true_poses: list, path_lengths_m, turns_rad, e: ErrorSettings
     if len(path_lengths_m) != n or len(turns_rad) != n:
         raise ValueError("path_lengths_m and turns_rad need one entry per stop")
     if e.odometry_is_exact:
-        return [RigidTransform(T.R.copy(), T.t.copy()) for T in true_poses], {"exact": True, "legs": []}
+        exact = [RigidTransform(T_site_rover.R.copy(), T_site_rover.t.copy()) for T_site_rover in true_poses]
+        return exact, {"exact": True, "legs": []}
     run_scale = rng.normal(0.0, e.odometry_scale_sigma)
     run_drift = rng.normal(0.0, e.heading_drift_sigma_rad_per_m)
     est = [true_poses[0]]
     yaw_est = matrix_to_euler_zyx(true_poses[0].R)[0]
     legs = []
     for i in range(1, n):
-        Tp, Tc = true_poses[i - 1], true_poses[i]
-        d_rover = Tp.inverse().apply(Tc.t)  # true displacement in the previous rover frame
+        T_site_roverprev, T_site_rover = true_poses[i - 1], true_poses[i]
+        d_rover = T_site_roverprev.inverse().apply(T_site_rover.t)  # true displacement in the previous rover frame
         scale = 1.0 + run_scale + rng.normal(0.0, e.odometry_scale_leg_sigma)
         L = float(path_lengths_m[i])
         dyaw_err = run_drift * L + rng.normal(0.0, e.heading_noise_sigma_rad) + rng.normal(0.0, e.turn_scale_sigma) * abs(float(turns_rad[i]))
-        yaw_p, _, _ = matrix_to_euler_zyx(Tp.R)
-        yaw_c, pitch_c, roll_c = matrix_to_euler_zyx(Tc.R)
+        yaw_p, _, _ = matrix_to_euler_zyx(T_site_roverprev.R)
+        yaw_c, pitch_c, roll_c = matrix_to_euler_zyx(T_site_rover.R)
         dyaw_true = (yaw_c - yaw_p + np.pi) % (2 * np.pi) - np.pi
         # translate along the previous estimated heading, with half of this leg's heading error
         R_mid = axis_angle_to_matrix([0, 0, 1], 0.5 * dyaw_err) @ est[-1].R

@@ -7,7 +7,7 @@ is non-central) and cast into the scene with Open3D's ``RaycastingScene``.
 the pixel (centre ``(u, v)``, extent +-0.5 px) are box-filtered, so a pixel
 value is the mean radiance over the pixel's footprint: sub-pixel truth is
 meaningful. Shading: Lambertian albedo (a function of the 3-D point, see
-``scene.Appearance``) x (ambient + direct sun with shadow rays).
+``appearance.Appearance``) x (ambient + direct sun with shadow rays).
 
 Octaves of the albedo finer than the pixel footprint are faded out
 (anti-aliasing; the footprint is ``range x pixel angle / sqrt(|cos incidence|)``).

@@ -58,21 +58,21 @@ NAVCAM_IFOV_RAD = 0.82e-3
 HAZCAM_IFOV_RAD = 2.1e-3
 
 
-def _model_axis(T: RigidTransform, ang_x: float, ang_y: float) -> np.ndarray:
-    """Optical axis O slightly off the boresight (camera-frame angles) -> (3,) in T's frame."""
+def _model_axis(T_rover_cam: RigidTransform, ang_x: float, ang_y: float) -> np.ndarray:
+    """Optical axis O slightly off the boresight (camera-frame angles) -> (3,) in the rover frame."""
     o = np.array([np.tan(ang_x), np.tan(ang_y), 1.0])
-    return T.R @ (o / np.linalg.norm(o))
+    return T_rover_cam.R @ (o / np.linalg.norm(o))
 
 
-def _cahvor(f_px, cx, cy, T, R, o_ang=(0.0, 0.0), aspect=1.0):
-    m = cahv_from_intrinsics(f_px, f_px * aspect, cx, cy, T)
-    return CameraModel("CAHVOR", m.C, m.A, m.H, m.V, O=_model_axis(T, *o_ang), R=list(R))
+def _cahvor(f_px, cx, cy, T_rover_cam, R, o_ang=(0.0, 0.0), aspect=1.0):
+    m = cahv_from_intrinsics(f_px, f_px * aspect, cx, cy, T_rover_cam)
+    return CameraModel("CAHVOR", m.C, m.A, m.H, m.V, O=_model_axis(T_rover_cam, *o_ang), R=list(R))
 
 
-def _cahvore(f_px, cx, cy, T, R, E, linearity, o_ang=(0.0, 0.0)):
-    m = cahv_from_intrinsics(f_px, f_px, cx, cy, T)
+def _cahvore(f_px, cx, cy, T_rover_cam, R, E, linearity, o_ang=(0.0, 0.0)):
+    m = cahv_from_intrinsics(f_px, f_px, cx, cy, T_rover_cam)
     return CameraModel(
-        "CAHVORE", m.C, m.A, m.H, m.V, O=_model_axis(T, *o_ang), R=list(R), E=list(E),
+        "CAHVORE", m.C, m.A, m.H, m.V, O=_model_axis(T_rover_cam, *o_ang), R=list(R), E=list(E),
         cahvore_type=3, linearity=linearity,
     )
 

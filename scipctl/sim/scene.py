@@ -1,4 +1,4 @@
-"""Synthetic Mars-like scenes with exact geometry (pure numerics; Open3D for ray casting).
+"""Synthetic Mars-like scenes with exact geometry: the assembled scene and its ray casting (Open3D).
 
 Site frame: +x north, +y east, +z **down** (heights above the ground are
 negative z). The scene's big target rock sits at the site origin (x, y) =
@@ -6,22 +6,22 @@ negative z). The scene's big target rock sits at the site origin (x, y) =
 
 Content, all reproducible from ``make_scene(seed)``:
 
-* terrain: a triangulated height field ``z = -h(x, y)``, ``h`` a sum of
-  sinusoids with random directions (wavelengths 0.2 - 60 m, amplitude about
-  0.4 % of the wavelength: rolling ground, cm-scale bumps). The grid is 2 cm
-  within 4 m of the target rock and grows geometrically outside (no cracks:
-  one tensor-product grid); wavelengths the local grid cannot carry are faded
-  out there.
-* rocks: convex hulls of random points (faceted, with sharp corners),
-  subdivided and roughened by 3-D noise, scaled to 0.2 - 0.6 m, partly buried;
-  one large target rock (~0.55 x 0.45 x 0.3 m) at the origin; other rocks are
-  kept out of ``keep_clear`` corridors (the rover's approach paths).
+* terrain (:mod:`.terrain`): a triangulated height field ``z = -h(x, y)`` on a
+  grid that is 2 cm near the target rock and grows geometrically outside.
+* rocks (:mod:`.rocks`, meshes from :mod:`.mesh`): convex hulls of random points
+  (faceted, with sharp corners), subdivided and roughened by 3-D noise, scaled to
+  0.2 - 0.6 m, partly buried; one large target rock (~0.55 x 0.45 x 0.3 m) at the
+  origin; other rocks are kept out of ``keep_clear`` corridors (the rover's
+  approach paths).
 * pebbles: small hulls (1 - 6 cm), dense near the target rock, sparse outside;
   none inside a few drift-sand patches near the rock.
-* appearance: Lambertian albedo that is a procedural function of the 3-D
-  surface point (multi-octave 3-D value noise with per-material statistics and
-  high-contrast spots), so it is the same from every viewpoint; the sun
-  direction and an ambient term are part of the scene.
+* appearance (:mod:`.appearance`): Lambertian albedo that is a procedural
+  function of the 3-D surface point, so it is the same from every viewpoint; the
+  sun direction and an ambient term are part of the scene.
+
+:class:`Scene` casts rays (:meth:`Scene.cast` -> :class:`Hits`, ``GEOM_*`` ids of
+the three meshes), tests occlusion, interpolates the ground height and shades
+(:meth:`Scene.radiance`).
 
 Arrays: points ``(N, 3)`` site frame metres; ``xy`` ``(N, 2)``.
 """
@@ -33,365 +33,15 @@ from typing import Optional
 
 import numpy as np
 
-from ..core.transforms import axis_angle_to_matrix
-from .noise import FractalNoise, LatticeNoise, lod_weight
+from .appearance import MAT_PEBBLE, MAT_ROCK, MAT_SKY, MAT_TERRAIN, Appearance, make_appearance
+from .mesh import hull_mesh
+from .noise import LatticeNoise
+from .rocks import Rock, make_rock
+from .terrain import HeightField, graded_axis, grid_mesh, random_height_field
 
-MAT_SKY, MAT_TERRAIN, MAT_ROCK, MAT_PEBBLE = -1, 0, 1, 2
 GEOM_TERRAIN, GEOM_ROCKS, GEOM_PEBBLES = 0, 1, 2
 
-INNER_HALF_M = 4.0
-INNER_STEP_M = 0.02
-OUTER_HALF_M = 150.0
-GROWTH = 1.07
-MAX_STEP_M = 4.0
 
-
-# ----------------------------------------------------------------------------- terrain
-@dataclass(frozen=True)
-class HeightField:
-    """``h(x, y) = sum_k a_k sin(k_k . (x, y) + phi_k)`` metres above the datum (site z = -h)."""
-
-    wavevectors: np.ndarray  # (K, 2) rad/m
-    amplitudes_m: np.ndarray  # (K,)
-    phases_rad: np.ndarray  # (K,)
-
-    @property
-    def wavelengths_m(self) -> np.ndarray:
-        return 2 * np.pi / np.linalg.norm(self.wavevectors, axis=1)
-
-    def _fade(self, spacing_m):
-        if spacing_m is None:
-            return 1.0
-        # a wave needs >= 8 grid steps per wavelength to be carried; fade between 8 and 16
-        r = self.wavelengths_m[None, :] / np.maximum(np.asarray(spacing_m, float)[:, None], 1e-9)
-        return np.clip((r - 8.0) / 8.0, 0.0, 1.0)
-
-    def height_and_gradient(self, xy, spacing_m=None, chunk: int = 32768):
-        """``xy`` ``(N, 2)`` -> heights ``(N,)`` (positive up) and gradients ``(N, 2)`` (dh/dx, dh/dy).
-
-        ``spacing_m`` ``(N,)``: fade out waves too short for a grid of that spacing (as the mesh is built).
-        """
-        xy = np.asarray(xy, float)
-        if xy.ndim != 2 or xy.shape[1] != 2:
-            raise ValueError(f"xy: expected shape (N, 2), got {xy.shape}")
-        N = len(xy)
-        h = np.zeros(N)
-        g = np.zeros((N, 2))
-        if spacing_m is None:
-            groups = [(np.arange(N), np.arange(len(self.amplitudes_m)))]
-        else:
-            sp = np.broadcast_to(np.asarray(spacing_m, float), (N,))
-            # waves a vertex can carry at all (fade > 0): wavelength > 8 x spacing; group vertices by that set
-            need = np.searchsorted(np.sort(-self.wavelengths_m), -8.0 * sp, side="left")  # count of long-enough waves
-            order = np.argsort(-self.wavelengths_m, kind="stable")
-            groups = [(np.nonzero(need == k)[0], order[:k]) for k in np.unique(need) if k > 0]
-        for vid, wid in groups:
-            K = self.wavevectors[wid]
-            for i in range(0, len(vid), chunk):
-                sel = vid[i:i + chunk]
-                ph = xy[sel] @ K.T
-                ph += self.phases_rad[wid][None, :]
-                w = self.amplitudes_m[wid][None, :]
-                if spacing_m is not None:
-                    r = self.wavelengths_m[wid][None, :] / np.maximum(sp[sel][:, None], 1e-9)
-                    w = w * np.clip((r - 8.0) / 8.0, 0.0, 1.0)
-                h[sel] = np.einsum("ij,ij->i", np.sin(ph), w)
-                g[sel] = (np.cos(ph) * w) @ K
-        return h, g
-
-    def height_m(self, xy, spacing_m=None) -> np.ndarray:
-        """``xy`` ``(N, 2)`` -> ``(N,)`` heights (positive up)."""
-        return self.height_and_gradient(xy, spacing_m)[0]
-
-    def gradient(self, xy, spacing_m=None) -> np.ndarray:
-        """``(N, 2)`` = (dh/dx, dh/dy)."""
-        return self.height_and_gradient(xy, spacing_m)[1]
-
-    def normal_site(self, xy, spacing_m=None) -> np.ndarray:
-        """Upward unit normal ``(N, 3)`` in the site frame (z down): ``(-hx, -hy, -1)/norm``."""
-        g = self.gradient(xy, spacing_m)
-        n = np.concatenate([-g, -np.ones((g.shape[0], 1))], axis=1)
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
-
-
-def random_height_field(rng: np.random.Generator, n_waves: int = 48, roughness: float = 0.004) -> HeightField:
-    lam = np.exp(rng.uniform(np.log(0.2), np.log(60.0), size=n_waves))
-    lam.sort()
-    ang = rng.uniform(0, 2 * np.pi, size=n_waves)
-    k = (2 * np.pi / lam)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
-    amp = roughness * lam * rng.uniform(0.4, 1.0, size=n_waves)
-    phase = rng.uniform(0, 2 * np.pi, size=n_waves)
-    return HeightField(k, amp, phase)
-
-
-def graded_axis(inner_half_m=INNER_HALF_M, inner_step_m=INNER_STEP_M, outer_half_m=OUTER_HALF_M,
-                growth=GROWTH, max_step_m=MAX_STEP_M) -> np.ndarray:
-    """Grid line positions ``(K,)``: uniform in ``[-inner, inner]``, geometric growth outside, to ``+-outer``."""
-    n_in = int(round(inner_half_m / inner_step_m))
-    inner = np.arange(-n_in, n_in + 1) * inner_step_m
-    outer = []
-    x, step = inner_half_m, inner_step_m
-    while x < outer_half_m:
-        step = min(step * growth, max_step_m)
-        x = min(x + step, outer_half_m)
-        outer.append(x)
-    outer = np.array(outer)
-    return np.concatenate([-outer[::-1], inner, outer])
-
-
-def grid_mesh(xs: np.ndarray, ys: np.ndarray):
-    """Tensor grid -> (vertex xy ``(nx*ny, 2)``, triangles ``(2(nx-1)(ny-1), 3)``, local spacing ``(nx*ny,)``)."""
-    nx, ny = len(xs), len(ys)
-    X, Y = np.meshgrid(xs, ys, indexing="ij")
-    xy = np.stack([X.ravel(), Y.ravel()], axis=1)
-    dx = np.maximum(np.diff(xs, prepend=xs[0] - (xs[1] - xs[0])), np.diff(xs, append=xs[-1] + (xs[-1] - xs[-2])))
-    dy = np.maximum(np.diff(ys, prepend=ys[0] - (ys[1] - ys[0])), np.diff(ys, append=ys[-1] + (ys[-1] - ys[-2])))
-    spacing = np.maximum(dx[:, None], dy[None, :]).ravel()
-    idx = np.arange(nx * ny).reshape(nx, ny)
-    a = idx[:-1, :-1].ravel()
-    b = idx[1:, :-1].ravel()
-    c = idx[1:, 1:].ravel()
-    d = idx[:-1, 1:].ravel()
-    tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
-    return xy, tris, spacing
-
-
-# ----------------------------------------------------------------------------- rocks
-def _subdivide(V: np.ndarray, F: np.ndarray):
-    """One midpoint subdivision: each triangle -> 4. Returns (V', F')."""
-    e = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
-    e = np.sort(e, axis=1)
-    uniq, inv = np.unique(e, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    mids = 0.5 * (V[uniq[:, 0]] + V[uniq[:, 1]])
-    base = len(V)
-    nF = len(F)
-    m01 = base + inv[:nF]
-    m12 = base + inv[nF:2 * nF]
-    m20 = base + inv[2 * nF:]
-    a, b, c = F[:, 0], F[:, 1], F[:, 2]
-    F2 = np.concatenate([
-        np.stack([a, m01, m20], 1), np.stack([m01, b, m12], 1), np.stack([m20, m12, c], 1), np.stack([m01, m12, m20], 1),
-    ])
-    return np.concatenate([V, mids]), F2
-
-
-def vertex_normals(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals ``(N, 3)`` of a consistently oriented mesh."""
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    vn = np.zeros_like(V)
-    for k in range(3):
-        np.add.at(vn, F[:, k], fn)
-    n = np.linalg.norm(vn, axis=1, keepdims=True)
-    return vn / np.maximum(n, 1e-30)
-
-
-def hull_mesh(rng: np.random.Generator, n_points: int, subdiv: int, radius_jitter=(0.72, 1.0)):
-    """A faceted unit-scale rock: convex hull of random points, outward-oriented, subdivided.
-
-    Returns ``(V (N, 3), F (M, 3), corner_idx (K,), corner_sharpness (K,))``; corners are the hull
-    vertices, ``sharpness`` = angle deficit (rad; high = pointed).
-    """
-    from scipy.spatial import ConvexHull
-
-    d = rng.normal(size=(n_points, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    P = d * rng.uniform(*radius_jitter, size=(n_points, 1))
-    hull = ConvexHull(P)
-    used = np.unique(hull.simplices)
-    remap = -np.ones(n_points, int)
-    remap[used] = np.arange(len(used))
-    V = P[used]
-    F = remap[hull.simplices]
-    ctr = V.mean(axis=0)
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
-    flip = np.sum(fn * (V[F].mean(axis=1) - ctr), axis=1) < 0
-    F[flip] = F[flip][:, ::-1]
-    # angle deficit at the hull vertices
-    ang_sum = np.zeros(len(V))
-    for k in range(3):
-        a = V[F[:, k]]
-        b = V[F[:, (k + 1) % 3]] - a
-        c = V[F[:, (k + 2) % 3]] - a
-        cosang = np.sum(b * c, 1) / (np.linalg.norm(b, axis=1) * np.linalg.norm(c, axis=1))
-        np.add.at(ang_sum, F[:, k], np.arccos(np.clip(cosang, -1, 1)))
-    sharp = 2 * np.pi - ang_sum
-    n_corner = len(V)
-    for _ in range(subdiv):
-        V, F = _subdivide(V, F)
-    return V, F, np.arange(n_corner), sharp
-
-
-@dataclass
-class Rock:
-    """A rock in the site frame. ``corner_idx`` indexes ``vertices`` (hull corners; candidates for sharp points)."""
-
-    name: str
-    centre_xy_m: np.ndarray  # (2,)
-    size_m: np.ndarray  # (3,) full extents: length, width, height above the buried part
-    vertices: np.ndarray  # (N, 3) site
-    triangles: np.ndarray  # (M, 3)
-    corner_idx: np.ndarray
-    corner_sharpness_rad: np.ndarray
-    albedo_scale: float
-    is_target: bool = False
-
-    @property
-    def radius_m(self) -> float:
-        return float(0.5 * max(self.size_m[0], self.size_m[1]))
-
-    @property
-    def top_site(self) -> np.ndarray:
-        """Highest vertex (min z) ``(3,)``."""
-        return self.vertices[np.argmin(self.vertices[:, 2])].copy()
-
-    def aim_point_site(self) -> np.ndarray:
-        """A point to point cameras at: the rock's centre (x, y), halfway up its visible part ``(3,)``."""
-        z_top = self.vertices[:, 2].min()
-        return np.array([self.centre_xy_m[0], self.centre_xy_m[1], z_top + 0.5 * self.size_m[2]])
-
-
-def make_rock(name, rng, lattice, field: HeightField, centre_xy, size_m, n_points, subdiv, rough_frac,
-              albedo_scale, is_target=False, sink_frac=0.3) -> Rock:
-    """A rock of visible extents ``size_m`` (length, width, height) at ``centre_xy`` on ``field``.
-
-    Hull of ``n_points`` random points, ``subdiv`` midpoint subdivisions, normal displacement of
-    ``rough_frac`` x size by fractal noise, random yaw and a small lean; ``sink_frac`` of the total
-    height is buried.
-    """
-    V, F, corners, sharp = hull_mesh(rng, n_points, subdiv)
-    size_m = np.asarray(size_m, float)
-    # unit hull spans about [-1, 1]; scale to the semi-axes (x: length, y: width, z: height incl. buried part)
-    lo, hi = V.min(axis=0), V.max(axis=0)
-    V = (V - (lo + hi) / 2) / ((hi - lo) / 2)  # exactly [-1, 1]
-    total_h = size_m[2] / (1 - sink_frac)
-    semi = np.array([size_m[0] / 2, size_m[1] / 2, total_h / 2])
-    V = V * semi
-    # roughness: displacement along the normal by fractal noise (cm-scale for big rocks)
-    nrm = vertex_normals(V, F)
-    rough = FractalNoise(lattice, rng, [0.08 * semi.max(), 0.03 * semi.max(), 0.012 * semi.max()], [1.0, 0.6, 0.35])
-    V = V + (rough_frac * semi.max() * 2.0 * rough(V))[:, None] * nrm
-    # V: x forward, y right, z UP (local). yaw about the vertical and a little lean
-    yaw = rng.uniform(0, 2 * np.pi)
-    lean = rng.normal(0, 0.06, size=2)
-    Rl = axis_angle_to_matrix([0, 0, 1], yaw) @ axis_angle_to_matrix([1, 0, 0], lean[0]) @ axis_angle_to_matrix([0, 1, 0], lean[1])
-    V = V @ Rl.T
-    V[:, 2] -= V[:, 2].min()  # bottom at 0 (local up)
-    cxy = np.asarray(centre_xy, float)
-    g = field.height_m(cxy[None])[0]
-    up = V[:, 2] - sink_frac * total_h  # bottom buried by sink_frac of the total height
-    site = np.empty_like(V)
-    site[:, 0] = V[:, 0] + cxy[0]
-    site[:, 1] = V[:, 1] + cxy[1]
-    site[:, 2] = -(g + up)
-    # actual visible extents
-    vis_h = float(up.max())
-    ext = np.array([np.ptp(V[:, 0]), np.ptp(V[:, 1]), vis_h])
-    return Rock(name, cxy, ext, site, F.astype(np.int64), corners, sharp, float(albedo_scale), is_target)
-
-
-# ----------------------------------------------------------------------------- appearance
-@dataclass
-class Appearance:
-    """Procedural albedo: per-material fractal noise + spots. Call :meth:`albedo`."""
-
-    soil: FractalNoise
-    sand: FractalNoise
-    rock: FractalNoise
-    spots: FractalNoise  # high-contrast specks (thresholded)
-    rock_spots: FractalNoise
-    patches: FractalNoise  # metre-scale albedo variation of the ground
-    sand_patches: np.ndarray  # (K, 3) x, y, radius_m of drift-sand patches
-    soil_albedo: float = 0.34
-    sand_albedo: float = 0.44
-    rock_albedo: float = 0.26
-    texture: Optional[object] = None  # a sim.texture.SurfaceTexture: real relative albedo replacing the soil's grain
-
-    def sand_weight(self, xy: np.ndarray) -> np.ndarray:
-        """0 (soil) .. 1 (drift sand) ``(N,)``: irregular patches (radius modulated by the angle) with a soft 4 cm edge."""
-        w = np.zeros(len(xy), np.float32)
-        for x, y, r in self.sand_patches:
-            near = np.flatnonzero((np.abs(xy[:, 0] - x) < 1.4 * r) & (np.abs(xy[:, 1] - y) < 1.4 * r))
-            if len(near) == 0:
-                continue
-            dx, dy = xy[near, 0] - x, xy[near, 1] - y
-            d = np.hypot(dx, dy)
-            a = np.arctan2(dy, dx)
-            k = 1000.0 * r  # fixed per patch: a deterministic wobble
-            rr = r * (1 + 0.12 * np.sin(3 * a + k) + 0.07 * np.sin(5 * a + 2 * k) + 0.04 * np.sin(11 * a + 3 * k))
-            w[near] = np.maximum(w[near], np.clip((rr - d) / 0.04, 0, 1).astype(np.float32))
-        return w
-
-    def albedo(self, P: np.ndarray, material: np.ndarray, obj_scale: np.ndarray, footprint_m: Optional[np.ndarray]) -> np.ndarray:
-        """Albedo ``(N,)`` float32 of surface points ``P`` ``(N, 3)`` site; ``material`` ``(N,)``; ``obj_scale`` ``(N,)``.
-
-        ``footprint_m`` ``(N,)`` (pixel footprint on the surface) fades octaves finer than a pixel; None = full detail.
-        """
-        N = P.shape[0]
-        out = np.zeros(N, np.float32)
-        f32 = np.float32
-
-        def sub(a, idx):
-            return None if a is None else a[idx]
-
-        ter = np.flatnonzero(material == MAT_TERRAIN)
-        if len(ter):
-            PT = np.ascontiguousarray(P[ter].T, np.float32)
-            f = sub(footprint_m, ter)
-            ws = self.sand_weight(P[ter, :2])
-            base = (1 - ws) * f32(self.soil_albedo) + ws * f32(self.sand_albedo)
-            base *= f32(1.0) + self.patches.eval_T(PT, f)
-            soil = np.flatnonzero(ws < 1)
-            tex = np.zeros(len(ter), np.float32)
-            if self.texture is not None:  # real texture: a function of the ground point (x, y), faded by the footprint
-                if len(soil):
-                    tex[soil] = self.texture.sample(PT[:2, soil].T, sub(f, soil))
-            elif len(soil) == len(ter):
-                tex = self.soil.eval_T(PT, f)
-            elif len(soil):
-                tex[soil] = self.soil.eval_T(np.ascontiguousarray(PT[:, soil]), sub(f, soil))
-            sel = np.flatnonzero(ws > 0)
-            if len(sel):
-                sand = self.sand.eval_T(np.ascontiguousarray(PT[:, sel]), sub(f, sel))
-                # wind ripples: ~9 cm crests across the prevailing wind, a little wavy (faded below the footprint)
-                x, y = PT[0, sel], PT[1, sel]
-                ph = f32(2 * np.pi / 0.09) * (f32(0.8) * x + f32(0.6) * y) + f32(1.5) * np.sin(f32(2 * np.pi / 0.7) * (f32(-0.6) * x + f32(0.8) * y))
-                rip = f32(0.07) * np.sin(ph)
-                if f is not None:
-                    rip *= lod_weight(0.09 / 4, f[sel])
-                tex[sel] = (1 - ws[sel]) * tex[sel] + ws[sel] * (sand + rip)
-            a = base * (f32(1.0) + tex)
-            if self.texture is None:  # the real texture carries its own specks
-                s = self.spots.eval_T(PT, f)  # ~[-0.5, 0.5]
-                dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
-                bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
-                a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
-            out[ter] = a
-        rk = np.flatnonzero((material == MAT_ROCK) | (material == MAT_PEBBLE))
-        if len(rk):
-            PT = np.ascontiguousarray(P[rk].T, np.float32)
-            f = sub(footprint_m, rk)
-            a = f32(self.rock_albedo) * obj_scale[rk].astype(np.float32) * (f32(1.0) + self.rock.eval_T(PT, f))
-            s = self.rock_spots.eval_T(PT, f)
-            bright = np.clip((s - f32(0.19)) / f32(0.05), 0, 1)
-            dark = np.clip((-s - f32(0.21)) / f32(0.05), 0, 1)
-            a = a * (1 - f32(0.6) * dark) + f32(0.4) * bright
-            out[rk] = a
-        return np.clip(out, 0.02, 0.98).astype(np.float32)
-
-
-def make_appearance(rng: np.random.Generator, sand_patches: np.ndarray) -> Appearance:
-    lattice = LatticeNoise(rng, 128)
-    soil = FractalNoise(lattice, rng, [0.0025, 0.005, 0.01, 0.02, 0.04, 0.09], [0.3, 0.32, 0.3, 0.25, 0.22, 0.18])
-    sand = FractalNoise(lattice, rng, [0.002, 0.004, 0.008, 0.02, 0.06], [0.22, 0.18, 0.14, 0.12, 0.12])
-    rock = FractalNoise(lattice, rng, [0.003, 0.006, 0.012, 0.025, 0.05, 0.1], [0.35, 0.4, 0.45, 0.5, 0.45, 0.3])
-    spots = FractalNoise(lattice, rng, [0.006, 0.012], [1.0, 0.5])
-    rock_spots = FractalNoise(lattice, rng, [0.005, 0.01, 0.02], [0.7, 0.6, 0.4])
-    patches = FractalNoise(lattice, rng, [0.3, 1.2, 5.0], [0.25, 0.3, 0.3])
-    return Appearance(soil, sand, rock, spots, rock_spots, patches, sand_patches)
-
-
-# ----------------------------------------------------------------------------- scene
 def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise dot products of ``(N, 3)`` arrays -> ``(N,)`` (no BLAS: cheap and thread-friendly)."""
     return np.einsum("ij,ij->i", a, b)

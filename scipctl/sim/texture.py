@@ -2,9 +2,9 @@
 :func:`texture_sources_from_pictures` chooses among the pictures).
 
 The texture is a property of the **surface**, not of an image: a periodic atlas of relative albedo
-``T(x, y)`` (dimensionless, mean ~0) in the site plane, sampled at every ray hit on the terrain, so every view
-of the same ground sees the same texture. The soil's albedo becomes ``base(x, y) (1 + T(x, y))`` (``base``: the
-procedural soil/sand level and metre-scale patchiness, unchanged); ``T`` replaces the procedural soil grain and
+``tex(x, y)`` (dimensionless, mean ~0) in the site plane, sampled at every ray hit on the terrain, so every view
+of the same ground sees the same texture. The soil's albedo becomes ``base(x, y) (1 + tex(x, y))`` (``base``: the
+procedural soil/sand level and metre-scale patchiness, unchanged); ``tex`` replaces the procedural soil grain and
 specks. Drift sand and rocks keep their procedural albedo.
 
 Building the atlas (:func:`build_surface_texture`), seeded by the scene seed:
@@ -28,7 +28,7 @@ Building the atlas (:func:`build_surface_texture`), seeded by the scene seed:
 Scale: one texture pixel is ``pixel_m`` on the ground (default 2.5 mm, a navcam's pixel at ~3 m). The source
 frames are perspective views, so their ground sampling varies over the crop and rows are foreshortened; the
 texture keeps those statistics (it is "real image texture", not an orthophoto). Shading of small relief in the
-sources is baked into ``T``.
+sources is baked into ``tex``.
 """
 
 from __future__ import annotations
@@ -231,7 +231,7 @@ class SurfaceTexture:
         return top * (1 - fr) + bot * fr
 
     def sample(self, xy: np.ndarray, footprint_m=None) -> np.ndarray:
-        """``T`` at site ``xy`` ``(N, 2)`` -> ``(N,)`` float32; ``footprint_m`` ``(N,)`` picks the pyramid level
+        """``tex`` at site ``xy`` ``(N, 2)`` -> ``(N,)`` float32; ``footprint_m`` ``(N,)`` picks the pyramid level
         (trilinear) whose pixel matches the sample's footprint; None: full detail."""
         rc = self.atlas_rc(xy)
         N = len(rc)

@@ -11,7 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from scipctl.core.camera import CameraModel, cahv_from_intrinsics, camera_frame
+from scipctl.core.camera import CameraModel, T_model_cam, cahv_from_intrinsics
 from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix
 from tests.models import pose
 
@@ -83,16 +83,16 @@ class Scene:
 
 
 def _distorted(m: CameraModel, R=(0.0, -0.12, 0.04), tilt=0.004) -> CameraModel:
-    T = camera_frame(m)
+    T_rover_cam = T_model_cam(m)
     o = np.array([np.sin(tilt), -0.5 * np.sin(tilt), 1.0])
-    return CameraModel("CAHVOR", m.C, m.A, m.H, m.V, O=T.R @ (o / np.linalg.norm(o)), R=list(R))
+    return CameraModel("CAHVOR", m.C, m.A, m.H, m.V, O=T_rover_cam.R @ (o / np.linalg.norm(o)), R=list(R))
 
 
 def _cahvore(m: CameraModel, tilt=0.004, e=(0.0005, 0.004, -0.002)) -> CameraModel:
     """A wide-angle, non-central CAHVORE (type 3, linearity 0.37) from a CAHV model."""
-    T = camera_frame(m)
+    T_rover_cam = T_model_cam(m)
     o = np.array([np.sin(tilt), -0.5 * np.sin(tilt), 1.0])
-    return CameraModel("CAHVORE", m.C, m.A, m.H, m.V, O=T.R @ (o / np.linalg.norm(o)), R=[0.0, -0.02, 0.004],
+    return CameraModel("CAHVORE", m.C, m.A, m.H, m.V, O=T_rover_cam.R @ (o / np.linalg.norm(o)), R=[0.0, -0.02, 0.004],
                        E=list(e), cahvore_type=3, linearity=0.37)
 
 

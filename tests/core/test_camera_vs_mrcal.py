@@ -25,9 +25,9 @@ MODELS = all_models()
 
 
 def _in_camera_frame(m):
-    from scipctl.core.camera import camera_frame
+    from scipctl.core.camera import T_model_cam
 
-    return m.transformed(camera_frame(m).inverse())
+    return m.transformed(T_model_cam(m).inverse())
 
 
 @pytest.mark.parametrize("name", ["CAHV", "CAHVOR"])

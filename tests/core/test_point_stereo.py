@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from scipctl.core.camera import camera_frame
+from scipctl.core.camera import T_model_cam
 from scipctl.core.point_stereo import DEFAULT_BAND_PX, default_band_px, point_stereo
 from scipctl.core.transforms import RigidTransform
 from tests.core.stereo_scenes import BASELINE_M, F_PX, H, W, rendered, to_uint8
@@ -55,10 +55,10 @@ def test_range_sigma_matches_disparity_formula():
 def test_epipolar_offset_measures_misaligned_right_model(pitch_px):
     """Rotate the right model about its x axis by ``pitch_px`` pixels: the match sits that far off the curve."""
     scene, left, right, L, R = rendered("CAHV")
-    T = camera_frame(right)
+    T_rover_cam = T_model_cam(right)
     ang = pitch_px / F_PX
-    rot = RigidTransform.rotation_about_line(T.R[:, 0], right.C, ang)
-    right_bad = right.transformed(rot)
+    T_bad_right = RigidTransform.rotation_about_line(T_rover_cam.R[:, 0], right.C, ang)
+    right_bad = right.transformed(T_bad_right)
     uv = (300.2, 280.6)
     X = scene.point_at(left, uv)[0]
     # truth: the real match is at right.project(X); the (wrong) curve passes through right_bad.project(X)

@@ -19,11 +19,11 @@ def _terrain(seed=0, n=60000):
 @pytest.mark.parametrize("method", ["point-to-plane", "generalized"])
 def test_icp_recovers_a_small_transform(method):
     tgt = _terrain(0)
-    T_true = RigidTransform(rotvec_to_matrix([0.01, -0.015, 0.02]), [0.03, -0.02, 0.015])  # T_target_source
-    src = T_true.inverse().apply(_terrain(1))  # a different sampling of the same surface
+    T_target_source_true = RigidTransform(rotvec_to_matrix([0.01, -0.015, 0.02]), [0.03, -0.02, 0.015])  # T_target_source
+    src = T_target_source_true.inverse().apply(_terrain(1))  # a different sampling of the same surface
     res = register_clouds(src, tgt, RigidTransform.identity(), method=method)
     P = np.array([[1.5, 0.3, -0.2], [2.0, 0.0, 0.0]])
-    err = np.linalg.norm(res.T_target_source.apply(P) - T_true.apply(P), axis=1).max()
+    err = np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P), axis=1).max()
     assert err < 0.003, f"{method}: residual {err * 1000:.2f} mm"
     assert res.fitness > 0.8
     assert res.correction_rad > 0.01
@@ -31,12 +31,12 @@ def test_icp_recovers_a_small_transform(method):
 
 def test_icp_uses_the_seed_and_crop():
     tgt = _terrain(0)
-    T_true = RigidTransform(rotvec_to_matrix([0.0, 0.0, 0.3]), [0.5, 0.2, 0.0])
-    src = T_true.inverse().apply(_terrain(1))
+    T_target_source_true = RigidTransform(rotvec_to_matrix([0.0, 0.0, 0.3]), [0.5, 0.2, 0.0])
+    src = T_target_source_true.inverse().apply(_terrain(1))
     seed = RigidTransform(rotvec_to_matrix([0.0, 0.0, 0.29]), [0.49, 0.21, 0.0])
     res = register_clouds(src, tgt, seed, crop_center_m=[2.0, 0.0, 0.0], crop_radius_m=1.2)
     P = np.array([[2.0, 0.0, 0.0]])
-    assert np.linalg.norm(res.T_target_source.apply(P) - T_true.apply(P)) < 0.003
+    assert np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P)) < 0.003
     with pytest.raises(ValueError):
         register_clouds(src[:10], tgt, seed)
 
@@ -44,11 +44,11 @@ def test_icp_uses_the_seed_and_crop():
 def test_a_perfect_seed_is_kept():
     """ICP on two samplings of one surface, seeded with the truth: it must not walk away (it cannot fit better)."""
     tgt = _terrain(0)
-    T_true = RigidTransform(rotvec_to_matrix([0.01, -0.015, 0.02]), [0.03, -0.02, 0.015])
-    src = T_true.inverse().apply(_terrain(1))
-    res = register_clouds(src, tgt, T_true, scales_m=(0.32, 0.16, 0.08, 0.04, 0.02))
+    T_target_source_true = RigidTransform(rotvec_to_matrix([0.01, -0.015, 0.02]), [0.03, -0.02, 0.015])
+    src = T_target_source_true.inverse().apply(_terrain(1))
+    res = register_clouds(src, tgt, T_target_source_true, scales_m=(0.32, 0.16, 0.08, 0.04, 0.02))
     P = np.array([[1.5, 0.3, -0.2], [2.0, 0.0, 0.0]])
-    assert np.linalg.norm(res.T_target_source.apply(P) - T_true.apply(P), axis=1).max() < 0.002
+    assert np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P), axis=1).max() < 0.002
     if res.kept_seed:
         assert res.correction_m == 0.0
 
@@ -78,13 +78,13 @@ def test_range_noise_gate_keeps_biased_far_target_points_out_of_the_fine_scales(
     d_est = fb / r - 0.1 + 0.1 * rng.normal(size=n)
     tgt = cam + rays / r[:, None] * (fb / d_est)[:, None]
     src_pts = surface[rng.permutation(n)[: n // 2]] + rng.normal(scale=0.001, size=(n // 2, 3))
-    T_true = RigidTransform(rotvec_to_matrix([0.004, -0.006, 0.03]), [0.12, -0.08, 0.02])  # a far seed's error
-    src = T_true.inverse().apply(src_pts)
+    T_target_source_true = RigidTransform(rotvec_to_matrix([0.004, -0.006, 0.03]), [0.12, -0.08, 0.02])  # a far seed's error
+    src = T_target_source_true.inverse().apply(src_pts)
     P = np.array([[1.2, 0.2, 0.0], [1.6, -0.4, 0.0], [1.0, 0.5, 0.0]])  # targets 1-2 m from the camera
     far = (0.32, 0.16, 0.08, 0.04, 0.02)
     plain = register_clouds(src, tgt, RigidTransform.identity(), scales_m=far)
     gated = register_clouds(src, tgt, RigidTransform.identity(), scales_m=far, target_noise=(cam, 0.25 / fb))
-    err = {name: np.linalg.norm(res.T_target_source.apply(P) - T_true.apply(P), axis=1).max()
+    err = {name: np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P), axis=1).max()
            for name, res in (("plain", plain), ("gated", gated))}
     # measured (seeds 4-7): plain 17-21 mm, gated 6.5-7.1 mm
     assert err["gated"] < 0.01 and err["gated"] < 0.5 * err["plain"], err

@@ -30,7 +30,7 @@ def test_bench_report_simulated_sol(benchmark, tmp_path):
     from scipctl.commands.report import build
     from scipctl.io.downlink import write_downlink
     from scipctl.io.workspace import open_source
-    from scipctl.sim.scenarios import build_run
+    from scipctl.sim.build import build_run
 
     sol = tmp_path / "paper-s1-straight.mcap"
     write_downlink(build_run("paper", "s1-straight", 0).downlink, sol)

@@ -2,8 +2,8 @@
 
 import pytest
 
+from scipctl.sim.build import build_run
 from scipctl.sim.errors import ErrorSettings
-from scipctl.sim.scenarios import build_run
 
 SMALL = 0.125  # 1024 -> 128 px
 

@@ -6,7 +6,7 @@ import pytest
 from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix, euler_zyx_to_matrix, matrix_to_euler_zyx
 from scipctl.sim.errors import DEG, ErrorSettings, estimate_poses, true_rover_config, vibration
 from scipctl.sim.rover import default_rover_config
-from scipctl.sim.scenarios import build_run
+from scipctl.sim.build import build_run
 
 from .conftest import SMALL
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from scipctl.sim.render import Sensor, auto_exposure, crop_model, expose, render_radiance, subpixel_offsets
-from scipctl.sim.scenarios import project_visible
+from scipctl.sim.marks import project_visible
 
 
 def _product(sim, stop, cam, eye):

@@ -8,7 +8,8 @@ from typer.testing import CliRunner
 
 from scipctl.cli import app
 from scipctl.io.downlink import downlink_differences, read_downlink
-from scipctl.sim.scenarios import plan_run, scene_for
+from scipctl.sim.build import scene_for
+from scipctl.sim.scenarios import plan_run
 
 runner = CliRunner()
 SMALL_ENV = {"SCIPCTL_SYNTH_IMAGE_SCALE": "0.125", "SCIPCTL_SYNTH_SUPERSAMPLE": "1"}

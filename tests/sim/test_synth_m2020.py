@@ -12,7 +12,8 @@ from scipctl.commands.synth import m2020_sim_rover
 from scipctl.io.downlink import read_downlink
 from scipctl.io.m2020_geometry import m2020_rover_config
 from scipctl.sim.rover import scale_model
-from scipctl.sim.scenarios import plan_run, scene_for
+from scipctl.sim.build import scene_for
+from scipctl.sim.scenarios import plan_run
 from tests.io.real_data import real
 
 runner = CliRunner()

@@ -14,9 +14,10 @@ from scipctl.commands.synth import read_texture_sources
 from scipctl.core.camera import cahv_from_intrinsics
 from scipctl.core.transforms import RigidTransform
 from scipctl.io.downlink import read_downlink
-from scipctl.sim import scenarios
+from scipctl.sim import build as sim_build
+from scipctl.sim.appearance import MAT_TERRAIN
 from scipctl.sim.render import render_radiance
-from scipctl.sim.scene import MAT_TERRAIN, make_scene
+from scipctl.sim.scene import make_scene
 from scipctl.sim.texture import OVERLAP_PX, PATCH_PX, build_surface_texture, patch_pixels, relative_contrast
 from tests.io.real_data import real
 
@@ -132,7 +133,7 @@ def test_synth_with_texture_validates_records_the_sources_and_repeats_bytes(tmp_
     folder = real("05_")
     outs = []
     for name in ("a", "b"):
-        monkeypatch.setattr(scenarios, "_SCENES", {})  # rebuild the scene and its atlas from scratch each time
+        monkeypatch.setattr(sim_build, "_SCENES", {})  # rebuild the scene and its atlas from scratch each time
         r = runner.invoke(app, ["synth", "--seed", "1", "--runs", "s1-straight", "--texture-from", str(folder),
                                 "-o", str(tmp_path / name), "--json"], env=SMALL_ENV)
         assert r.exit_code == 0, r.stderr
@@ -147,7 +148,7 @@ def test_synth_with_texture_validates_records_the_sources_and_repeats_bytes(tmp_
         p.name: sha256_file(p) for p in sorted(folder.glob("*.IMG"))}
     assert f"--texture-from {folder}" in rec["written_by"]["regenerate"]
     # the texture changes the pixels, not the geometry: same poses and marks as without it
-    monkeypatch.setattr(scenarios, "_SCENES", {})
+    monkeypatch.setattr(sim_build, "_SCENES", {})
     r = runner.invoke(app, ["synth", "--seed", "1", "--runs", "s1-straight", "-o", str(tmp_path / "plain")], env=SMALL_ENV)
     assert r.exit_code == 0, r.stderr
     plain = read_downlink(tmp_path / "plain" / "paper-s1-straight.mcap")

@@ -7,7 +7,7 @@ seed 1, default errors, every camera at half size (512 x 512), no supersampling.
 import sys
 
 from scipctl.io.downlink import write_downlink
-from scipctl.sim.scenarios import build_run
+from scipctl.sim.build import build_run
 
 if __name__ == "__main__":
     sim = build_run("traverse", "s1-straight", 1, image_scale=0.5, supersample=1)

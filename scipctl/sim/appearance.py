@@ -1,0 +1,119 @@
+"""Appearance: procedural Lambertian albedo of the scene's surfaces (pure numerics).
+
+The albedo is a function of the 3-D surface point (multi-octave 3-D value noise with
+per-material statistics and high-contrast spots), so it is the same from every
+viewpoint. Drift-sand patches (with wind ripples) replace the soil near the target
+rock. ``MAT_*`` are the material ids the albedo dispatches on (the scene's ray casts
+report them). Points ``(N, 3)`` site frame metres.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Optional
+
+import numpy as np
+
+from .noise import FractalNoise, LatticeNoise, lod_weight
+
+MAT_SKY, MAT_TERRAIN, MAT_ROCK, MAT_PEBBLE = -1, 0, 1, 2
+
+
+@dataclass
+class Appearance:
+    """Procedural albedo: per-material fractal noise + spots. Call :meth:`albedo`."""
+
+    soil: FractalNoise
+    sand: FractalNoise
+    rock: FractalNoise
+    spots: FractalNoise  # high-contrast specks (thresholded)
+    rock_spots: FractalNoise
+    patches: FractalNoise  # metre-scale albedo variation of the ground
+    sand_patches: np.ndarray  # (K, 3) x, y, radius_m of drift-sand patches
+    soil_albedo: float = 0.34
+    sand_albedo: float = 0.44
+    rock_albedo: float = 0.26
+    texture: Optional[object] = None  # a sim.texture.SurfaceTexture: real relative albedo replacing the soil's grain
+
+    def sand_weight(self, xy: np.ndarray) -> np.ndarray:
+        """0 (soil) .. 1 (drift sand) ``(N,)``: irregular patches (radius modulated by the angle) with a soft 4 cm edge."""
+        w = np.zeros(len(xy), np.float32)
+        for x, y, r in self.sand_patches:
+            near = np.flatnonzero((np.abs(xy[:, 0] - x) < 1.4 * r) & (np.abs(xy[:, 1] - y) < 1.4 * r))
+            if len(near) == 0:
+                continue
+            dx, dy = xy[near, 0] - x, xy[near, 1] - y
+            d = np.hypot(dx, dy)
+            a = np.arctan2(dy, dx)
+            k = 1000.0 * r  # fixed per patch: a deterministic wobble
+            rr = r * (1 + 0.12 * np.sin(3 * a + k) + 0.07 * np.sin(5 * a + 2 * k) + 0.04 * np.sin(11 * a + 3 * k))
+            w[near] = np.maximum(w[near], np.clip((rr - d) / 0.04, 0, 1).astype(np.float32))
+        return w
+
+    def albedo(self, P: np.ndarray, material: np.ndarray, obj_scale: np.ndarray, footprint_m: Optional[np.ndarray]) -> np.ndarray:
+        """Albedo ``(N,)`` float32 of surface points ``P`` ``(N, 3)`` site; ``material`` ``(N,)``; ``obj_scale`` ``(N,)``.
+
+        ``footprint_m`` ``(N,)`` (pixel footprint on the surface) fades octaves finer than a pixel; None = full detail.
+        """
+        N = P.shape[0]
+        out = np.zeros(N, np.float32)
+        f32 = np.float32
+
+        def sub(a, idx):
+            return None if a is None else a[idx]
+
+        ter = np.flatnonzero(material == MAT_TERRAIN)
+        if len(ter):
+            PT = np.ascontiguousarray(P[ter].T, np.float32)
+            f = sub(footprint_m, ter)
+            ws = self.sand_weight(P[ter, :2])
+            base = (1 - ws) * f32(self.soil_albedo) + ws * f32(self.sand_albedo)
+            base *= f32(1.0) + self.patches.eval_T(PT, f)
+            soil = np.flatnonzero(ws < 1)
+            tex = np.zeros(len(ter), np.float32)
+            if self.texture is not None:  # real texture: a function of the ground point (x, y), faded by the footprint
+                if len(soil):
+                    tex[soil] = self.texture.sample(PT[:2, soil].T, sub(f, soil))
+            elif len(soil) == len(ter):
+                tex = self.soil.eval_T(PT, f)
+            elif len(soil):
+                tex[soil] = self.soil.eval_T(np.ascontiguousarray(PT[:, soil]), sub(f, soil))
+            sel = np.flatnonzero(ws > 0)
+            if len(sel):
+                sand = self.sand.eval_T(np.ascontiguousarray(PT[:, sel]), sub(f, sel))
+                # wind ripples: ~9 cm crests across the prevailing wind, a little wavy (faded below the footprint)
+                x, y = PT[0, sel], PT[1, sel]
+                ph = f32(2 * np.pi / 0.09) * (f32(0.8) * x + f32(0.6) * y) + f32(1.5) * np.sin(f32(2 * np.pi / 0.7) * (f32(-0.6) * x + f32(0.8) * y))
+                rip = f32(0.07) * np.sin(ph)
+                if f is not None:
+                    rip *= lod_weight(0.09 / 4, f[sel])
+                tex[sel] = (1 - ws[sel]) * tex[sel] + ws[sel] * (sand + rip)
+            a = base * (f32(1.0) + tex)
+            if self.texture is None:  # the real texture carries its own specks
+                s = self.spots.eval_T(PT, f)  # ~[-0.5, 0.5]
+                dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
+                bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
+                a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
+            out[ter] = a
+        rk = np.flatnonzero((material == MAT_ROCK) | (material == MAT_PEBBLE))
+        if len(rk):
+            PT = np.ascontiguousarray(P[rk].T, np.float32)
+            f = sub(footprint_m, rk)
+            a = f32(self.rock_albedo) * obj_scale[rk].astype(np.float32) * (f32(1.0) + self.rock.eval_T(PT, f))
+            s = self.rock_spots.eval_T(PT, f)
+            bright = np.clip((s - f32(0.19)) / f32(0.05), 0, 1)
+            dark = np.clip((-s - f32(0.21)) / f32(0.05), 0, 1)
+            a = a * (1 - f32(0.6) * dark) + f32(0.4) * bright
+            out[rk] = a
+        return np.clip(out, 0.02, 0.98).astype(np.float32)
+
+
+def make_appearance(rng: np.random.Generator, sand_patches: np.ndarray) -> Appearance:
+    lattice = LatticeNoise(rng, 128)
+    soil = FractalNoise(lattice, rng, [0.0025, 0.005, 0.01, 0.02, 0.04, 0.09], [0.3, 0.32, 0.3, 0.25, 0.22, 0.18])
+    sand = FractalNoise(lattice, rng, [0.002, 0.004, 0.008, 0.02, 0.06], [0.22, 0.18, 0.14, 0.12, 0.12])
+    rock = FractalNoise(lattice, rng, [0.003, 0.006, 0.012, 0.025, 0.05, 0.1], [0.35, 0.4, 0.45, 0.5, 0.45, 0.3])
+    spots = FractalNoise(lattice, rng, [0.006, 0.012], [1.0, 0.5])
+    rock_spots = FractalNoise(lattice, rng, [0.005, 0.01, 0.02], [0.7, 0.6, 0.4])
+    patches = FractalNoise(lattice, rng, [0.3, 1.2, 5.0], [0.25, 0.3, 0.3])
+    return Appearance(soil, sand, rock, spots, rock_spots, patches, sand_patches)
