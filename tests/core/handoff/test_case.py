@@ -42,8 +42,10 @@ def test_threaded_registration_equals_serial(make_handoff_scene):
         for nc in ("near", "far"):
             a = run_method(threaded.cases[nc], "mesh-registration", t.nav_uv[nc])
             b = run_method(serial.cases[nc], "mesh-registration", t.nav_uv[nc])
-            np.testing.assert_array_equal(a.uv, b.uv)
-            assert a.diagnostics["icp_fitness"] == b.diagnostics["icp_fitness"]
+            # Open3D's ICP reduces in parallel: the same registration differs run to run in the last bits (measured
+            # <= 2.2e-14 relative on the unchanged code, docs/stereo-and-tracking.md); 1e-9 is far below a pixel
+            np.testing.assert_allclose(a.uv, b.uv, rtol=1e-9, atol=0)
+            assert a.diagnostics["icp_fitness"] == pytest.approx(b.diagnostics["icp_fitness"], rel=1e-9)
             assert "whole_reg_future" not in threaded.cases[nc]._cache
 
 
