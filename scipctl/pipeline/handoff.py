@@ -79,11 +79,11 @@ def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=Non
     haz_view = _view(dl, haz, 0.3, 6.0, ds)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m
     setup = HandoffSetup(haz, nr, fr)
     if nr is not None:
-        T = T_roverB_roverA(haz.pose, nr.pose) if nr.position != haz.position else RigidTransform.identity()
-        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.8, 30.0, ds), haz_view, T, params)
+        T_roverhaz_rovernav = T_roverB_roverA(haz.pose, nr.pose) if nr.position != haz.position else RigidTransform.identity()
+        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.8, 30.0, ds), haz_view, T_roverhaz_rovernav, params)
     if fr is not None:
-        T = T_roverB_roverA(haz.pose, fr.pose)
-        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.8, 30.0, ds), haz_view, T, params)
+        T_roverhaz_rovernav = T_roverB_roverA(haz.pose, fr.pose)
+        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.8, 30.0, ds), haz_view, T_roverhaz_rovernav, params)
     return setup
 
 

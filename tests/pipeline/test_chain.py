@@ -10,6 +10,7 @@ from scipctl.core.windows import extract_window, scale_window, window_scale_for_
 from scipctl.io.downlink import read_downlink
 from scipctl.pipeline.chain import ChainParams, run_chain
 from scipctl.pipeline.plane_warp import plane_warped_template
+from tests.pipeline.chain_expected import EXPECTED_ERROR_PX  # the measured bounds and how they were measured
 
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLES = [ROOT / "sample_sols/mcap/paper-s1-straight.mcap", ROOT / "sample_sols/mcap/paper-s1-arc.mcap"]
@@ -72,28 +73,6 @@ def test_plane_warped_template_matches_the_next_view(dl):
         checked += 1
     if checked == 0:
         pytest.skip("no flat/sand/contrast target marked in two navcam stops")
-
-
-# Error against the mark at each step after the designation (pancam 4.5 m, navcam handoff, navcam ~3 m, navcam
-# ~1.7 m, hazcam), run_chain with its defaults from the first pancam mark. Each bound is the largest error measured
-# over four runs of the locked stack -- OpenCV 5.0.0 and 4.14.0, the designation moved by 0.01 px, and +-1 DN of
-# seeded noise on every image (a thread count changes no bit: test_chain_stability.py) -- times 1.25, rounded up
-# to 0.5 px. The measured range is beside each (docs/stereo-and-tracking.md, "Reproducibility").
-# None: that step is not checked (flagged unverified; see the flags test).
-EXPECTED_ERROR_PX = {
-    "paper-s1-straight": {
-        # pancam 21 px, flagged unverified; the handoff starts from 10 m. Measured: -, 0.29-0.51, 1.11-1.45,
-        # 4.10-5.53, 2.10-3.25 px
-        "t1": [None, 1.0, 2.0, 7.0, 4.5],
-        # measured: 1.66-1.95, 0.46-0.57, 1.99-2.68, 6.49-8.33, 3.51-4.52 px
-        "t2": [2.5, 1.0, 3.5, 10.5, 6.0],
-    },
-    "paper-s1-arc": {
-        # pancam: the feature match alone (NCC peaks 17 px away), flagged; the handoff starts from 10 m, and its
-        # 2-3 px grow with each zoom. Measured: -, 2.22-2.62, 4.00-4.68, 12.81-14.09, 8.10-9.11 px
-        "t1": [None, 3.5, 6.0, 18.0, 11.5],
-    },
-}
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 
 from scipctl.io.downlink import read_downlink
 from scipctl.pipeline.chain import run_chain
-from tests.pipeline.test_chain import EXPECTED_ERROR_PX
+from tests.pipeline.chain_expected import EXPECTED_ERROR_PX
 
 cv2 = pytest.importorskip("cv2")
 

@@ -86,10 +86,10 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
         nav_view = None
         for st in plan.stops[1:]:
             if sid < 0:
-                T_true = st.T_site_rover
+                T_site_rover_true = st.T_site_rover
             else:
                 dxy, dyaw = mc.errors[st.index]
-                T_true = perturb_pose(st.T_site_rover, dxy[sid:sid + 1], dyaw[sid:sid + 1])[0]
+                T_site_rover_true = perturb_pose(st.T_site_rover, dxy[sid:sid + 1], dyaw[sid:sid + 1])[0]
             for sh in st.cameras:
                 kind = "track"
                 if st.kind == "pancam-navcam-handoff" and sh.camera == "navcam":
@@ -118,7 +118,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                         continue
                 m_bel = rover_config.camera_model(sh.camera, "left", pan or 0.0, tilt or 0.0)
                 uv_pred = m_bel.project(Xr_est[None])[0]
-                m_true = m_bel.transformed(T_true)  # site frame, true pose
+                m_true = m_bel.transformed(T_site_rover_true)  # site frame, true pose
                 uv_true = m_true.project(Xs[None])[0]
                 if not (np.all(np.isfinite(uv_true)) and np.all(np.isfinite(uv_pred))):
                     rec["reason"] = "target behind the camera"
@@ -165,7 +165,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                 o, d = m_true.unproject(uv_tr[None])
                 hit = terrain.cast(o, d)
                 X_hit = hit.points[0] if hit.hit[0] else Xs
-                X_est = st.T_site_rover.apply(T_true.inverse().apply(X_hit))
+                X_est = st.T_site_rover.apply(T_site_rover_true.inverse().apply(X_hit))
                 prev = {"img": view.image, "origin": view.origin_uv, "uv": uv_tr, "model": m_true,
                         "range": float(np.linalg.norm(X_hit - m_true.C))}
                 if sh.camera == "navcam":

@@ -71,14 +71,14 @@ def terrain_sources(dl, position, cameras=STEREO_CAMERAS, downsample: int = 2, t
         L = im.pixels_float()
         ds = dense_stereo(L, right.pixels_float(), im.camera_model, right.camera_model,
                           min_range_m=lo, max_range_m=hi, downsample=downsample)
-        T = im.pose.T_site_rover
+        T_site_rover = im.pose.T_site_rover
         xyz = ds.xyz
         flat = xyz.reshape(-1, 3)
         ok = np.all(np.isfinite(flat), axis=1)
         xs = np.full_like(flat, np.nan)
-        xs[ok] = T.apply(flat[ok])
-        out.append(TerrainSource(im.product_id, im.camera, xs.reshape(xyz.shape), L, im.camera_model.transformed(T),
-                                 T.apply(ds.rectified.left_model.C), _PRIORITY.get(im.camera, 9)))
+        xs[ok] = T_site_rover.apply(flat[ok])
+        out.append(TerrainSource(im.product_id, im.camera, xs.reshape(xyz.shape), L, im.camera_model.transformed(T_site_rover),
+                                 T_site_rover.apply(ds.rectified.left_model.C), _PRIORITY.get(im.camera, 9)))
     return out
 
 

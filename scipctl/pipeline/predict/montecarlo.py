@@ -81,14 +81,14 @@ def sample_pose_errors(plan: ApproachPlan, up: UncertaintyParams, sigma_position
     return out
 
 
-def _true_pose_arrays(T_believed: RigidTransform, dxy, dyaw):
-    """R (n, 3, 3), t (n, 3) of ``T_believed @ Exp(dxy, dyaw)``."""
+def _true_pose_arrays(T_site_rover_believed: RigidTransform, dxy, dyaw):
+    """R (n, 3, 3), t (n, 3) of ``T_site_rover_believed @ Exp(dxy, dyaw)``."""
     n = len(dyaw)
     c, s = np.cos(dyaw), np.sin(dyaw)
     Rz = np.zeros((n, 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
-    R = T_believed.R[None] @ Rz
-    t = T_believed.t[None] + np.c_[dxy, np.zeros(n)] @ T_believed.R.T
+    R = T_site_rover_believed.R[None] @ Rz
+    t = T_site_rover_believed.t[None] + np.c_[dxy, np.zeros(n)] @ T_site_rover_believed.R.T
     return R, t
 
 
@@ -123,7 +123,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     for st in plan.stops[1:]:
         dxy, dyaw = errors[st.index]
         R_true, t_true = _true_pose_arrays(st.T_site_rover, dxy, dyaw)
-        Tinv_b = st.T_site_rover.inverse()
+        T_rover_site_believed = st.T_site_rover.inverse()
         X_true_rover = np.einsum("nji,nj->ni", R_true, X_T[None] - t_true)  # R^T (X - t)
         last_est = None
         for sh in st.cameras:
@@ -133,7 +133,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
                 continue
             spec = rover_config.spec(sh.camera, "left")
             m = rover_config.camera_model(sh.camera, "left", sh.pan_rad or 0.0, sh.tilt_rad or 0.0)
-            uv_pred = m.project(Tinv_b.apply(X_est))
+            uv_pred = m.project(T_rover_site_believed.apply(X_est))
             uv_true = m.project(X_true_rover)
             uv_nom = np.asarray(sh.uv, float)
             shift = uv_pred - uv_nom

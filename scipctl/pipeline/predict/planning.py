@@ -198,7 +198,7 @@ def clearance_of(poses_xy_yaw: list, rocks_xy: np.ndarray, target_xy: np.ndarray
     min_rock, worst = np.inf, None
     min_tgt = np.inf
     R = np.asarray(rocks_xy, float).reshape(-1, 2)
-    T = np.asarray(target_xy, float).reshape(2)
+    target_xy_site = np.asarray(target_xy, float).reshape(2)
     for xy, yaw in poses_xy_yaw:
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, s], [-s, c]])  # site -> rover (2-D)
@@ -211,7 +211,7 @@ def clearance_of(poses_xy_yaw: list, rocks_xy: np.ndarray, target_xy: np.ndarray
                 k = int(np.argmin(d))
                 if d[k] < min_rock:
                     min_rock, worst = float(d[k]), R[near][k].tolist()
-        dt = float(body.distance(((T - xy) @ rot.T)[None])[0])
+        dt = float(body.distance(((target_xy_site - xy) @ rot.T)[None])[0])
         min_tgt = min(min_tgt, dt)
     return {"min_rock_m": float(min_rock), "min_target_m": float(min_tgt), "worst_rock_xy": worst}
 
@@ -232,17 +232,17 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
     """
     p = (params or ApproachParams()).check()
     chain_params = chain_params or ChainParams()
-    T = np.asarray(target_site_m, float).reshape(3)
+    X_target_site = np.asarray(target_site_m, float).reshape(3)
     S = start.T_site_rover.t[:2]
-    d_start = float(np.linalg.norm(T[:2] - S))
-    direct = math.atan2(T[1] - S[1], T[0] - S[0])
+    d_start = float(np.linalg.norm(X_target_site[:2] - S))
+    direct = math.atan2(X_target_site[1] - S[1], X_target_site[0] - S[0])
     rocks = (terrain.rock_cells(p.rock_cell_m, p.ground_window_m, p.rock_height_m)
              if terrain is not None else np.zeros((0, 2)))
     candidates = []
     for db in p.detour_bearings_rad:
         if d_start <= p.pancam_handoff_m and abs(db) > 1e-9:
             continue  # too close for a detour leg
-        plan = _plan_bearing(start, T, terrain, rover_config, p, direct + db, db, rocks, designation_camera,
+        plan = _plan_bearing(start, X_target_site, terrain, rover_config, p, direct + db, db, rocks, designation_camera,
                              chain_params)
         candidates.append(plan)
         if not plan.clearance["blocked"]:
@@ -250,18 +250,18 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
     return candidates[0]
 
 
-def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, designation_camera,
+def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detour, rocks, designation_camera,
                   chain_params: ChainParams) -> ApproachPlan:
     S = start.T_site_rover.t[:2].copy()
     u = np.array([math.cos(bearing), math.sin(bearing)])
-    d_start = float(np.linalg.norm(T[:2] - S))
+    d_start = float(np.linalg.norm(X_target_site[:2] - S))
     d_final = p.final_distance_m
-    F = T[:2] - d_final * u
+    F = X_target_site[:2] - d_final * u
     if abs(detour) < 1e-9:
         poly = np.array([S, F])
     else:
         d_w = min(p.pancam_handoff_m, 0.8 * d_start)
-        W = T[:2] - d_w * u
+        W = X_target_site[:2] - d_w * u
         poly = np.array([S, W, F])
     dists = stop_distances(d_start, p, designation_camera)
     start_plane = _plane_of(start.T_site_rover)
@@ -275,12 +275,12 @@ def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, de
         if kind == "final":
             pt, s, seg = F, _polyline_length(poly), len(poly) - 2
         else:
-            r = _point_on_polyline_at_distance(poly, T[:2], dist, s_prev)
+            r = _point_on_polyline_at_distance(poly, X_target_site[:2], dist, s_prev)
             if r is None:
                 continue
             pt, s, seg = r
         seg_yaw = math.atan2(poly[seg + 1][1] - poly[seg][1], poly[seg + 1][0] - poly[seg][0])
-        facing = math.atan2(T[1] - pt[1], T[0] - pt[0])
+        facing = math.atan2(X_target_site[1] - pt[1], X_target_site[0] - pt[0])
         heading = facing if kind in ("navcam-hazcam-handoff", "hazcam", "final") else seg_yaw
         # path from the previous stop: vertices of the polyline between s_prev and s
         seg_path = [prev_xy] + [poly[i] for i in range(1, len(poly) - 1) if s_prev < _arc(poly, i) < s] + [pt]
@@ -297,7 +297,7 @@ def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, de
             if pl is not None:
                 plane, known = pl, True
         Tsr = pose_on_plane(pt, heading, plane)
-        stops.append(PlannedStop(k, kind, float(np.linalg.norm(T[:2] - pt)), Tsr, heading, float(s - s_prev), turn,
+        stops.append(PlannedStop(k, kind, float(np.linalg.norm(X_target_site[:2] - pt)), Tsr, heading, float(s - s_prev), turn,
                                  tilt_rad=tilt_of(Tsr), terrain_known=known,
                                  path_from_previous=[np.asarray(q, float).tolist() for q in seg_path]))
         path_pts.extend(seg_path[1:])
@@ -307,14 +307,14 @@ def _plan_bearing(start, T, terrain, rover_config, p, bearing, detour, rocks, de
     path_xy = np.array(path_pts).reshape(-1, 2)
     pts, yaws = _sample_path_poses(path_xy, p.path_step_m)
     swept = [(pts[i], yaws[i]) for i in range(len(pts))] + turn_poses + [(stops[-1].T_site_rover.t[:2], stops[-1].heading_rad)]
-    cl = clearance_of(swept, rocks, T[:2], p.body)
+    cl = clearance_of(swept, rocks, X_target_site[:2], p.body)
     cl["blocked"] = bool(cl["min_rock_m"] < p.rock_keep_out_m or cl["min_target_m"] < p.target_keep_out_m)
     cl["terrain_known_fraction"] = terrain.known_fraction_along(pts) if terrain is not None else 0.0
     cl["rock_cells"] = int(len(rocks))
-    plan = ApproachPlan(T, start, float(bearing), float(detour), stops, path_xy, _polyline_length(path_xy), cl, p,
+    plan = ApproachPlan(X_target_site, start, float(bearing), float(detour), stops, path_xy, _polyline_length(path_xy), cl, p,
                         designation_camera)
     for st in plan.stops[1:]:
-        st.cameras = [_shot(rover_config, st, c, T, chain_params) for c in _cameras_for(st.kind)]
+        st.cameras = [_shot(rover_config, st, c, X_target_site, chain_params) for c in _cameras_for(st.kind)]
     return plan
 
 
