@@ -265,23 +265,19 @@ def geometry_from_pds4(path: Path) -> tuple[ProductGeometry, Optional[Pds4Array]
         # coordinate spaces: resolve local references by local_identifier
         defs = _kids(geo, "Coordinate_Space_Definition")
         by_local: dict = {}
-        present: list = []
+        present: list = []  # (index, definition, its frame), in label order
         for i, d in enumerate(defs):
             f = f"geom:Coordinate_Space_Definition[{i}]"
             ind = _path(d, "Coordinate_Space_Present", "Coordinate_Space_Indexed")
             if ind is None:
                 continue
             frame = r.frame_ref(ind, f"{f}.Coordinate_Space_Present")
-            present.append(frame)
+            present.append((i, d, frame))
             for lid in _kids(d, "local_identifier"):
                 if lid.text:
                     by_local[lid.text.strip()] = frame
-        for i, d in enumerate(defs):
+        for i, d, frame in present:  # references may point forward: resolved once every local name is known
             f = f"geom:Coordinate_Space_Definition[{i}]"
-            ind = _path(d, "Coordinate_Space_Present", "Coordinate_Space_Indexed")
-            if ind is None:
-                continue
-            frame = r.frame_ref(ind, f"{f}.Coordinate_Space_Present")
             ref_el = _kid(d, "Coordinate_Space_Reference")
             ref = None
             if ref_el is not None:

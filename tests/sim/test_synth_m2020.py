@@ -15,6 +15,7 @@ from scipctl.sim.rover import scale_model
 from scipctl.sim.build import scene_for
 from scipctl.sim.scenarios import plan_run
 from tests.io.real_data import real
+from tests.sim.marks_check import count_exact_marks
 
 runner = CliRunner()
 SCALE = 0.125
@@ -57,16 +58,7 @@ def test_m2020_marks_are_the_exact_projection_of_the_true_targets(m2020_run):
     folder, out, _ = m2020_run
     dl = read_downlink(out / "paper-s1-straight.mcap")
     scene = scene_for(plan_run("paper", "s1-straight", 1, m2020_sim_rover(folder)))
-    n = 0
-    for tm in dl.targets:
-        X = dl.truth_target(tm.id).xyz_site_m
-        for m in tm.marks:
-            tr = dl.truth_for(m.product_id)
-            uv = tr.camera_model.project(tr.pose.T_site_rover.inverse().apply(X[None]))[0]
-            assert np.hypot(uv[0] - m.u, uv[1] - m.v) < 1e-6
-            o, d = tr.camera_model.transformed(tr.pose.T_site_rover).unproject(np.array([[m.u, m.v]]))
-            assert np.linalg.norm(scene.cast(o, d).points[0] - X) < 1e-3
-            n += 1
+    n = count_exact_marks(dl, scene)
     assert len(dl.targets) == 3 and n >= 3 * 6  # every target in both eyes of the 3 key pairs at least
 
 
