@@ -47,14 +47,14 @@ def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site,
     uv = np.asarray(uv, float)
     shape = uv.shape[:-1]
     o, d = prod.camera_model.unproject(uv.reshape(-1, 2))
-    T_new = prod.pose.T_site_rover
-    o_s, d_s = T_new.apply(o), T_new.rotate(d)
+    T_site_rovernew = prod.pose.T_site_rover
+    o_s, d_s = T_site_rovernew.apply(o), T_site_rovernew.rotate(d)
     with np.errstate(divide="ignore", invalid="ignore"):
         t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
     P_s = o_s + t[:, None] * d_s
     P_s[~(t > 0)] = np.nan
-    P_prev = prev.pose.T_site_rover.inverse().apply(P_s)
-    uv_prev = prev.camera_model.project(P_prev)
+    P_roverprev = prev.pose.T_site_rover.inverse().apply(P_s)
+    uv_prev = prev.camera_model.project(P_roverprev)
     return bilinear_sample(prev.pixels_float(), uv_prev).reshape(shape)
 
 

@@ -143,8 +143,9 @@ def _cameras_for(kind: str) -> list:
     }[kind]
 
 
-def _point_on_polyline_at_distance(poly: np.ndarray, T_xy: np.ndarray, dist: float, s_from: float = 0.0):
-    """First point (arc length s >= s_from) of the polyline ``poly`` (N, 2) at horizontal ``dist`` from ``T_xy``.
+def _point_on_polyline_at_distance(poly: np.ndarray, target_xy_site: np.ndarray, dist: float, s_from: float = 0.0):
+    """First point (arc length s >= s_from) of the polyline ``poly`` (N, 2) at horizontal ``dist`` from
+    ``target_xy_site``.
 
     Returns ``(point (2,), s, segment index)`` or None.
     """
@@ -155,8 +156,8 @@ def _point_on_polyline_at_distance(poly: np.ndarray, T_xy: np.ndarray, dist: flo
         if L < 1e-12:
             continue
         u = (b - a) / L
-        # |a + t u - T|^2 = dist^2
-        w = a - T_xy
+        # |a + t u - target_xy_site|^2 = dist^2
+        w = a - target_xy_site
         bq = 2 * np.dot(u, w)
         cq = np.dot(w, w) - dist * dist
         disc = bq * bq - 4 * cq
@@ -296,9 +297,9 @@ def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detou
             pl, _, _ = terrain.ground_plane(guess, p.body, p.rock_cell_m)
             if pl is not None:
                 plane, known = pl, True
-        Tsr = pose_on_plane(pt, heading, plane)
-        stops.append(PlannedStop(k, kind, float(np.linalg.norm(X_target_site[:2] - pt)), Tsr, heading, float(s - s_prev), turn,
-                                 tilt_rad=tilt_of(Tsr), terrain_known=known,
+        T_site_rover = pose_on_plane(pt, heading, plane)
+        stops.append(PlannedStop(k, kind, float(np.linalg.norm(X_target_site[:2] - pt)), T_site_rover, heading,
+                                 float(s - s_prev), turn, tilt_rad=tilt_of(T_site_rover), terrain_known=known,
                                  path_from_previous=[np.asarray(q, float).tolist() for q in seg_path]))
         path_pts.extend(seg_path[1:])
         s_prev, prev_xy, prev_yaw = s, pt, heading
