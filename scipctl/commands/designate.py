@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import math
 import sys
 
-from ..errors import CommandFailed, InputError
+from ..errors import CommandFailed
 from .output import emit_json, note, stderr_console
 
 
@@ -14,6 +13,7 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.designate import designate as designate_target, parse_pixel, pick_left_product
+    from .params import designation_params
 
     uv = parse_pixel(pixel)
     source = open_source(src, products_root=products_root)
@@ -27,9 +27,8 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
         while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
             n += 1
         target_id = f"d{n}"
-    if band_px is not None and not (math.isfinite(band_px) and band_px > 0):
-        raise InputError("--band-px", "band_px", f"must be a positive finite number, got {band_px}")
-    rec = designate_target(dl, left, uv, band_px=band_px, target_id=target_id)
+    params = designation_params(band_px)
+    rec = designate_target(dl, left, uv, target_id=target_id, params=params)
     rec["provenance"] = provenance({"downlink": str(src)})
     if not rec["ok"]:
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec['reason']}",

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from ..errors import InputError
@@ -52,13 +51,11 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.designate import parse_pixel
-    from ..core.handoff import HandoffParams
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
+    from .params import handoff_params, success_threshold
 
-    params = HandoffParams(dense_downsample=2 if fast else 1)
-
-    if not (math.isfinite(success_px) and success_px > 0):
-        raise InputError("--success-px", "success_px", f"must be a positive finite number, got {success_px}")
+    params = handoff_params(fast)
+    success_px = success_threshold(success_px)
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
     names, navcams, pairs = _parse_methods(methods)

@@ -81,11 +81,9 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     out = Path(out)
     if out.exists() and out.is_dir():
         raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
-    from ..pipeline.operator_sigmas import uncertainty_params
-    from ..pipeline.report_data import ReportParams
+    from .params import report_params
 
-    unc = uncertainty_params(sigma_position_m, sigma_yaw_deg).uncertainty
-    params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad)
+    params = report_params(sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
     con = stderr_console()
     with con.status("report", spinner="dots") as st:

@@ -16,14 +16,14 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     (exit 1, no sequence) when a flight rule is broken."""
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
-    from ..pipeline.operator_sigmas import uncertainty_params
     from ..pipeline.sequence import FORMATTERS, broken
     from ..pipeline.target_sequence import make_sequence
+    from .params import predict_params
 
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
-    params = uncertainty_params(sigma_position_m, sigma_yaw_deg)
+    params = predict_params(sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
     doc, checks, pred, record = make_sequence(source, target, params=params)
     summary = {

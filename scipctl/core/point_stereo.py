@@ -31,16 +31,56 @@ from .ncc import default_min_std, local_maxima, ncc_region, refine_subpixel_peak
 from .triangulation import triangulate_rays
 from .windows import crop_window
 
-__all__ = ["DEFAULT_BAND_PX", "default_band_px", "PointStereoResult", "point_stereo"]
+__all__ = ["DEFAULT_BAND_PX", "PointStereoParams", "PointStereoResult", "point_stereo"]
 
 #: Epipolar band half-widths (px) per camera: wide enough for the ~4 px
 #: misalignment the paper saw on pancams, ~1 px (x 3 margin) on navcams.
 DEFAULT_BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
 
 
-def default_band_px(camera: str) -> float:
-    """Band half-width (px) for a camera name (``pancam``, ``navcam``, ``hazcam``; others: 6)."""
-    return DEFAULT_BAND_PX.get(str(camera).lower(), 6.0)
+@dataclass(frozen=True)
+class PointStereoParams:
+    """Per-camera band half-width and window of point stereo at a chosen pixel (:func:`point_stereo`'s
+    ``band_px`` and ``window_px``): a designation (``scipctl designate``) and each step of the tracking chain.
+
+    A camera not in a dict takes the ``other_*`` value (e.g. ``mastcamz`` from PDS products). These are
+    the values the designation and the chain have always used; the calibration-health figures of the report
+    use their own instance (``scipctl.pipeline.report_data.ReportParams.calibration_stereo``).
+    """
+
+    band_px: dict = field(default_factory=lambda: dict(DEFAULT_BAND_PX))
+    window_px: dict = field(default_factory=lambda: {"pancam": 21, "navcam": 21, "hazcam": 21})
+    other_band_px: float = 4.0
+    other_window_px: int = 11
+
+    @classmethod
+    def with_band(cls, band_px: float) -> "PointStereoParams":
+        """The defaults with one band half-width for every camera (an operator's ``--band-px``)."""
+        return cls(band_px={}, other_band_px=float(band_px))
+
+    def check(self) -> "PointStereoParams":
+        """Raise ValueError naming the first bad field; return self."""
+        for name, values, fallback, integer in (("band_px", self.band_px, self.other_band_px, False),
+                                                ("window_px", self.window_px, self.other_window_px, True)):
+            if not isinstance(values, dict):
+                raise ValueError(f"PointStereoParams.{name}: expected a {{camera: value}} dict, got {values!r}")
+            for cam, v in list(values.items()) + [("other cameras", fallback)]:
+                if integer:
+                    ok = isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= 3
+                else:
+                    ok = isinstance(v, (int, float, np.number)) and not isinstance(v, bool) and np.isfinite(v) and v >= 0
+                if not ok:
+                    what = "an integer >= 3" if integer else "a finite number >= 0"
+                    raise ValueError(f"PointStereoParams.{name}[{cam!r}]: must be {what}, got {v!r}")
+        return self
+
+    def band(self, camera: str) -> float:
+        """Band half-width (px) for ``camera``."""
+        return self.band_px.get(camera, self.other_band_px)
+
+    def window(self, camera: str) -> int:
+        """Correlation window side (px) for ``camera``."""
+        return self.window_px.get(camera, self.other_window_px)
 
 
 @dataclass(frozen=True)
@@ -116,7 +156,7 @@ def point_stereo(
         The left pixel (sub-pixel allowed).
     band_px : float
         Half-width of the search band around the epipolar curve (right
-        pixels); see :data:`DEFAULT_BAND_PX` / :func:`default_band_px`.
+        pixels); see :class:`PointStereoParams` (per camera).
     window_px : int
         Side of the correlation window (odd; an even value is increased by 1).
         Near the image border the window is clipped to the image (at least

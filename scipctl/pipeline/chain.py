@@ -26,7 +26,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..core.point_stereo import DEFAULT_BAND_PX
+from ..core.point_stereo import PointStereoParams
 from ..model import Downlink, ImageProduct, InputError
 from .plane_warp import local_normals_site, plane_warped_template, plane_warped_view, render_through_plane
 from ..jsonutil import finite_or_none
@@ -76,22 +76,18 @@ class ChainParams:
     feature_confirm_px: float = 8.0
     # confirmed candidates whose NCC positions lie within this of the best-scoring one are pooled (weighted by score)
     feature_agree_px: float = 2.0
-    # point stereo at each tracked pixel: epipolar band half-widths (one home: core.point_stereo.DEFAULT_BAND_PX)
-    band_px: dict = field(default_factory=lambda: dict(DEFAULT_BAND_PX))
-    stereo_window_px: dict = field(default_factory=lambda: {"pancam": 21, "navcam": 21, "hazcam": 21})
+    # point stereo at each tracked pixel: the designation's band and window per camera
+    point_stereo: PointStereoParams = field(default_factory=PointStereoParams)
     other_template_half_px: int = 15
     other_search_radius_px: float = 60.0
     other_context_half_px: int = 100
-    other_band_px: float = 4.0
-    other_stereo_window_px: int = 11
 
     def check(self) -> "ChainParams":
         """Raise ValueError naming the first bad field; return self."""
         _per_camera("template_half_px", self.template_half_px, self.other_template_half_px, 1, integer=True)
         _per_camera("search_radius_px", self.search_radius_px, self.other_search_radius_px, 0.0)
         _per_camera("context_half_px", self.context_half_px, self.other_context_half_px, 1, integer=True)
-        _per_camera("band_px", self.band_px, self.other_band_px, 0.0)
-        _per_camera("stereo_window_px", self.stereo_window_px, self.other_stereo_window_px, 3, integer=True)
+        self.point_stereo.check()
         for name in ("fine_radius_px", "feature_fine_radius_px", "feature_local_px", "feature_confirm_px",
                      "feature_agree_px"):
             v = getattr(self, name)
@@ -123,10 +119,10 @@ class ChainParams:
         return self.context_half_px.get(camera, self.other_context_half_px)
 
     def band(self, camera: str) -> float:
-        return self.band_px.get(camera, self.other_band_px)
+        return self.point_stereo.band(camera)
 
     def stereo_window(self, camera: str) -> int:
-        return self.stereo_window_px.get(camera, self.other_stereo_window_px)
+        return self.point_stereo.window(camera)
 
 
 @dataclass

@@ -6,13 +6,11 @@ from typing import Optional
 
 import numpy as np
 
+from ..core.point_stereo import PointStereoParams
 from ..jsonutil import finite_or_none
 from ..model import Downlink, ImageProduct, InputError
 
-# epipolar search band half-width per camera (px): wide enough for the ~4 px pancam misalignment
-DEFAULT_BAND_PX = {"pancam": 6.0, "navcam": 3.0, "hazcam": 3.0}
-WINDOW_PX = {"pancam": 21, "navcam": 21, "hazcam": 21}
-EDGE_MARGIN_PX = 20
+EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warned about
 
 
 def pick_left_product(dl: Downlink, product_id: Optional[str], camera: Optional[str]) -> ImageProduct:
@@ -54,19 +52,24 @@ def surface_normal(xyz: np.ndarray, centre: np.ndarray, radius_m: float) -> tupl
     return n, len(pts)
 
 
-def designate(dl: Downlink, left: ImageProduct, uv, band_px: Optional[float] = None,
-              target_id: str = "t1", with_normal: bool = True) -> dict:
-    """Point stereo at ``uv`` in ``left``; returns the designation record (raises InputError / NoMatch)."""
+def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
+              params: Optional[PointStereoParams] = None) -> dict:
+    """Point stereo at ``uv`` in ``left``; returns the designation record (raises InputError).
+
+    ``params``: the per-camera band and window (default :class:`PointStereoParams`, checked; an operator's
+    ``--band-px`` is :meth:`PointStereoParams.with_band`).
+    """
     from ..core.point_stereo import point_stereo
 
+    params = (params or PointStereoParams()).check()
     uv = np.asarray(uv, float)
     if not (-0.5 <= uv[0] <= left.width - 0.5 and -0.5 <= uv[1] <= left.height - 0.5):
         raise InputError(left.product_id, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the {left.width}x{left.height} image")
     right = dl.stereo_pair(left)
     if right is None:
         raise InputError(left.product_id, "eye", f"no right-eye {left.camera} image taken with it: cannot do stereo")
-    band = DEFAULT_BAND_PX.get(left.camera, 4.0) if band_px is None else float(band_px)
-    win = WINDOW_PX.get(left.camera, 11)
+    band = float(params.band(left.camera))
+    win = params.window(left.camera)
     L = left.pixels_float()
     R = right.pixels_float()
     ps = point_stereo(L, R, left.camera_model, right.camera_model, uv, band_px=band, window_px=win)

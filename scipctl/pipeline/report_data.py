@@ -18,6 +18,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..core.point_stereo import PointStereoParams
 from ..model import Downlink, InputError
 
 SAT_WARN = 0.01  # saturated fraction above which an image is flagged
@@ -40,6 +41,25 @@ class ReportParams:
     calib_points_per_pair: int = 5
     sigma_position_m: Optional[float] = None  # pose-error sigmas for the prediction (None: from the downlink)
     sigma_yaw_rad: Optional[float] = None
+    # point stereo on textured points for the calibration-health offsets: a 15 px pancam window, 11 px for the
+    # other cameras, and a 6 px band for cameras other than pancam/navcam/hazcam (the band is looked up by the
+    # lower-cased camera name, the window by the name as given)
+    calibration_stereo: PointStereoParams = field(default_factory=lambda: PointStereoParams(
+        window_px={"pancam": 15}, other_window_px=11, other_band_px=6.0))
+
+    def check(self) -> "ReportParams":
+        """Raise ValueError naming the first bad field; return self."""
+        for name, lo in (("chip_half_px", 1), ("n_track_samples", 0), ("n_mc_samples", 1), ("calib_points_per_pair", 0)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+                raise ValueError(f"ReportParams.{name}: must be an integer >= {lo}, got {v!r}")
+        for name in ("sigma_position_m", "sigma_yaw_rad"):
+            v = getattr(self, name)
+            if v is not None and not (isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                                      and v >= 0):
+                raise ValueError(f"ReportParams.{name}: must be a number >= 0 or None, got {v!r}")
+        self.calibration_stereo.check()
+        return self
 
 
 @dataclass
@@ -132,9 +152,12 @@ def _texture_points(img: np.ndarray, n: int, margin: int = 40) -> np.ndarray:
     return np.zeros((0, 2)) if pts is None else pts.reshape(-1, 2).astype(float)
 
 
-def calibration_health(dl: Downlink, points_per_pair: int = 5) -> dict:
-    """Epipolar offsets per stereo pair (point stereo on textured points; and from marks) and a mast bias estimate."""
-    from ..core.point_stereo import default_band_px, point_stereo
+def calibration_health(dl: Downlink, points_per_pair: int = 5, stereo: Optional[PointStereoParams] = None) -> dict:
+    """Epipolar offsets per stereo pair (point stereo on textured points, with ``stereo``'s band and window,
+    default :attr:`ReportParams.calibration_stereo`; and from marks) and a mast bias estimate."""
+    from ..core.point_stereo import point_stereo
+
+    stereo = (stereo or ReportParams().calibration_stereo).check()
 
     pairs = []
     for im in sorted(dl.images, key=lambda i: i.time_s):
@@ -148,7 +171,7 @@ def calibration_health(dl: Downlink, points_per_pair: int = 5) -> dict:
         for uv in _texture_points(L, points_per_pair):
             try:
                 ps = point_stereo(L, R, im.camera_model, right.camera_model, uv,
-                                  band_px=default_band_px(im.camera), window_px=15 if im.camera == "pancam" else 11)
+                                  band_px=stereo.band(str(im.camera).lower()), window_px=stereo.window(im.camera))
             except ValueError:
                 continue
             if ps.ok and np.isfinite(ps.epipolar_offset_px):
@@ -409,7 +432,7 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
     """All report content for a downlink (see the module docstring). ``progress(str)`` is called as work proceeds."""
     from .predict import PredictParams, Terrain, UncertaintyParams, predict_target, resolve_target, terrain_sources
 
-    p = params or ReportParams()
+    p = (params or ReportParams()).check()
     dl = source_dl
     say = progress or (lambda s: None)
     secs = {}
@@ -479,7 +502,7 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
     # ---- calibration and images
     t0 = time.perf_counter()
     say("calibration health")
-    data["calibration"] = calibration_health(dl, p.calib_points_per_pair)
+    data["calibration"] = calibration_health(dl, p.calib_points_per_pair, p.calibration_stereo)
     data["image_stats"] = image_stats(dl)
     secs["calibration"] = time.perf_counter() - t0
 

@@ -4,15 +4,38 @@ import numpy as np
 import pytest
 
 from scipctl.core.camera import T_model_cam
-from scipctl.core.point_stereo import DEFAULT_BAND_PX, default_band_px, point_stereo
+from scipctl.core.point_stereo import DEFAULT_BAND_PX, PointStereoParams, point_stereo
 from scipctl.core.transforms import RigidTransform
 from tests.core.stereo_scenes import BASELINE_M, F_PX, H, W, rendered, to_uint8
 
 
-def test_default_band():
-    assert default_band_px("pancam") >= 4.0  # the paper saw up to 4 px off the epipolar line on pancams
-    assert default_band_px("navcam") == DEFAULT_BAND_PX["navcam"]
-    assert default_band_px("something") == 6.0
+def test_default_band_and_window_per_camera():
+    p = PointStereoParams().check()
+    assert p.band("pancam") >= 4.0  # the paper saw up to 4 px off the epipolar line on pancams
+    assert p.band("navcam") == DEFAULT_BAND_PX["navcam"] and p.band("hazcam") == DEFAULT_BAND_PX["hazcam"]
+    assert p.band("mastcamz") == p.other_band_px == 4.0  # a camera not named: the fallback
+    assert p.window("navcam") == 21 and p.window("mastcamz") == p.other_window_px == 11
+    assert PointStereoParams().band_px is not PointStereoParams().band_px  # no shared mutable default
+
+
+def test_an_operators_band_is_every_cameras_band():
+    p = PointStereoParams.with_band(5).check()
+    assert [p.band(c) for c in ("pancam", "navcam", "hazcam", "other")] == [5.0] * 4
+    assert p.window("pancam") == PointStereoParams().window("pancam")  # windows unchanged
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"other_band_px": -1.0}, "PointStereoParams.band_px['other cameras']: must be a finite number >= 0, got -1.0"),
+    ({"band_px": {"pancam": float("nan")}}, "PointStereoParams.band_px['pancam']: must be a finite number >= 0"),
+    ({"band_px": {"navcam": True}}, "PointStereoParams.band_px['navcam']"),
+    ({"window_px": {"navcam": 2}}, "PointStereoParams.window_px['navcam']: must be an integer >= 3, got 2"),
+    ({"other_window_px": 11.0}, "PointStereoParams.window_px['other cameras']: must be an integer >= 3"),
+    ({"band_px": [6.0]}, "PointStereoParams.band_px: expected a {camera: value} dict"),
+])
+def test_bad_params_name_the_field(kw, message):
+    with pytest.raises(ValueError) as e:
+        PointStereoParams(**kw).check()
+    assert str(e.value).startswith(message)
 
 
 POINTS = [(256.0, 300.0), (100.4, 350.2), (420.7, 330.9), (300.2, 220.6), (150.0, 200.0)]

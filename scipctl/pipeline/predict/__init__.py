@@ -48,10 +48,6 @@ re-exported here: ``from scipctl.pipeline import predict as P; P.Terrain``.
 """
 
 from .params import (
-    FOV_MARGIN_PX,
-    LOST_M,
-    MIN_SUCCESS_PX,
-    SUCCESS_M,
     ApproachParams,
     ArmWorkspace,
     PredictParams,
@@ -77,7 +73,6 @@ from .from_downlink import STEREO_CAMERAS, TargetContext, resolve_target, sigmas
 from .prediction import Designation, PoseSigmas, Prediction, confidence_of, predict_target, run_prediction
 
 __all__ = [
-    "FOV_MARGIN_PX", "LOST_M", "MIN_SUCCESS_PX", "SUCCESS_M",
     "ApproachParams", "ArmWorkspace", "PredictParams", "RoverBody", "UncertaintyParams",
     "perturb_pose", "pose_on_plane", "scaled_model", "tilt_of", "yaw_of",
     "RayHits", "RenderedView", "Terrain", "TerrainSource", "grid_mesh", "smooth_grid",

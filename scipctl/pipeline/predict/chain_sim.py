@@ -13,7 +13,7 @@ from ...core.camera import CameraModel
 from ...core.kinematics import RoverConfig
 from .geometry import perturb_pose
 from .montecarlo import McResult
-from .params import FOV_MARGIN_PX, LOST_M, MIN_SUCCESS_PX, SUCCESS_M, PredictParams
+from .params import PredictParams
 from .planning import ApproachPlan
 from .terrain import Terrain
 
@@ -124,7 +124,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                     rec["reason"] = "target behind the camera"
                     lost = True
                     continue
-                margin = FOV_MARGIN_PX.get(sh.camera, 20)
+                margin = plan.params.fov_margin(sh.camera)
                 if not (margin <= uv_true[0] <= spec.width - 1 - margin and margin <= uv_true[1] <= spec.height - 1 - margin):
                     rec["reason"] = "out of the field of view"
                     lost = True
@@ -149,12 +149,12 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                     continue
                 err = float(np.hypot(*(uv_tr - uv_true)))
                 rng_t = float(np.linalg.norm(Xs - m_true.C))
-                tol = success_px(m_true, rng_t, sh.camera)
+                tol = success_px(m_true, rng_t, sh.camera, params)
                 rec["error_px"] = err
                 rec["error_m"] = err * rng_t / m_true.hs
                 rec["tolerance_px"] = tol
                 rec["ok"] = err <= tol
-                rec["kept"] = rec["error_m"] <= LOST_M
+                rec["kept"] = rec["error_m"] <= params.lost_m
                 if not rec["ok"]:
                     rec["reason"] = f"drift: tracked {100 * rec['error_m']:.1f} cm from the target ({err:.1f} px, tolerance {tol:.1f} px)"
                 if not rec["kept"]:
@@ -188,9 +188,10 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     return ChainResult(samples, per_view)
 
 
-def success_px(model: CameraModel, range_m: float, camera: str) -> float:
-    """Tracking tolerance (px) at ``range_m``: ``SUCCESS_M[camera]`` on the surface (at least ``MIN_SUCCESS_PX``)."""
-    return float(max(MIN_SUCCESS_PX, SUCCESS_M.get(camera, 0.01) * model.hs / max(range_m, 1e-6)))
+def success_px(model: CameraModel, range_m: float, camera: str, params: PredictParams) -> float:
+    """Tracking tolerance (px) at ``range_m``: ``params.success_of(camera)`` on the surface (at least
+    ``params.min_success_px``)."""
+    return float(max(params.min_success_px, params.success_of(camera) * model.hs / max(range_m, 1e-6)))
 
 
 def _p_given_visible(vals, key):

@@ -11,7 +11,7 @@ import numpy as np
 
 from ...core.kinematics import RoverConfig
 from ...core.transforms import RigidTransform
-from .params import FOV_MARGIN_PX, UncertaintyParams
+from .params import UncertaintyParams
 from .planning import ApproachPlan
 from .terrain import Terrain
 
@@ -104,7 +104,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     ``uv_pred``. Pointing is the nominal one plus the re-pointing shift
     ``uv_pred - uv_nominal`` (first order in the small pointing change).
     A view is ok when the re-pointed true pixel is inside the image (margin
-    ``FOV_MARGIN_PX``), within the tracker's search radius of ``uv_pred``
+    ``plan.params.fov_margin``), within the tracker's search radius of ``uv_pred``
     (square region), and the line of sight is not occluded by the terrain.
     At the final pose the rover drives so that its estimate sits at the
     workspace centre; the true target must be inside the arm workspace.
@@ -138,7 +138,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
             uv_nom = np.asarray(sh.uv, float)
             shift = uv_pred - uv_nom
             rep = uv_true - shift
-            margin = FOV_MARGIN_PX.get(sh.camera, 20)
+            margin = plan.params.fov_margin(sh.camera)
             fin = np.all(np.isfinite(rep), axis=1) & np.all(np.isfinite(uv_pred), axis=1)
             with np.errstate(invalid="ignore"):
                 in_fov = fin & (rep[:, 0] >= margin) & (rep[:, 0] <= spec.width - 1 - margin) & \

@@ -1,6 +1,6 @@
 """Parameters of the pre-uplink prediction: the arm workspace and rover footprint models, the approach
-planning, the pose-error model and the prediction as a whole (each with ``check()``), and the fixed criteria
-a tracked pixel is judged by."""
+planning (with the field-of-view margins), the pose-error model and the prediction as a whole (with the
+criteria a tracked pixel is judged by), each with ``check()``."""
 
 from __future__ import annotations
 
@@ -12,14 +12,6 @@ import numpy as np
 
 from ...core.handoff import HandoffParams
 from ..chain import ChainParams
-
-FOV_MARGIN_PX = {"pancam": 24, "navcam": 20, "hazcam": 20}
-# a tracked pixel is accurate when it lies this close to the target on the surface (the paper's goal is 1 cm
-# at the hazcams), or within MIN_SUCCESS_PX; farther than LOST_M the chain has lost the target
-SUCCESS_M = {"pancam": 0.02, "navcam": 0.02, "hazcam": 0.01}
-MIN_SUCCESS_PX = 1.0
-LOST_M = 0.05
-
 
 def _check_number(owner: str, name: str, v, lo: float = -math.inf, hi: float = math.inf, lo_open: bool = False,
                   integer: bool = False, none_ok: bool = False, lo_name: str = "") -> None:
@@ -126,6 +118,10 @@ class ApproachParams:
     target_keep_out_m: float = 0.25
     arm: ArmWorkspace = field(default_factory=ArmWorkspace)
     body: RoverBody = field(default_factory=RoverBody)
+    # a target is in view when its pixel is at least this far inside the image (px, per camera; other cameras:
+    # other_fov_margin_px); the planner, the Monte Carlo and the chain simulation all judge views by it
+    fov_margin_px: dict = field(default_factory=lambda: {"pancam": 24, "navcam": 20, "hazcam": 20})
+    other_fov_margin_px: int = 20
 
     def check(self) -> "ApproachParams":
         """Raise ValueError naming the first bad field; return self."""
@@ -151,6 +147,11 @@ class ApproachParams:
         _check_number(c, "ground_window_m", self.ground_window_m, 0.0, lo_open=True)
         _check_number(c, "rock_keep_out_m", self.rock_keep_out_m, 0.0)
         _check_number(c, "target_keep_out_m", self.target_keep_out_m, 0.0)
+        if not isinstance(self.fov_margin_px, dict):
+            raise ValueError(f"{c}.fov_margin_px: expected a {{camera: px}} dict, got {self.fov_margin_px!r}")
+        for cam, v in self.fov_margin_px.items():
+            _check_number(c, f"fov_margin_px[{cam!r}]", v, 0, integer=True)
+        _check_number(c, "other_fov_margin_px", self.other_fov_margin_px, 0, integer=True)
         self.arm.check()
         self.body.check()
         return self
@@ -158,6 +159,10 @@ class ApproachParams:
     @property
     def final_distance_m(self) -> float:
         return self.arm.centre_m if self.standoff_m is None else float(self.standoff_m)
+
+    def fov_margin(self, camera: str) -> int:
+        """The field-of-view margin (px) of ``camera``."""
+        return self.fov_margin_px.get(camera, self.other_fov_margin_px)
 
 
 @dataclass(frozen=True)
@@ -217,9 +222,19 @@ class PredictParams:
     risk_probability: float = 0.9  # a stop/handoff whose probability is below this is at risk
     run_chain: bool = True
     search_margin_px: float = 40.0  # chain sim: rendered search region = true offset + this (see docs)
+    # a tracked pixel is accurate when it lies within success_m of the target on the surface (per camera; the
+    # paper's goal is 1 cm at the hazcams), or within min_success_px; farther than lost_m the chain has lost it
+    success_m: dict = field(default_factory=lambda: {"pancam": 0.02, "navcam": 0.02, "hazcam": 0.01})
+    other_success_m: float = 0.01
+    min_success_px: float = 1.0
+    lost_m: float = 0.05
     # the chain simulation runs with the on-board chain's windows and the navcam->hazcam handoff's expected window
     chain: ChainParams = field(default_factory=ChainParams)
     handoff: HandoffParams = field(default_factory=HandoffParams)
+
+    def success_of(self, camera: str) -> float:
+        """The accuracy goal (m, on the surface) of a tracked pixel in ``camera``."""
+        return self.success_m.get(camera, self.other_success_m)
 
     def check(self) -> "PredictParams":
         """Raise ValueError naming the first bad field (nested ones too); return self."""
@@ -238,6 +253,13 @@ class PredictParams:
         _check_number(c, "max_foreshortening_change", self.max_foreshortening_change, 1.0)
         _check_number(c, "risk_probability", self.risk_probability, 0.0, 1.0)
         _check_number(c, "search_margin_px", self.search_margin_px, 0.0)
+        if not isinstance(self.success_m, dict):
+            raise ValueError(f"{c}.success_m: expected a {{camera: m}} dict, got {self.success_m!r}")
+        for cam, v in self.success_m.items():
+            _check_number(c, f"success_m[{cam!r}]", v, 0.0, lo_open=True)
+        _check_number(c, "other_success_m", self.other_success_m, 0.0, lo_open=True)
+        _check_number(c, "min_success_px", self.min_success_px, 0.0)
+        _check_number(c, "lost_m", self.lost_m, 0.0, lo_open=True)
         self.chain.check()
         # the two HandoffParams fields the chain simulation uses (HandoffParams lives in core.handoff)
         _check_number(c, "handoff.template_half_px", self.handoff.template_half_px, 1, integer=True)

@@ -15,7 +15,7 @@ from ...core.transforms import RigidTransform
 # the planned shots carry the on-board chain's window sizes
 from ..chain import ChainParams
 from .geometry import _wrap, pose_on_plane, tilt_of, yaw_of
-from .params import FOV_MARGIN_PX, ApproachParams, RoverBody
+from .params import ApproachParams, RoverBody
 from .terrain import Terrain
 
 
@@ -315,7 +315,7 @@ def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detou
     plan = ApproachPlan(X_target_site, start, float(bearing), float(detour), stops, path_xy, _polyline_length(path_xy), cl, p,
                         designation_camera)
     for st in plan.stops[1:]:
-        st.cameras = [_shot(rover_config, st, c, X_target_site, chain_params) for c in _cameras_for(st.kind)]
+        st.cameras = [_shot(rover_config, st, c, X_target_site, p, chain_params) for c in _cameras_for(st.kind)]
     return plan
 
 
@@ -343,7 +343,7 @@ def camera_model_at(rover_config: RoverConfig, camera: str, eye: str, pan_rad, t
     return rover_config.camera_model(camera, eye, pan_rad or 0.0, tilt_rad or 0.0).transformed(T_site_rover)
 
 
-def _shot(rover_config: RoverConfig, stop: PlannedStop, camera: str, target_site,
+def _shot(rover_config: RoverConfig, stop: PlannedStop, camera: str, target_site, params: ApproachParams,
           chain_params: ChainParams) -> CameraShot:
     Xr = stop.T_site_rover.inverse().apply(np.asarray(target_site, float))
     cam = rover_config.cameras.get(camera)
@@ -360,7 +360,7 @@ def _shot(rover_config: RoverConfig, stop: PlannedStop, camera: str, target_site
     m = rover_config.camera_model(camera, "left", pan or 0.0, tilt or 0.0)
     uv = m.project(Xr[None])[0]
     rng = float(np.linalg.norm(Xr - m.C))
-    margin = FOV_MARGIN_PX.get(camera, 20)
+    margin = params.fov_margin(camera)
     ok = bool(np.all(np.isfinite(uv)) and margin <= uv[0] <= spec.width - 1 - margin
               and margin <= uv[1] <= spec.height - 1 - margin)
     return CameraShot(camera, pan, tilt, uv.tolist() if np.all(np.isfinite(uv)) else None, rng, ok,

@@ -13,7 +13,7 @@ from ...core.kinematics import RoverConfig
 from .chain_sim import ChainResult, simulate_chain
 from .from_downlink import sigmas_for, target_context, terrain_sources
 from .montecarlo import McResult, monte_carlo
-from .params import SUCCESS_M, PredictParams
+from .params import PredictParams
 from .planning import ApproachPlan, plan_approach
 from .risks import Risk, assess_risks, foreshortening_changes
 from .terrain import Terrain
@@ -131,7 +131,7 @@ def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_c
         acc = {"nominal_final_error_m": nom[0].final_error_m if nom else None,
                "mean_final_error_m": float(np.mean(kept)) if kept else None,
                "max_final_error_m": float(np.max(kept)) if kept else None, "samples_kept": len(kept),
-               "goal_m": SUCCESS_M["hazcam"]}
+               "goal_m": params.success_of("hazcam")}
     return Prediction(target_id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigmas.source, notes,
                       secs, acc, terrain)
 

@@ -15,7 +15,7 @@ def test_chain_on_exact_terrain_keeps_the_slab_target(slab_case):
     nominal = [s for s in pred.chain.samples if s.sample < 0][0]
     assert nominal.ok
     for st in nominal.steps:
-        assert st["kept"] and st["error_m"] is not None and st["error_m"] < P.LOST_M
+        assert st["kept"] and st["error_m"] is not None and st["error_m"] < params.lost_m
     # the surface point is the true target (exact terrain)
     assert np.linalg.norm(pred.surface_point_site - S.TARGET_SLAB_SITE) < 0.01
     assert pred.accuracy["nominal_final_error_m"] < 0.02

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from scipctl.pipeline import predict as P
+from scipctl.core.point_stereo import PointStereoParams
 from scipctl.pipeline.chain import ChainParams
 from tests.pipeline.predict.helpers import start_pose
 
@@ -45,7 +46,14 @@ BAD = [
     (P.PredictParams(uncertainty=P.UncertaintyParams(seed=-1)), "UncertaintyParams.seed: must be an integer >= 0"),
     (P.PredictParams(chain=ChainParams(fine_radius_px=0.0)), "ChainParams.fine_radius_px: must be a number > 0"),
     (ChainParams(template_half_px={"pancam": 20, "navcam": 0}), "ChainParams.template_half_px['navcam']: must be an integer >= 1"),
-    (ChainParams(other_band_px=-1.0), "ChainParams.band_px['other cameras']: must be a number >= 0.0"),
+    (ChainParams(point_stereo=PointStereoParams(other_band_px=-1.0)),
+     "PointStereoParams.band_px['other cameras']: must be a finite number >= 0"),
+    (P.ApproachParams(fov_margin_px={"pancam": -1}), "ApproachParams.fov_margin_px['pancam']: must be an integer >= 0"),
+    (P.ApproachParams(other_fov_margin_px=2.5), "ApproachParams.other_fov_margin_px: must be an integer >= 0"),
+    (P.PredictParams(success_m={"hazcam": 0.0}), "PredictParams.success_m['hazcam']: must be a number > 0"),
+    (P.PredictParams(other_success_m=float("inf")), "PredictParams.other_success_m: must be a number > 0"),
+    (P.PredictParams(min_success_px=-1.0), "PredictParams.min_success_px: must be a number >= 0"),
+    (P.PredictParams(lost_m=0.0), "PredictParams.lost_m: must be a number > 0"),
     (ChainParams(feature_step_factors=()), "ChainParams.feature_step_factors: must be a non-empty tuple"),
     (ChainParams(feature_candidates=((0.15, "affine", 6),)), "ChainParams.feature_candidates: each must be"),
 ]
@@ -76,3 +84,29 @@ def test_planned_shots_carry_the_chain_windows(rc, flat_terrain):
         assert (sh.template_half_px, sh.search_radius_px) == (cp.template_half_px[sh.camera], cp.search_radius_px[sh.camera])
     for sh in (sh for st in default.stops[1:] for sh in st.cameras):
         assert sh.template_half_px == ChainParams().template_half(sh.camera)
+
+
+def test_planned_shots_judge_the_field_of_view_by_the_approach_margin(rc, flat_terrain):
+    """ApproachParams.fov_margin_px is the planner's in-view margin: a margin of half the image puts no target in
+    view; the default keeps the shots in view on this open terrain."""
+    T = np.array([9.0, 0.0, 0.0])
+    default = P.plan_approach(start_pose(), T, flat_terrain, rc)
+    assert all(sh.in_fov for st in default.stops[1:] for sh in st.cameras)
+    half = max(max(rc.spec(c, "left").width, rc.spec(c, "left").height) for c in ("pancam", "navcam", "hazcam")) // 2
+    wide = P.ApproachParams(fov_margin_px={}, other_fov_margin_px=half)
+    blind = P.plan_approach(start_pose(), T, flat_terrain, rc, wide)
+    assert not any(sh.in_fov for st in blind.stops[1:] for sh in st.cameras)
+
+
+def test_success_tolerance_follows_the_prediction_params():
+    """success_px: the camera's accuracy goal on the surface in pixels at the range, at least min_success_px."""
+    from scipctl.core.camera import cahv_from_intrinsics
+    from scipctl.core.transforms import RigidTransform
+
+    m = cahv_from_intrinsics(1000.0, 1000.0, 500.0, 500.0, RigidTransform.identity())  # hs = 1000 px per radian
+    p = P.PredictParams()
+    assert P.success_px(m, 2.0, "hazcam", p) == pytest.approx(p.success_of("hazcam") * m.hs / 2.0, rel=1e-12)
+    assert P.success_px(m, 100.0, "hazcam", p) == p.min_success_px  # 0.1 px on the surface: the floor
+    loose = P.PredictParams(success_m={"hazcam": 0.04})
+    assert P.success_px(m, 2.0, "hazcam", loose) == pytest.approx(4 * P.success_px(m, 2.0, "hazcam", p), rel=1e-12)
+    assert p.success_of("chemcam") == p.other_success_m

@@ -1,0 +1,61 @@
+"""The parameters each command runs with, built in one place from its options.
+
+The defaults live beside their algorithms (``core.point_stereo.PointStereoParams``,
+``core.handoff.HandoffParams``, ``pipeline.predict.PredictParams``, ``pipeline.report_data.ReportParams``);
+these functions turn the command-line options into those objects, checking the options first
+(:class:`InputError` naming the option). Heavy modules are imported inside the functions.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Optional
+
+from ..errors import InputError
+
+
+def _positive(option: str, field: str, v: float, what: str = "a positive finite number") -> None:
+    if not (math.isfinite(v) and v > 0):
+        raise InputError(option, field, f"must be {what}, got {v}")
+
+
+def designation_params(band_px: Optional[float] = None):
+    """``scipctl designate``: :class:`~scipctl.core.point_stereo.PointStereoParams`, with ``--band-px`` (if given)
+    as the band of every camera."""
+    from ..core.point_stereo import PointStereoParams
+
+    if band_px is None:
+        return PointStereoParams()
+    _positive("--band-px", "band_px", band_px)
+    return PointStereoParams.with_band(band_px)
+
+
+def handoff_params(fast: bool = False):
+    """``scipctl simulate-handoff``: :class:`~scipctl.core.handoff.HandoffParams` (``--fast``: half-resolution
+    shared dense stereo)."""
+    from ..core.handoff import HandoffParams
+
+    return HandoffParams(dense_downsample=2 if fast else 1).check()
+
+
+def success_threshold(success_px: float) -> float:
+    """``--success-px``: a handoff within this many hazcam pixels of the truth is a success."""
+    _positive("--success-px", "success_px", success_px)
+    return float(success_px)
+
+
+def predict_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Optional[float] = None):
+    """``scipctl sequence``: :class:`~scipctl.pipeline.predict.PredictParams` with the operator's pose-error sigmas
+    (``--sigma-position-m``, ``--sigma-yaw-deg``; None: from the downlink)."""
+    from ..pipeline.operator_sigmas import uncertainty_params
+
+    return uncertainty_params(sigma_position_m, sigma_yaw_deg).check()
+
+
+def report_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Optional[float] = None):
+    """``scipctl report``: :class:`~scipctl.pipeline.report_data.ReportParams` with the operator's pose-error
+    sigmas for its predictions."""
+    from ..pipeline.report_data import ReportParams
+
+    unc = predict_params(sigma_position_m, sigma_yaw_deg).uncertainty
+    return ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad).check()
