@@ -10,9 +10,11 @@ from .output import emit_json, note, stderr_console
 
 def designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=None):
     """``scipctl designate``: the 3-D target at ``pixel`` of a left product, added to ``targets.json``."""
+    from dataclasses import replace
+
     from ..io.provenance import provenance
     from ..io.workspace import open_source
-    from ..pipeline.designate import designate as designate_target, parse_pixel, pick_left_product
+    from ..pipeline.designate import designate as designate_target, designations_from_doc, parse_pixel, pick_left_product
     from .params import designation_params
 
     uv = parse_pixel(pixel)
@@ -21,7 +23,8 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     dl = source.downlink
     left = pick_left_product(dl, product, camera)
     targets = source.load_json("targets.json", default={"targets": []}) or {"targets": []}
-    existing = {t["id"] for t in targets.get("targets", [])}
+    saved = designations_from_doc(targets, str(source.read_from.get("targets.json", "targets.json")))
+    existing = {t.id for t in saved}
     if target_id is None:
         n = 1
         while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
@@ -29,37 +32,36 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
         target_id = f"d{n}"
     params = designation_params(band_px)
     rec = designate_target(dl, left, uv, target_id=target_id, params=params)
-    rec["provenance"] = provenance({"downlink": str(src)})
-    if not rec["ok"]:
-        raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec['reason']}",
-                            payload=rec)
-    targets["targets"] = [t for t in targets.get("targets", []) if t["id"] != target_id] + [rec]
-    targets["provenance"] = rec["provenance"]
+    rec = replace(rec, provenance=provenance({"downlink": str(src)}))
+    if not rec.ok:
+        raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec.reason}",
+                            payload=rec.to_dict())
+    targets["targets"] = [t.to_dict() for t in saved if t.id != target_id] + [rec.to_dict()]
+    targets["provenance"] = rec.provenance
     path = source.save_json("targets.json", targets)
-    rec["saved_to"] = str(path)
     if source.location_note():
         note(source.location_note())
     if json_out:
-        emit_json(rec)
-    _print(rec)
+        emit_json(dict(rec.to_dict(), saved_to=str(path)))
+    _print(rec, path)
 
 
-def _print(rec):
+def _print(rec, saved_to):
     from rich.table import Table
 
     con = stderr_console()
-    t = Table(title=f"target {rec['id']} from {rec['product_id']}", show_header=False)
-    t.add_row("pixel (u, v)", f"{rec['pixel_uv'][0]:.2f}, {rec['pixel_uv'][1]:.2f}")
-    t.add_row("rover xyz (m)", ", ".join(f"{x:.3f}" for x in rec["xyz_rover_m"]))
-    t.add_row("site xyz (m)", ", ".join(f"{x:.3f}" for x in rec["xyz_site_m"]))
-    sig = rec.get("range_sigma_m")
-    t.add_row("range (m)", f"{rec['range_m']:.3f}" + (f" ± {sig:.3f}" if sig is not None else ""))
-    t.add_row("match score", f"{rec['match_score']:.3f}")
-    eo = rec.get("epipolar_offset_px")
+    t = Table(title=f"target {rec.id} from {rec.product_id}", show_header=False)
+    t.add_row("pixel (u, v)", f"{rec.pixel_uv[0]:.2f}, {rec.pixel_uv[1]:.2f}")
+    t.add_row("rover xyz (m)", ", ".join(f"{x:.3f}" for x in rec.xyz_rover_m))
+    t.add_row("site xyz (m)", ", ".join(f"{x:.3f}" for x in rec.xyz_site_m))
+    sig = rec.range_sigma_m
+    t.add_row("range (m)", f"{rec.range_m:.3f}" + (f" ± {sig:.3f}" if sig is not None else ""))
+    t.add_row("match score", f"{rec.match_score:.3f}")
+    eo = rec.epipolar_offset_px
     t.add_row("epipolar offset (px)", "n/a" if eo is None else f"{eo:+.2f}")
-    n = rec.get("surface_normal_rover")
+    n = rec.surface_normal_rover
     t.add_row("surface normal (rover)", "n/a" if n is None else ", ".join(f"{x:+.2f}" for x in n))
-    t.add_row("warnings", "; ".join(rec["warnings"]) or "none")
-    t.add_row("saved to", rec["saved_to"])
+    t.add_row("warnings", "; ".join(rec.warnings) or "none")
+    t.add_row("saved to", str(saved_to))
     con.print(t)
     sys.stderr.flush()

@@ -122,7 +122,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
         "table1": rows,
     }
     if chain:
-        doc["chains"] = chains
+        doc["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in chains]
     if json_out:
         emit_json(doc)
     _print_table(con, rows, records)
@@ -146,7 +146,7 @@ def _chains(dl, name, only):
             continue
         try:
             steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id)
-            out.append({"downlink": name, "target": t.id, "steps": [s.to_dict() for s in steps]})
+            out.append({"downlink": name, "target": t.id, "steps": steps})
         except InputError as e:
             out.append({"downlink": name, "target": t.id, "error": str(e), "steps": []})
     return out
@@ -178,19 +178,20 @@ def _print_chains(con, chains):
             tab.add_column(c)
         for s in ch["steps"]:
             f2 = lambda v: "-" if v is None else f"{v[0]:.1f},{v[1]:.1f}"  # noqa: E731
-            tab.add_row(f"{s['position'][0]}/{s['position'][1]}", s["camera"], s["kind"], f2(s["tracked_uv"]), f2(s["mark_uv"]),
-                        "-" if s["error_px"] is None else f"{s['error_px']:.2f}",
-                        "-" if s["range_m"] is None else f"{s['range_m']:.2f}",
-                        "-" if s["error_3d_m"] is None else f"{s['error_3d_m']:.3f}", _trust(s))
+            tab.add_row(f"{s.position[0]}/{s.position[1]}", s.camera, s.kind, f2(s.tracked_uv), f2(s.mark_uv),
+                        "-" if s.error_px is None else f"{s.error_px:.2f}",
+                        "-" if s.range_m is None else f"{s.range_m:.2f}",
+                        "-" if s.error_3d_m is None else f"{s.error_3d_m:.3f}", _trust(s))
         con.print(tab)
 
 
-def _trust(step: dict) -> str:
-    """How far to trust a chain step: ``ok`` or ``FLAG``, the feature status, and the reason (warning) if any."""
-    parts = ["ok" if step.get("ok") else "FLAG"]
-    status = (step.get("extra") or {}).get("feature_status")
+def _trust(step) -> str:
+    """How far to trust a chain step (:class:`~scipctl.pipeline.chain.ChainStep`): ``ok`` or ``FLAG``, the
+    feature status, and the reason (warning) if any."""
+    parts = ["ok" if step.ok else "FLAG"]
+    status = (step.extra or {}).get("feature_status")
     if status:
         parts.append(status)
-    if step.get("reason"):
-        parts.append(str(step["reason"]))
+    if step.reason:
+        parts.append(str(step.reason))
     return " ".join(parts)

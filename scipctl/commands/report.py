@@ -13,6 +13,8 @@ def build(source, progress=None, params=None):
     """(html text, summary dict, data) for an opened source. No file is written."""
     from ..io.provenance import provenance
     from ..io.report_html import render_report
+    from ..pipeline.designate import designations_from_doc
+    from ..pipeline.handoff import handoff_records_from_doc
     from ..pipeline.report_data import ReportParams, collect
     from ..pipeline.paper_table1 import PAPER_TABLE1
     from ..pipeline.sequence import format_seqn
@@ -20,10 +22,13 @@ def build(source, progress=None, params=None):
 
     dl = source.downlink
     targets_doc = source.load_json("targets.json")
-    if targets_doc is not None and not isinstance(targets_doc, dict):
-        raise InputError(str(source.read_from["targets.json"]), "targets", "expected a JSON object with a 'targets' list")
+    designations = designations_from_doc(targets_doc, str(source.read_from.get("targets.json", "targets.json")))
     handoff_doc = source.load_json("handoff.json")
-    data = collect(dl, targets_doc, handoff_doc, params or ReportParams(), progress)
+    saved_handoff = None
+    if isinstance(handoff_doc, dict):
+        saved_handoff = (handoff_records_from_doc(handoff_doc, str(source.read_from.get("handoff.json", "handoff.json"))),
+                         handoff_doc.get("table1"))
+    data = collect(dl, designations, saved_handoff, params or ReportParams(), progress)
     rows = data["handoff"]["table1"]
     sequences = {}
     for t in data["targets"]:
@@ -45,18 +50,18 @@ def _summary(data, sequences) -> dict:
     targets = []
     for t in data["targets"]:
         pred = t["prediction"]
-        fin = next((s for s in reversed(t["chain"]) if s.get("error_px") is not None), None)
-        near = [r for r in t["handoff"] if r.get("navcam") == "near" and r.get("error_px") is not None]
-        best = min(near, key=lambda r: r["error_px"]) if near else None
+        fin = next((s for s in reversed(t["chain"]) if s.error_px is not None), None)
+        near = [r for r in t["handoff"] if r.navcam == "near" and r.error_px is not None]
+        best = min(near, key=lambda r: r.error_px) if near else None
         seq = sequences.get(t["id"])
         targets.append({
             "id": t["id"], "designated": t["record"] is not None,
-            "designation_ok": bool(t["record"] and t["record"].get("ok", True) and t["record"].get("xyz_site_m")),
+            "designation_ok": t["record"] is not None and t["record"].has_position,
             "prediction_check": [{k: r.get(k) for k in ("product_id", "expected_error_px", "expected_error_true_pose_px",
                                                          "render_pose", "ncc", "shift_px")}
                                  for r in t.get("prediction_check", [])],
-            "chain_final_error_px": None if fin is None else fin["error_px"],
-            "best_near_handoff": None if best is None else {"method": best["method"], "error_px": best["error_px"]},
+            "chain_final_error_px": None if fin is None else fin.error_px,
+            "best_near_handoff": None if best is None else {"method": best.method, "error_px": best.error_px},
             "predicted_success": None if pred is None else pred.confidence,
             "risks": None if pred is None else len(pred.risks),
             "rules_broken": None if not seq else [c["rule"] for c in seq["checks"] if c["blocking"] and not c["ok"]],

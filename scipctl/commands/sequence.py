@@ -27,7 +27,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     source = open_source(src, products_root=products_root)
     doc, checks, pred, record = make_sequence(source, target, params=params)
     summary = {
-        "target": target, "designated_now": bool(record.get("designated_from") == "mark"),
+        "target": target, "designated_now": record.designated_from == "mark",
         "confidence": pred.confidence, "rules": [c.to_dict() for c in checks],
         "risks": [r.to_dict() for r in pred.risks], "path_length_m": pred.plan.path_length_m,
         "stops": len(pred.plan.stops) - 1, "seconds": pred.seconds,

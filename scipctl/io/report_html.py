@@ -140,12 +140,12 @@ def plot_methods(rows: list) -> Optional[bytes]:
 
 
 def plot_chain(targets: list) -> Optional[bytes]:
-    """Tracking-chain error (px, against marks) per stop, one line per target."""
+    """Tracking-chain error (px, against marks) per stop, one line per target (``t["chain"]``: chain steps)."""
     fig = _figure()
     ax = fig.add_subplot(111)
     any_line = False
     for t in targets:
-        pts = [(i, s["error_px"]) for i, s in enumerate(t["chain"]) if s.get("error_px") is not None]
+        pts = [(i, s.error_px) for i, s in enumerate(t["chain"]) if s.error_px is not None]
         if pts:
             i, e = zip(*pts)
             ax.plot(i, e, "o-", label=t["id"])
@@ -237,7 +237,11 @@ def _chip_html(chip, palette) -> str:
 
 
 def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: dict) -> str:
-    """The report HTML. ``sequences``: target id -> {"checks": [RuleCheck dicts], "text": SeqN or None}."""
+    """The report HTML. ``sequences``: target id -> {"checks": [RuleCheck dicts], "text": SeqN or None}.
+
+    ``data``: ``scipctl.pipeline.report_data.collect``'s; per target its ``record`` (the designation record, or
+    None), ``chain`` (chain steps) and ``handoff`` (handoff records), read by attribute.
+    """
     palette: dict = {}
     P = []
     add = P.append
@@ -255,17 +259,17 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
     add("<h2 id=\"summary\">Summary</h2>")
     rows = []
     for t in data["targets"]:
-        rec = t["record"] or {}
+        rec = t["record"]
         pred = t["prediction"]
         seq = sequences.get(t["id"], {})
         bad = [c["rule"] for c in seq.get("checks", []) if c["blocking"] and not c["ok"]]
-        fin = next((s for s in reversed(t["chain"]) if s.get("error_px") is not None), None)
+        fin = next((s for s in reversed(t["chain"]) if s.error_px is not None), None)
         best = _best_handoff(t["handoff"])
         rows.append([
             f'<a href="#t-{_e(t["id"])}">{_e(t["id"])}</a>',
-            _e(rec.get("product_id", "-")) + (" (from mark)" if rec.get("designated_from") == "mark" else ""),
-            _f(rec.get("range_m")), _f(t["designation_error_m"], 3),
-            "-" if fin is None else f"{_f(fin['error_px'], 1)} px ({_e(fin['camera'])})",
+            "-" if rec is None else _e(rec.product_id) + (" (from mark)" if rec.designated_from == "mark" else ""),
+            _f(None if rec is None else rec.range_m), _f(t["designation_error_m"], 3),
+            "-" if fin is None else f"{_f(fin.error_px, 1)} px ({_e(fin.camera)})",
             best,
             "-" if pred is None else _f(pred.confidence),
             "-" if pred is None else str(len(pred.risks)),
@@ -307,12 +311,12 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         if rec is None:
             add("<p>Not designated.</p>")
         else:
-            xyz = rec.get("xyz_site_m")
+            xyz = rec.xyz_site_m
             add(_table(["designated in", "pixel", "site xyz m", "range m", "range σ m", "epipolar offset px", "warnings"],
-                       [[_e(rec.get("product_id")), _e(_uv(rec.get("pixel_uv"))),
-                         "-" if xyz is None else _e(", ".join(f"{v:.3f}" for v in xyz)), _f(rec.get("range_m")),
-                         _f(rec.get("range_sigma_m"), 3), _f(rec.get("epipolar_offset_px")),
-                         _e("; ".join(rec.get("warnings") or []) or "none")]]))
+                       [[_e(rec.product_id), _e(_uv(rec.pixel_uv)),
+                         "-" if xyz is None else _e(", ".join(f"{v:.3f}" for v in xyz)), _f(rec.range_m),
+                         _f(rec.range_sigma_m, 3), _f(rec.epipolar_offset_px),
+                         _e("; ".join(rec.warnings or []) or "none")]]))
         add("<h3>Image chips: designated, predicted (per method), tracked and true positions</h3>")
         add('<p class="small">' + " ".join(f'<span class="sw" style="background:{v[2]}"></span>{_e(k)}'
                                            for k, v in STYLE.items()) +
@@ -322,14 +326,14 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
             add("<h3>Tracking chain through the downlink's stops</h3>")
             add(_table(["stop", "camera", "kind", "chain prediction", "tracked", "mark", "error px", "NCC", "range m",
                         "3-D error m", "note"],
-                       [[f"{s['position'][0]}/{s['position'][1]}", _e(s["camera"]), _e(s["kind"]), _uv(s.get("predicted_uv")),
-                         _uv(s.get("tracked_uv")), _uv(s.get("mark_uv")), _f(s.get("error_px"), 2), _f(s.get("ncc_peak")),
-                         _f(s.get("range_m")), _f(s.get("error_3d_m"), 3), _e(s.get("reason") or "")] for s in t["chain"]]))
+                       [[f"{s.position[0]}/{s.position[1]}", _e(s.camera), _e(s.kind), _uv(s.predicted_uv),
+                         _uv(s.tracked_uv), _uv(s.mark_uv), _f(s.error_px, 2), _f(s.ncc_peak),
+                         _f(s.range_m), _f(s.error_3d_m, 3), _e(s.reason or "")] for s in t["chain"]]))
         if t["handoff"]:
             add("<h3>Handoff predictions for this target</h3>")
             add(_table(["method", "navcam", "predicted", "true", "error px", "success", "note"],
-                       [[_e(r["method"]), _e(r["navcam"]), _uv(r.get("predicted_uv")), _uv(r.get("truth_uv")),
-                         _f(r.get("error_px"), 1), _yes(r.get("success")), _e(r.get("reason") or "")]
+                       [[_e(r.method), _e(r.navcam), _uv(r.predicted_uv), _uv(r.truth_uv),
+                         _f(r.error_px, 1), _yes(r.success), _e(r.reason or "")]
                         for r in t["handoff"]]))
         pred = t["prediction"]
         if pred is not None:
@@ -458,11 +462,11 @@ def _prediction_html(pred, chips, palette) -> str:
 
 
 def _best_handoff(recs: list) -> str:
-    ok = [r for r in recs if r.get("navcam") == "near" and r.get("error_px") is not None]
+    ok = [r for r in recs if r.navcam == "near" and r.error_px is not None]
     if not ok:
         return "-"
-    r = min(ok, key=lambda r: r["error_px"])
-    return f"{_e(r['method'])} {r['error_px']:.1f} px"
+    r = min(ok, key=lambda r: r.error_px)
+    return f"{_e(r.method)} {r.error_px:.1f} px"
 
 
 def _stats(s) -> str:

@@ -127,7 +127,16 @@ class ChainParams:
 
 @dataclass
 class ChainStep:
-    position: tuple
+    """One step of the tracking chain: the target's pixel in one left image (``kind``: the designation, a
+    track from the previous stop, or a handoff to another camera), against its mark when there is one.
+
+    ``predicted_uv``: where the pose estimates put the target; ``tracked_uv``: where it was found (None: lost);
+    ``xyz_site_m``: point stereo at the tracked pixel, site frame through the downlinked pose;
+    ``truth_xyz_site_m``: the true target (simulation truth). ``ok`` False: a weak or unverified step
+    (``reason``), not used as the next stop's reference. ``extra``: how it was found (docs/stereo-and-tracking.md).
+    """
+
+    position: tuple  # (site, drive)
     camera: str
     product_id: str
     kind: str  # "designate" | "track" | "handoff"
@@ -148,6 +157,30 @@ class ChainStep:
         d = dict(self.__dict__)
         d["position"] = list(self.position)
         return d
+
+    @classmethod
+    def from_dict(cls, d, product: str = "chain", index: Optional[int] = None) -> "ChainStep":
+        """A step as read back from JSON (``to_dict``'s inverse); :class:`InputError` naming ``product`` and the
+        field (``steps[index].field``) on a missing or ill-typed value."""
+        from ..jsonutil import RecordReader
+
+        r = RecordReader(d, product, "" if index is None else f"steps[{index}].", "chain step")
+        pos = d.get("position")
+        if not (isinstance(pos, list) and len(pos) == 2):
+            r.bad("position", f"expected [site, drive], got {pos!r}")
+        ok = r.flag("ok", required=True, nullable=False)
+        return cls(
+            position=tuple(pos), camera=r.text("camera", required=True, nullable=False),
+            product_id=r.text("product_id", required=True, nullable=False),
+            kind=r.text("kind", required=True, nullable=False),
+            predicted_uv=r.vector("predicted_uv", 2, required=True, kind=list),
+            tracked_uv=r.vector("tracked_uv", 2, required=True, kind=list),
+            mark_uv=r.vector("mark_uv", 2, required=True, kind=list), error_px=r.number("error_px", required=True),
+            ncc_peak=r.number("ncc_peak", required=True), range_m=r.number("range_m", required=True),
+            xyz_site_m=r.vector("xyz_site_m", 3, required=True, kind=list),
+            truth_xyz_site_m=r.vector("truth_xyz_site_m", 3, required=True, kind=list),
+            error_3d_m=r.number("error_3d_m", required=True), ok=ok, reason=r.text("reason") or "",
+            extra=r.mapping("extra") or {})
 
 
 _f = finite_or_none

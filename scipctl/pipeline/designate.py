@@ -1,16 +1,144 @@
-"""Designate a 3-D target from a pixel in a left stereo image (SCIP step 1)."""
+"""Designate a 3-D target from a pixel in a left stereo image (SCIP step 1).
+
+The designation record (:class:`Designation`) is written to ``targets.json`` by ``scipctl designate``
+(:meth:`Designation.to_dict`) and read back by the other commands (:func:`designations_from_doc`).
+"""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
 
 from ..core.point_stereo import PointStereoParams
-from ..jsonutil import finite_or_none
+from ..jsonutil import RecordReader, finite_or_none
 from ..model import Downlink, ImageProduct, InputError
 
 EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warned about
+
+#: the keys of a designation record in targets.json (Designation.to_dict writes them in this order; the
+#: optional ones only when present: the stereo result when the match is good, the surface normal when computed)
+_KNOWN_KEYS = ("id", "product_id", "right_product_id", "camera", "position", "pixel_uv", "band_px", "ok", "reason",
+               "match_score", "match_ratio", "uv_right", "epipolar_offset_px", "warnings",
+               "xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose",
+               "surface_normal_rover", "normal_points", "incidence_deg", "designated_from", "provenance")
+
+
+@dataclass(frozen=True)
+class Designation:
+    """A designated target: the pixel of a left image and the 3-D point stereo found there.
+
+    Frames: ``xyz_rover_m`` in the rover frame of the left image's acquisition (``pose``: that rover pose,
+    ``p_site = R p_rover + t``), ``xyz_site_m`` in the site frame, ``surface_normal_rover`` (unit, up: -z) in
+    the rover frame. Pixels ``(u, v)`` as docs/conventions.md. ``band_px``: the epipolar band half-width used.
+    ``ok`` False: no reliable stereo match (``reason``), and no 3-D point.
+    ``designated_from``: ``"mark"`` when designated on the fly from a target's mark (None: from targets.json);
+    ``provenance``: how ``scipctl designate`` made it (None until saved).
+    """
+
+    id: str
+    product_id: str
+    camera: str
+    pixel_uv: tuple  # (u, v) px
+    ok: bool = True
+    right_product_id: Optional[str] = None
+    position: Optional[tuple] = None  # (site, drive) of the left image
+    band_px: Optional[float] = None
+    reason: str = ""
+    match_score: Optional[float] = None
+    match_ratio: Optional[float] = None
+    uv_right: Optional[tuple] = None
+    epipolar_offset_px: Optional[float] = None
+    warnings: tuple = ()
+    # the stereo result (written when xyz_site_m is set)
+    xyz_rover_m: Optional[tuple] = None
+    xyz_site_m: Optional[tuple] = None
+    range_m: Optional[float] = None
+    range_sigma_m: Optional[float] = None
+    ray_miss_m: Optional[float] = None
+    pose: Optional[dict] = None  # {position_m, orientation_wxyz, source}
+    # the surface normal (written when normal_points is set; incidence_deg only when there is a normal)
+    surface_normal_rover: Optional[tuple] = None
+    normal_points: Optional[int] = None
+    incidence_deg: Optional[float] = None
+    designated_from: Optional[str] = None
+    provenance: Optional[dict] = None
+    extra: dict = field(default_factory=dict)  # keys of a read record this version does not know (kept as read)
+
+    @property
+    def has_position(self) -> bool:
+        """True when the designation has a reliable 3-D point."""
+        return bool(self.ok) and self.xyz_site_m is not None
+
+    def to_dict(self) -> dict:
+        """The targets.json record (keys in the order ``scipctl designate`` has always written them)."""
+        d = {"id": self.id, "product_id": self.product_id, "right_product_id": self.right_product_id,
+             "camera": self.camera,
+             "position": None if self.position is None else {"site": self.position[0], "drive": self.position[1]},
+             "pixel_uv": list(self.pixel_uv), "band_px": self.band_px, "ok": self.ok, "reason": self.reason,
+             "match_score": self.match_score, "match_ratio": self.match_ratio,
+             "uv_right": None if self.uv_right is None else list(self.uv_right),
+             "epipolar_offset_px": self.epipolar_offset_px, "warnings": list(self.warnings)}
+        if self.xyz_site_m is not None:
+            d.update({"xyz_rover_m": _list(self.xyz_rover_m), "xyz_site_m": list(self.xyz_site_m),
+                      "range_m": self.range_m, "range_sigma_m": self.range_sigma_m, "ray_miss_m": self.ray_miss_m,
+                      "pose": self.pose})
+        if self.normal_points is not None:
+            d["surface_normal_rover"] = _list(self.surface_normal_rover)
+            d["normal_points"] = self.normal_points
+            if self.incidence_deg is not None:
+                d["incidence_deg"] = self.incidence_deg
+        if self.designated_from is not None:
+            d["designated_from"] = self.designated_from
+        if self.provenance is not None:
+            d["provenance"] = self.provenance
+        d.update(self.extra)
+        return d
+
+    @classmethod
+    def from_dict(cls, d, product: str = "targets.json", index: Optional[int] = None) -> "Designation":
+        """The record as read from ``targets.json`` (``to_dict``'s inverse); :class:`InputError` naming
+        ``product`` and the field (``targets[index].field``) when a value is missing or of the wrong kind.
+        Required: ``id``, ``product_id``, ``camera``, ``pixel_uv``; ``ok`` defaults to true."""
+        r = RecordReader(d, product, "" if index is None else f"targets[{index}].", "designation record")
+        tid = r.text("id", required=True, nullable=False)
+        if not tid:
+            r.bad("id", "must not be empty")
+        r.about = f"target {tid!r}: "
+        pos = r.mapping("position")
+        if pos is not None:
+            if not ("site" in pos and "drive" in pos):
+                r.bad("position", "expected {site, drive}")
+            pos = (pos["site"], pos["drive"])
+        warnings = r.strings("warnings")
+        return cls(
+            id=tid, product_id=r.text("product_id", required=True, nullable=False),
+            camera=r.text("camera", required=True, nullable=False),
+            pixel_uv=r.vector("pixel_uv", 2, required=True, nullable=False), ok=r.flag("ok", default=True),
+            right_product_id=r.text("right_product_id"), position=pos, band_px=r.number("band_px"),
+            reason=r.text("reason") or "", match_score=r.number("match_score"), match_ratio=r.number("match_ratio"),
+            uv_right=r.vector("uv_right", 2), epipolar_offset_px=r.number("epipolar_offset_px"),
+            warnings=tuple(warnings or ()),
+            xyz_rover_m=r.vector("xyz_rover_m", 3), xyz_site_m=r.vector("xyz_site_m", 3), range_m=r.number("range_m"),
+            range_sigma_m=r.number("range_sigma_m"), ray_miss_m=r.number("ray_miss_m"), pose=r.mapping("pose"),
+            surface_normal_rover=r.vector("surface_normal_rover", 3), normal_points=r.integer("normal_points"),
+            incidence_deg=r.number("incidence_deg"), designated_from=r.text("designated_from"),
+            provenance=r.mapping("provenance"), extra={k: v for k, v in d.items() if k not in _KNOWN_KEYS})
+
+
+def _list(v):
+    return None if v is None else list(v)
+
+
+def designations_from_doc(doc, product: str = "targets.json") -> list:
+    """The :class:`Designation` records of a ``targets.json`` document (None: none yet); :class:`InputError`
+    naming ``product`` and the field for a malformed document or record."""
+    if doc is None:
+        return []
+    if not isinstance(doc, dict) or not isinstance(doc.get("targets", []), (list, type(None))):
+        raise InputError(product, "targets", "expected a JSON object with a 'targets' list")
+    return [Designation.from_dict(r, product, i) for i, r in enumerate(doc.get("targets") or [])]
 
 
 def pick_left_product(dl: Downlink, product_id: Optional[str], camera: Optional[str]) -> ImageProduct:
@@ -53,8 +181,8 @@ def surface_normal(xyz: np.ndarray, centre: np.ndarray, radius_m: float) -> tupl
 
 
 def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
-              params: Optional[PointStereoParams] = None) -> dict:
-    """Point stereo at ``uv`` in ``left``; returns the designation record (raises InputError).
+              params: Optional[PointStereoParams] = None) -> Designation:
+    """Point stereo at ``uv`` in ``left``; returns the :class:`Designation` (raises InputError).
 
     ``params``: the per-camera band and window (default :class:`PointStereoParams`, checked; an operator's
     ``--band-px`` is :meth:`PointStereoParams.with_band`).
@@ -82,35 +210,20 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
         warnings.append("low texture")
     if min(uv[0], uv[1], left.width - 1 - uv[0], left.height - 1 - uv[1]) < EDGE_MARGIN_PX:
         warnings.append("near the image edge")
-    rec = {
-        "id": target_id,
-        "product_id": left.product_id,
-        "right_product_id": right.product_id,
-        "camera": left.camera,
-        "position": {"site": left.site, "drive": left.drive},
-        "pixel_uv": uv.tolist(),
-        "band_px": band,
-        "ok": bool(ps.ok),
-        "reason": ps.reason,
-        "match_score": _f(ps.score),
-        "match_ratio": _f(getattr(ps, "ratio", None)),
-        "uv_right": None if ps.uv_right is None else [float(x) for x in ps.uv_right],
-        "epipolar_offset_px": _f(ps.epipolar_offset_px),
-        "warnings": warnings,
-    }
+    rec = Designation(
+        id=target_id, product_id=left.product_id, right_product_id=right.product_id, camera=left.camera,
+        position=(left.site, left.drive), pixel_uv=tuple(uv.tolist()), band_px=band, ok=bool(ps.ok),
+        reason=ps.reason, match_score=_f(ps.score), match_ratio=_f(getattr(ps, "ratio", None)),
+        uv_right=None if ps.uv_right is None else tuple(float(x) for x in ps.uv_right),
+        epipolar_offset_px=_f(ps.epipolar_offset_px))
     if not ps.ok:
-        return rec
+        return replace(rec, warnings=tuple(warnings))
     X_rover = np.asarray(ps.xyz, float)
     X_site = left.pose.T_site_rover.apply(X_rover)
-    rec.update({
-        "xyz_rover_m": X_rover.tolist(),
-        "xyz_site_m": X_site.tolist(),
-        "range_m": _f(ps.range_m),
-        "range_sigma_m": _f(ps.range_sigma_m),
-        "ray_miss_m": _f(getattr(ps, "miss_distance_m", None)),
-        "pose": {"position_m": left.pose.position_m.tolist(), "orientation_wxyz": left.pose.orientation_wxyz.tolist(),
-                 "source": left.pose.source},
-    })
+    rec = replace(rec, xyz_rover_m=tuple(X_rover.tolist()), xyz_site_m=tuple(X_site.tolist()), range_m=_f(ps.range_m),
+                  range_sigma_m=_f(ps.range_sigma_m), ray_miss_m=_f(getattr(ps, "miss_distance_m", None)),
+                  pose={"position_m": left.pose.position_m.tolist(),
+                        "orientation_wxyz": left.pose.orientation_wxyz.tolist(), "source": left.pose.source})
     if with_normal:
         from ..core.dense_stereo import dense_stereo
 
@@ -122,15 +235,16 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
         except Exception as e:  # dense stereo is a diagnostic here; the designation stands without it
             n, npts = None, 0
             warnings.append(f"no surface normal (dense stereo failed: {e})")
-        rec["surface_normal_rover"] = None if n is None else n.tolist()
-        rec["normal_points"] = npts
+        incidence = None
         if n is None and npts < 10:
             warnings.append("no surface normal (too few dense-stereo points around the target)")
         else:
             ray = X_rover - left.camera_model.C
             ray /= np.linalg.norm(ray)
-            rec["incidence_deg"] = float(np.degrees(np.arccos(abs(float(np.dot(ray, n))))))
-    return rec
+            incidence = float(np.degrees(np.arccos(abs(float(np.dot(ray, n))))))
+        rec = replace(rec, surface_normal_rover=None if n is None else tuple(n.tolist()), normal_points=npts,
+                      incidence_deg=incidence)
+    return replace(rec, warnings=tuple(warnings))
 
 
 _f = finite_or_none

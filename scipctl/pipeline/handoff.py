@@ -89,10 +89,17 @@ def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=Non
 
 @dataclass
 class HandoffRecord:
+    """One method's navcam -> hazcam handoff of one target (a ``results`` entry of ``handoff.json``).
+
+    ``source_uv``: the navcam-left pixel handed off (None: the target is not marked there); ``predicted_uv``:
+    the method's hazcam-left pixel (None: no answer); ``truth_uv``: the hazcam mark (None: not marked);
+    ``error_px`` their distance and ``success`` whether it is within the success threshold.
+    """
+
     downlink: str
     target: str
     method: str
-    navcam: str
+    navcam: str  # "near" | "far"
     source_product: str
     source_uv: Optional[list]
     predicted_uv: Optional[list]
@@ -106,6 +113,38 @@ class HandoffRecord:
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
+
+    @classmethod
+    def from_dict(cls, d, product: str = "handoff.json", index: Optional[int] = None) -> "HandoffRecord":
+        """A record as read back from ``handoff.json`` (``to_dict``'s inverse); :class:`InputError` naming
+        ``product`` and the field (``results[index].field``) on a missing or ill-typed value."""
+        from ..jsonutil import RecordReader
+
+        r = RecordReader(d, product, "" if index is None else f"results[{index}].", "handoff record")
+        out = cls(
+            downlink=r.text("downlink", required=True, nullable=False),
+            target=r.text("target", required=True, nullable=False),
+            method=r.text("method", required=True, nullable=False),
+            navcam=r.text("navcam", required=True, nullable=False),
+            source_product=r.text("source_product", required=True, nullable=False),
+            source_uv=r.vector("source_uv", 2, required=True, kind=list),
+            predicted_uv=r.vector("predicted_uv", 2, required=True, kind=list),
+            truth_uv=r.vector("truth_uv", 2, required=True, kind=list),
+            error_px=r.number("error_px", required=True), success=r.flag("success", required=True),
+            ok=r.flag("ok", required=True, nullable=False), reason=r.text("reason", required=True, nullable=False),
+            diagnostics=r.mapping("diagnostics", required=True, nullable=False),
+            seconds=r.number("seconds", required=True, nullable=False))
+        return out
+
+
+def handoff_records_from_doc(doc, product: str = "handoff.json") -> list:
+    """The :class:`HandoffRecord` results of a ``handoff.json`` document (``[]`` when it has none)."""
+    if not isinstance(doc, dict) or not doc.get("results"):
+        return []
+    results = doc["results"]
+    if not isinstance(results, list):
+        raise InputError(product, "results", "expected a list of handoff records")
+    return [HandoffRecord.from_dict(r, product, i) for i, r in enumerate(results)]
 
 
 def run_targets(

@@ -20,6 +20,7 @@ import numpy as np
 
 from ..core.point_stereo import PointStereoParams
 from ..model import Downlink, InputError
+from .designate import Designation
 
 SAT_WARN = 0.01  # saturated fraction above which an image is flagged
 DARK_WARN = 0.2  # fraction of pixels within 2 % of black
@@ -293,31 +294,36 @@ def _norm(img):
     return np.where(ok, np.clip((a - lo) / (hi - lo), 0, 1), np.nan).astype(np.float32)
 
 
-def chips_for_target(dl: Downlink, target_id: str, record: Optional[dict], chain_steps: list, handoff_records: list,
-                     half: int) -> list:
-    """One chip per left image where the target is marked, tracked or predicted, with every position on it."""
+def chips_for_target(dl: Downlink, target_id: str, record: Optional[Designation], chain_steps: list,
+                     handoff_records: list, half: int, hazcam_product: Optional[str]) -> list:
+    """One chip per left image where the target is marked, tracked or predicted, with every position on it.
+
+    ``chain_steps``: :class:`~scipctl.pipeline.chain.ChainStep`; ``handoff_records``:
+    :class:`~scipctl.pipeline.handoff.HandoffRecord`, predicting into the
+    left hazcam image ``hazcam_product``.
+    """
     tm = next((t for t in dl.targets if t.id == target_id), None)
-    steps = {s["product_id"]: s for s in chain_steps}
+    steps = {s.product_id: s for s in chain_steps}
     preds = {}
     for r in handoff_records:
-        if r.get("target") == target_id and r.get("predicted_uv") is not None:
-            preds.setdefault(_hazcam_of(dl, r), []).append(r)
+        if r.target == target_id and r.predicted_uv is not None:
+            preds.setdefault(hazcam_product, []).append(r)
     chips = []
     for im in sorted((i for i in dl.images if i.eye == "left"), key=lambda i: (i.time_s, i.camera)):
         marks = []
         mk = tm.mark_in(im.product_id) if tm is not None else None
         if mk is not None:
             marks.append(ChipMarker("true", "true (mark)", (mk.u, mk.v)))
-        if record is not None and record.get("product_id") == im.product_id and record.get("pixel_uv"):
-            marks.append(ChipMarker("designated", "designated", tuple(record["pixel_uv"])))
+        if record is not None and record.product_id == im.product_id:
+            marks.append(ChipMarker("designated", "designated", tuple(record.pixel_uv)))
         st = steps.get(im.product_id)
         if st is not None:
-            if st.get("predicted_uv") is not None:
-                marks.append(ChipMarker("expected", "chain prediction", tuple(st["predicted_uv"])))
-            if st.get("tracked_uv") is not None:
-                marks.append(ChipMarker("tracked", f"tracked ({st['kind']})", tuple(st["tracked_uv"])))
-        for r in sorted(preds.get(im.product_id, []), key=lambda r: (r["method"], r["navcam"])):
-            marks.append(ChipMarker("predicted", f"{r['method']} ({r['navcam']})", tuple(r["predicted_uv"])))
+            if st.predicted_uv is not None:
+                marks.append(ChipMarker("expected", "chain prediction", tuple(st.predicted_uv)))
+            if st.tracked_uv is not None:
+                marks.append(ChipMarker("tracked", f"tracked ({st.kind})", tuple(st.tracked_uv)))
+        for r in sorted(preds.get(im.product_id, []), key=lambda r: (r.method, r.navcam)):
+            marks.append(ChipMarker("predicted", f"{r.method} ({r.navcam})", tuple(r.predicted_uv)))
         if not marks:
             continue
         ref = next((m.uv for m in marks if m.kind == "true"), None) or next(
@@ -327,11 +333,6 @@ def chips_for_target(dl: Downlink, target_id: str, record: Optional[dict], chain
                           f"{im.product_id} ({im.camera}, position {im.position[0]}/{im.position[1]})",
                           _norm(img), origin, marks))
     return chips
-
-
-def _hazcam_of(dl, rec):
-    """The hazcam product a handoff record predicts into (its truth mark's product, or the setup's hazcam)."""
-    return rec.get("hazcam_product") or rec.get("_hazcam")
 
 
 def expected_view_chips(pred) -> list:
@@ -353,7 +354,7 @@ def expected_view_chips(pred) -> list:
 
 
 # ============================================================================ prediction vs later images
-def prediction_check(dl: Downlink, record: dict, pred, half: int = 40, search_px: int = 150) -> tuple:
+def prediction_check(dl: Downlink, record: Designation, pred, half: int = 40, search_px: int = 150) -> tuple:
     """Check the prediction against the images of this downlink taken after today's position.
 
     For each later left image where the target is marked: the expected pixel
@@ -368,11 +369,11 @@ def prediction_check(dl: Downlink, record: dict, pred, half: int = 40, search_px
     import cv2
 
     terrain = pred.terrain
-    tm = next((t for t in dl.targets if t.id == record["id"]), None)
+    tm = next((t for t in dl.targets if t.id == record.id), None)
     if terrain is None or tm is None:
         return [], []
-    today = dl.product(record["product_id"])
-    X = np.asarray(record["xyz_site_m"], float)
+    today = dl.product(record.product_id)
+    X = np.asarray(record.xyz_site_m, float)
     rows, chips = [], []
     for im in sorted((i for i in dl.images if i.eye == "left" and i.position != today.position and i.time_s > today.time_s),
                      key=lambda i: i.time_s):
@@ -409,27 +410,35 @@ def prediction_check(dl: Downlink, record: dict, pred, half: int = 40, search_px
         marks = [ChipMarker("true", "true (mark)", (mk.u, mk.v))]
         if row["expected_uv"] is not None:
             marks.append(ChipMarker("expected", "expected (designated 3-D, downlinked pose)", tuple(row["expected_uv"])))
-        chips.append(Chip(record["id"], im.product_id, im.camera, im.position, f"{im.product_id}: actual",
+        chips.append(Chip(record.id, im.product_id, im.camera, im.position, f"{im.product_id}: actual",
                           _norm(actual), origin, marks))
         sh = row["shift_px"] or [0.0, 0.0]
-        chips.append(Chip(record["id"], im.product_id, im.camera, im.position,
+        chips.append(Chip(record.id, im.product_id, im.camera, im.position,
                           f"{im.product_id}: expected from today's stereo (aligned, shift {sh[0]:+.0f}, {sh[1]:+.0f} px)",
                           _norm(inner), (origin[0] + sh[0], origin[1] + sh[1]), []))
     return rows, chips
 
 
 # ============================================================================ the whole report
-def _all_target_ids(dl: Downlink, targets_doc) -> list:
+def _all_target_ids(dl: Downlink, designations: list) -> list:
     ids = [t.id for t in dl.targets]
-    for r in (targets_doc or {}).get("targets", []) or []:
-        if isinstance(r, dict) and r.get("id") and r["id"] not in ids:
-            ids.append(r["id"])
+    for r in designations:
+        if r.id not in ids:
+            ids.append(r.id)
     return ids
 
 
-def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optional[dict],
+def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Optional[tuple],
             params: Optional[ReportParams] = None, progress=None) -> dict:
-    """All report content for a downlink (see the module docstring). ``progress(str)`` is called as work proceeds."""
+    """All report content for a downlink (see the module docstring). ``progress(str)`` is called as work proceeds.
+
+    ``designations``: the :class:`Designation` records of ``targets.json``
+    (:func:`~scipctl.pipeline.designate.designations_from_doc`); ``saved_handoff``: ``(records, table1 rows)``
+    from ``handoff.json`` (:func:`~scipctl.pipeline.handoff.handoff_records_from_doc`) or None (the methods are
+    run here). Per target the data holds its ``record`` (:class:`Designation` or None), ``chain``
+    (:class:`~scipctl.pipeline.chain.ChainStep` list) and ``handoff``
+    (:class:`~scipctl.pipeline.handoff.HandoffRecord` list).
+    """
     from .predict import PredictParams, Terrain, UncertaintyParams, predict_target, resolve_target, terrain_sources
 
     p = (params or ReportParams()).check()
@@ -444,9 +453,10 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
     # ---- designations
     t0 = time.perf_counter()
     records = {}
-    for tid in _all_target_ids(dl, targets_doc):
+    designations = list(designations or [])
+    for tid in _all_target_ids(dl, designations):
         try:
-            rec, now = resolve_target(dl, tid, targets_doc, with_normal=False)
+            rec, now = resolve_target(dl, tid, designations, with_normal=False)
             records[tid] = rec
         except InputError as e:
             notes.append(f"target {tid}: not designated ({e})")
@@ -454,11 +464,12 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
 
     # ---- handoff results (reuse handoff.json when present)
     t0 = time.perf_counter()
-    handoff_records, table1_rows, handoff_source = [], [], None
-    if isinstance(handoff_doc, dict) and handoff_doc.get("results"):
-        handoff_records = list(handoff_doc.get("results") or [])
-        table1_rows = list(handoff_doc.get("table1") or [])
+    handoff_records, table1_rows, handoff_source, hazcam_product = [], [], None, None
+    if saved_handoff is not None and saved_handoff[0]:
+        handoff_records = list(saved_handoff[0])
+        table1_rows = list(saved_handoff[1] or [])
         handoff_source = "handoff.json (saved by simulate-handoff)"
+        hazcam_product = _guess_hazcam(dl)
     elif p.run_handoff and dl.targets:
         say("handoff methods")
         try:
@@ -467,19 +478,16 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
             setup = build_setup(dl)
             recs = run_targets(dl, setup, marked_targets(dl, setup), methods=p.fresh_methods,
                                downlink_name=dl.source or "")
-            handoff_records = [r.to_dict() for r in recs]
-            for r in handoff_records:
-                r["hazcam_product"] = setup.hazcam.product_id
+            handoff_records = list(recs)
+            hazcam_product = setup.hazcam.product_id
             table1_rows = table1(recs)
             handoff_source = ("computed for this report (" + ", ".join(p.fresh_methods) + "; run `scipctl "
                               "simulate-handoff` first to include every method, the report then reuses handoff.json)")
         except (InputError, ValueError) as e:
             notes.append(f"handoff methods not run: {e}")
-    for r in handoff_records:
-        if "hazcam_product" not in r:
-            r["hazcam_product"] = _guess_hazcam(dl, r)
     secs["handoff"] = time.perf_counter() - t0
-    data["handoff"] = {"source": handoff_source, "records": handoff_records, "table1": table1_rows}
+    data["handoff"] = {"source": handoff_source, "records": handoff_records, "table1": table1_rows,
+                       "hazcam_product": hazcam_product}
 
     # ---- tracking chains through the downlink's stops
     t0 = time.perf_counter()
@@ -488,13 +496,12 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
         from .chain import run_chain
 
         for tid, rec in records.items():
-            start = next((i for i in dl.images if i.product_id == rec.get("product_id")), None)
-            if start is None or not rec.get("pixel_uv"):
+            start = next((i for i in dl.images if i.product_id == rec.product_id), None)
+            if start is None:
                 continue
             say(f"chain {tid}")
             try:
-                steps = run_chain(dl, start, rec["pixel_uv"], target_id=tid)
-                chains[tid] = [s.to_dict() for s in steps]
+                chains[tid] = run_chain(dl, start, list(rec.pixel_uv), target_id=tid)
             except (InputError, ValueError) as e:
                 notes.append(f"target {tid}: tracking chain not run ({e})")
     secs["chain"] = time.perf_counter() - t0
@@ -514,14 +521,14 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
                                                          sigma_position_m=p.sigma_position_m, sigma_yaw_rad=p.sigma_yaw_rad))
         terrains = {}
         for tid, rec in records.items():
-            if not rec.get("ok", True) or rec.get("xyz_site_m") is None:
+            if not rec.has_position:
                 continue
             say(f"prediction {tid}")
             try:
-                pos = dl.product(rec["product_id"]).position
+                pos = dl.product(rec.product_id).position
                 if pos not in terrains:
                     terrains[pos] = Terrain(terrain_sources(dl, pos, downsample=pp.stereo_downsample,
-                                                            target_range_m=rec.get("range_m")),
+                                                            target_range_m=rec.range_m),
                                             pp.max_edge_ratio, pp.min_edge_m, pp.smooth_sigma_px)
                 pr = predict_target(dl, rec, pp, terrain=terrains[pos])
                 for (si, cam), v in pr.views.items():
@@ -532,14 +539,14 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
     secs["prediction"] = time.perf_counter() - t0
 
     # ---- per target
-    for tid in _all_target_ids(dl, targets_doc):
+    for tid in _all_target_ids(dl, designations):
         rec = records.get(tid)
         steps = chains.get(tid, [])
-        hrecs = [r for r in handoff_records if r.get("target") == tid]
+        hrecs = [r for r in handoff_records if r.target == tid]
         tt = dl.truth_target(tid)
         err3d = None
-        if rec is not None and tt is not None and rec.get("xyz_site_m") is not None:
-            err3d = float(np.linalg.norm(np.asarray(rec["xyz_site_m"]) - np.asarray(tt.xyz_site_m)))
+        if rec is not None and tt is not None and rec.xyz_site_m is not None:
+            err3d = float(np.linalg.norm(np.asarray(rec.xyz_site_m) - np.asarray(tt.xyz_site_m)))
         pr = predictions.get(tid)
         check_rows, check_chips = ([], []) if pr is None else prediction_check(dl, rec, pr, p.chip_half_px)
         data["targets"].append({
@@ -547,13 +554,13 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
             "expected_chips": [] if pr is None else expected_view_chips(pr),
             "prediction_check": check_rows, "prediction_check_chips": check_chips,
             "chain": steps, "handoff": hrecs,
-            "chips": chips_for_target(dl, tid, rec, steps, hrecs, p.chip_half_px),
+            "chips": chips_for_target(dl, tid, rec, steps, hrecs, p.chip_half_px, hazcam_product),
             "prediction": predictions.get(tid),
         })
     return data
 
 
-def _guess_hazcam(dl: Downlink, rec: dict) -> Optional[str]:
-    """A handoff.json record lacks the hazcam product id: the latest left hazcam (what simulate-handoff uses)."""
+def _guess_hazcam(dl: Downlink) -> Optional[str]:
+    """handoff.json records lack the hazcam product id: the latest left hazcam (what simulate-handoff uses)."""
     hz = sorted((im for im in dl.images if im.camera == "hazcam" and im.eye == "left"), key=lambda i: i.time_s)
     return hz[-1].product_id if hz else None

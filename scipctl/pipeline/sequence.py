@@ -28,6 +28,7 @@ from typing import Optional
 
 import numpy as np
 
+from .designate import Designation
 from .predict import Prediction, camera_model_at
 
 FORMAT = "scipctl-sequence/1"
@@ -196,19 +197,23 @@ def _exposures(dl, position) -> dict:
     return out
 
 
-def build_commands(pred: Prediction, record: dict, handoff: dict, exposures: dict, timing: Optional[Timing] = None) -> list:
-    """The command list for the planned approach (see the module docstring; stems are notional)."""
+def build_commands(pred: Prediction, record: Designation, handoff: dict, exposures: dict,
+                   timing: Optional[Timing] = None, chain_params=None) -> list:
+    """The command list for the planned approach to the designated target (see the module docstring; stems are
+    notional). ``chain_params``: the on-board chain's windows and stereo bands (default
+    :class:`~scipctl.pipeline.chain.ChainParams`; the prediction's ``PredictParams.chain``)."""
     from .chain import ChainParams
 
     tm = timing or Timing()
+    cp = chain_params or ChainParams()
     plan = pred.plan
     X = plan.target_site_m
-    cmds = [Command("SCIP_BEGIN", [("target", record["id"])], tm.misc_s, "single-cycle instrument placement"),
+    cmds = [Command("SCIP_BEGIN", [("target", record.id)], tm.misc_s, "single-cycle instrument placement"),
             Command("SCIP_TARGET_SET", [("x_m", X[0]), ("y_m", X[1]), ("z_m", X[2]), ("frame", ("enum", "SITE"))], tm.misc_s,
                     "designated 3-D target, today's site frame"),
-            Command("TRK_INIT_TEMPLATE", [("product", record["product_id"]), ("u_px", record["pixel_uv"][0]),
-                                          ("v_px", record["pixel_uv"][1]),
-                                          ("template_half_px", _half(record.get("camera", "pancam")))], tm.misc_s,
+            Command("TRK_INIT_TEMPLATE", [("product", record.product_id), ("u_px", record.pixel_uv[0]),
+                                          ("v_px", record.pixel_uv[1]),
+                                          ("template_half_px", cp.template_half(record.camera))], tm.misc_s,
                     "first tracking window from today's image")]
     prev_heading = plan.stops[0].heading_rad
     for st in plan.stops[1:]:
@@ -266,20 +271,14 @@ def build_commands(pred: Prediction, record: dict, handoff: dict, exposures: dic
                 cmds.append(Command("TRK_TRACK", [("camera", ("enum", cam.upper())), ("template_half_px", sh.template_half_px),
                                                   ("search_radius_px", sh.search_radius_px), ("min_ncc", 0.3)],
                                     tm.track_s, "window scaled by the range ratio", st.index))
-            cmds.append(Command("TRK_STEREO_UPDATE", [("camera", ("enum", cam.upper())), ("band_px", ChainParams().band(cam))],
+            cmds.append(Command("TRK_STEREO_UPDATE", [("camera", ("enum", cam.upper())), ("band_px", cp.band(cam))],
                                 tm.stereo_s, "re-range the tracked target", st.index))
     fin = plan.final
     cmds.append(Command("ARM_PLACE_AT_TARGET", [("instrument", ("enum", "CONTACT")), ("approach", ("enum", "SURFACE_NORMAL")),
                                                 ("max_offset_m", 0.02)],
                         tm.arm_s, f"target expected {fin.distance_m:.2f} m ahead", fin.index))
-    cmds.append(Command("SCIP_END", [("target", record["id"])], 0.0, ""))
+    cmds.append(Command("SCIP_END", [("target", record.id)], 0.0, ""))
     return cmds
-
-
-def _half(camera):
-    from .chain import ChainParams
-
-    return ChainParams().template_half(camera)
 
 
 def _enum(s: str) -> str:
@@ -321,11 +320,11 @@ def time_tag(seconds: float) -> str:
     return f"R{s // 3600:02d}:{(s % 3600) // 60:02d}:{s % 60:02d}"
 
 
-def sequence_document(pred: Prediction, record: dict, checks: list, commands: list, handoff: dict,
+def sequence_document(pred: Prediction, record: Designation, checks: list, commands: list, handoff: dict,
                       provenance: dict, mission: str = "", sol: Optional[int] = None) -> dict:
     """The deterministic document both formats are written from."""
     plan = pred.plan
-    seq_id = f"scip_{_ident(record['id'])}" + (f"_sol{sol}" if sol is not None else "")
+    seq_id = f"scip_{_ident(record.id)}" + (f"_sol{sol}" if sol is not None else "")
     cmd_docs = []
     prev = 0.0
     t = 0.0
@@ -342,9 +341,9 @@ def sequence_document(pred: Prediction, record: dict, checks: list, commands: li
         "mission": mission,
         "sol": sol,
         "provenance": provenance,
-        "target": {"id": record["id"], "product_id": record["product_id"], "pixel_uv": record["pixel_uv"],
-                   "xyz_site_m": record["xyz_site_m"], "range_m": record.get("range_m"),
-                   "designated_from": record.get("designated_from", "targets.json")},
+        "target": {"id": record.id, "product_id": record.product_id, "pixel_uv": list(record.pixel_uv),
+                   "xyz_site_m": list(record.xyz_site_m), "range_m": record.range_m,
+                   "designated_from": record.designated_from or "targets.json"},
         "plan": {"path_length_m": plan.path_length_m, "bearing_rad": plan.bearing_rad, "detour_rad": plan.detour_rad,
                  "stops": [{"index": s.index, "kind": s.kind, "distance_m": s.distance_m,
                             "xy_site_m": s.T_site_rover.t[:2].tolist(), "heading_rad": s.heading_rad,

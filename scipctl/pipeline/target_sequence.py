@@ -3,40 +3,42 @@ sequence document (:mod:`.sequence` builds, checks and formats; this module puts
 
 from __future__ import annotations
 
-from ..errors import CommandFailed, InputError
+from ..errors import CommandFailed
 
 
 def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
-    :class:`~scipctl.io.workspace` source): returns ``(doc or None, checks, prediction, record)``.
+    :class:`~scipctl.io.workspace` source): returns ``(doc or None, checks, prediction, record)`` (``record``:
+    the target's :class:`~scipctl.pipeline.designate.Designation`).
 
     ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
     :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
     """
+    from .designate import designations_from_doc
     from .predict import predict_target, resolve_target
 
     dl = source.downlink
     if pred is None or record is None:
         targets_doc = source.load_json("targets.json")
-        if targets_doc is not None and not isinstance(targets_doc, dict):
-            raise InputError(str(source.read_from["targets.json"]), "targets",
-                             "expected a JSON object with a 'targets' list")
-        record, now = resolve_target(dl, target, targets_doc)
-        if not record.get("ok", True) or record.get("xyz_site_m") is None:
+        designations = designations_from_doc(targets_doc, str(source.read_from.get("targets.json", "targets.json")))
+        record, now = resolve_target(dl, target, designations)
+        if not record.has_position:
             raise CommandFailed(f"{target}: no reliable 3-D position for the target "
-                                f"({record.get('reason') or 'no stereo match'}); no sequence",
-                                payload={"target": target, "designation": record})
+                                f"({record.reason or 'no stereo match'}); no sequence",
+                                payload={"target": target, "designation": record.to_dict()})
         pred = predict_target(dl, record, params, designated_now=now)
     handoff_doc = source.load_json("handoff.json")
     rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
-    doc, checks = document_for(dl, record, pred, rows, rules)
+    doc, checks = document_for(dl, record, pred, rows, rules, chain_params=None if params is None else params.chain)
     return doc, checks, pred, record
 
 
-def document_for(dl, record, pred, table1_rows=None, rules=None):
+def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=None):
     """(sequence document or None when a blocking rule is broken, rule checks) for a prediction.
 
-    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method.
+    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method;
+    ``chain_params``: the windows and bands the uplinked chain commands carry (default ``ChainParams()``; the
+    prediction's ``PredictParams.chain``).
     """
     from ..io.provenance import provenance
     from .sequence import (broken, build_commands, canonical_hash, check_rules, choose_handoff,
@@ -46,9 +48,10 @@ def document_for(dl, record, pred, table1_rows=None, rules=None):
     if broken(checks):
         return None, checks
     handoff = choose_handoff(table1_rows)
-    inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash(record)}
+    inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash(record.to_dict())}
     if table1_rows:
         inputs["handoff_results"] = canonical_hash(table1_rows)
     prov = provenance(inputs, deterministic=True)
-    cmds = build_commands(pred, record, handoff, _exposures(dl, dl.product(record["product_id"]).position))
+    cmds = build_commands(pred, record, handoff, _exposures(dl, dl.product(record.product_id).position),
+                          chain_params=chain_params)
     return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol), checks

@@ -2,6 +2,7 @@
 
 import json
 import shutil
+from dataclasses import replace
 
 import pytest
 from typer.testing import CliRunner
@@ -60,11 +61,10 @@ def test_a_broken_rule_means_no_sequence_and_exit_1(tmp_path, slab_dir):
     src = tmp_path / "sol7"
     shutil.copytree(slab_dir, src)
     dl = read_downlink(src)
-    rec = S.designation_record(dl, "t_slab")
-    rec.update({"id": "t_far", "xyz_site_m": [30.0, 0.0, 0.0]})  # far beyond the drive limit
+    rec = replace(S.designation_record(dl, "t_slab"), id="t_far", xyz_site_m=(30.0, 0.0, 0.0))  # beyond the drive limit
     side = src.parent / "sol7.scipctl"
     side.mkdir()
-    (side / "targets.json").write_text(json.dumps({"targets": [rec]}))
+    (side / "targets.json").write_text(json.dumps({"targets": [rec.to_dict()]}))
     out = tmp_path / "far.seqn"
     r = runner.invoke(app, ["sequence", str(src), "--target", "t_far", "-o", str(out), "--json"])
     assert r.exit_code == 1
@@ -84,6 +84,21 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, slab_dir):
     assert r.exit_code == 2 and "--format" in r.stderr and r.stderr.count("\n") == 1
     r = runner.invoke(app, ["sequence", str(tmp_path / "missing"), "--target", "t_slab"])
     assert r.exit_code == 2 and r.stderr.count("\n") == 1
+
+
+def test_a_bad_field_in_targets_json_is_exit_2_naming_the_file_and_field(tmp_path, slab_dir):
+    src = tmp_path / "sol8"
+    shutil.copytree(slab_dir, src)
+    dl = read_downlink(src)
+    rec = S.designation_record(dl, "t_slab").to_dict()
+    side = src.parent / "sol8.scipctl"
+    side.mkdir()
+    (side / "targets.json").write_text(json.dumps({"targets": [dict(rec, id="t_bad", pixel_uv=[1.0])]}))
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "--json"])
+    assert r.exit_code == 2 and r.stdout == ""
+    assert r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith(f"scipctl: error: {side / 'targets.json'}: targets[0].pixel_uv: target 't_bad': "
+                               "expected 2 finite numbers"), r.stderr
 
 
 def test_bad_pose_sigma_flag_is_exit_2():

@@ -246,14 +246,16 @@ def cached(name: str):
     return _CACHE[name]
 
 
-def designation_record(dl: Downlink, target_id: str, world: World = None) -> dict:
-    """An exact designation record (as ``scipctl designate`` writes) from the target's mark in the left pancam."""
+def designation_record(dl: Downlink, target_id: str, world: World = None):
+    """An exact :class:`~scipctl.pipeline.designate.Designation` (as ``scipctl designate`` makes it) from the
+    target's mark in the left pancam."""
+    from scipctl.pipeline.designate import Designation
+
     tm = dl.target(target_id)
     left = dl.product("pancam_left_1_0")
     mk = tm.mark_in(left.product_id)
     X = next(t.xyz_site_m for t in dl.truth_targets if t.id == target_id)
     Xr = left.pose.T_site_rover.inverse().apply(X)
-    return {"id": target_id, "ok": True, "product_id": left.product_id, "camera": "pancam", "pixel_uv": [mk.u, mk.v],
-            "xyz_site_m": np.asarray(X).tolist(), "xyz_rover_m": Xr.tolist(),
-            "range_m": float(np.linalg.norm(Xr - left.camera_model.C)), "range_sigma_m": 0.01,
-            "position": {"site": 1, "drive": 0}, "warnings": []}
+    return Designation(id=target_id, ok=True, product_id=left.product_id, camera="pancam", pixel_uv=(mk.u, mk.v),
+                       xyz_site_m=tuple(np.asarray(X).tolist()), xyz_rover_m=tuple(Xr.tolist()),
+                       range_m=float(np.linalg.norm(Xr - left.camera_model.C)), range_sigma_m=0.01, position=(1, 0))

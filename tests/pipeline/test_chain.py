@@ -8,7 +8,7 @@ import pytest
 from scipctl.core.tracking import track
 from scipctl.core.windows import extract_window, scale_window, window_scale_for_handoff
 from scipctl.io.downlink import read_downlink
-from scipctl.pipeline.chain import ChainParams, run_chain
+from scipctl.pipeline.chain import ChainParams, ChainStep, run_chain
 from scipctl.pipeline.plane_warp import plane_warped_template
 from tests.pipeline.chain_expected import EXPECTED_ERROR_PX  # the measured bounds and how they were measured
 
@@ -105,6 +105,38 @@ def test_chain_records_every_stop_against_the_marks(dl, chains):
     # time order of the stops
     times = [dl.product(s.product_id).time_s for s in steps]
     assert times == sorted(times)
+
+
+def test_chain_steps_read_back_from_json(chains):
+    """Every step of a real chain, written as the commands write JSON and read back, is the same record."""
+    import json
+
+    from scipctl.io.workspace import dumps
+
+    steps = [s for ss in chains.values() for s in ss]
+    text = dumps([s.to_dict() for s in steps])
+    back = [ChainStep.from_dict(d, "handoff.json", i) for i, d in enumerate(json.loads(text))]
+    assert dumps([b.to_dict() for b in back]) == text
+    assert [(b.position, b.product_id, b.tracked_uv, b.error_px) for b in back] == \
+        [(tuple(s.position), s.product_id, s.tracked_uv, s.error_px) for s in steps]
+
+
+@pytest.mark.parametrize("change, field, why", [
+    ({"position": [1]}, "steps[3].position", "expected [site, drive]"),
+    ({"tracked_uv": [1.0, None]}, "steps[3].tracked_uv", "expected 2 finite numbers"),
+    ({"ok": None}, "steps[3].ok", "missing"),
+    ({"error_px": "1.2"}, "steps[3].error_px", "expected a finite number"),
+    ({"kind": 3}, "steps[3].kind", "expected a string"),
+])
+def test_a_bad_chain_step_field_is_named(change, field, why):
+    from scipctl.model import InputError
+
+    good = ChainStep((1, 2), "navcam", "p", "track", None, [1.0, 2.0], None, None, 0.9, 3.0, None, None, None,
+                     True).to_dict()
+    assert ChainStep.from_dict(good).to_dict() == good
+    with pytest.raises(InputError) as e:
+        ChainStep.from_dict(dict(good, **change), "chains.json", 3)
+    assert str(e.value).startswith(f"chains.json: {field}: ") and why in str(e.value), str(e.value)
 
 
 def test_chain_lands_on_the_marks_at_every_stop(dl, chains):

@@ -17,7 +17,7 @@ import pytest
 
 from scipctl.core.transforms import RigidTransform
 from scipctl.model import InputError
-from scipctl.pipeline.designate import designate, parse_pixel, pick_left_product
+from scipctl.pipeline.designate import Designation, designate, designations_from_doc, parse_pixel, pick_left_product
 from tests.pipeline import scene as S
 
 NEAR_FLAT_SITE = np.array([8.9, -0.3, 0.0])  # flat ground beside the slab's foot
@@ -61,24 +61,24 @@ def _angle_deg(a, b):
 def test_point_is_the_truth_within_the_stereo_error_model(scene, camera, target_id, request):
     _, dl = request.getfixturevalue(scene)
     rec, left, X_site_true = _designate_mark(dl, camera, target_id, with_normal=False)
-    assert rec["ok"], rec["reason"]
-    assert rec["product_id"] == left.product_id and rec["right_product_id"] == f"{camera}_right_1_0"
+    assert rec.ok, rec.reason
+    assert rec.product_id == left.product_id and rec.right_product_id == f"{camera}_right_1_0"
     T_site_rover = left.pose.T_site_rover
-    X_rover = np.array(rec["xyz_rover_m"])
-    assert np.allclose(rec["xyz_site_m"], T_site_rover.apply(X_rover), rtol=0, atol=1e-12)
-    assert rec["range_m"] == pytest.approx(np.linalg.norm(X_rover - left.camera_model.C), rel=1e-12)
+    X_rover = np.array(rec.xyz_rover_m)
+    assert np.allclose(rec.xyz_site_m, T_site_rover.apply(X_rover), rtol=0, atol=1e-12)
+    assert rec.range_m == pytest.approx(np.linalg.norm(X_rover - left.camera_model.C), rel=1e-12)
     # the true left ray (rover frame) through the mark
-    o, d = left.camera_model.unproject(np.array([rec["pixel_uv"]]))
+    o, d = left.camera_model.unproject(np.array([rec.pixel_uv]))
     o, d = o[0], d[0] / np.linalg.norm(d[0])
     X_rover_true = T_site_rover.inverse().apply(X_site_true)
     assert np.linalg.norm(np.cross(X_rover_true - o, d)) < 1e-6  # the mark is exact: the ray passes through the truth
     err = X_rover - X_rover_true
     along_m = float(err @ d)
-    sigma_m = rec["range_sigma_m"]
+    sigma_m = rec.range_sigma_m
     assert 0 < sigma_m < np.inf
     assert abs(along_m) < 2.0 * sigma_m, f"{along_m * 1e3:.1f} mm along the ray, sigma {sigma_m * 1e3:.1f} mm"
     off_ray_m = np.linalg.norm(err - along_m * d)
-    assert off_ray_m == pytest.approx(rec["ray_miss_m"] / 2, abs=1e-6)
+    assert off_ray_m == pytest.approx(rec.ray_miss_m / 2, abs=1e-6)
 
 
 @pytest.mark.parametrize("scene, target_id", [("near", "t_slab"), ("far", "t_slab"), ("far", "t_flat")])
@@ -90,10 +90,10 @@ def test_range_sigma_is_a_quarter_pixel_of_disparity(scene, target_id, request):
     m = left.camera_model
     f_px = np.linalg.norm(np.cross(m.A, m.H))
     baseline_m = np.linalg.norm(right.camera_model.C - m.C)
-    ray = np.array(rec["xyz_rover_m"]) - m.C
+    ray = np.array(rec.xyz_rover_m) - m.C
     r = np.linalg.norm(ray)
     expected_m = r**2 / (f_px * baseline_m) * 0.25 / float(ray @ m.A / r)
-    assert rec["range_sigma_m"] == pytest.approx(expected_m, rel=0.02)
+    assert rec.range_sigma_m == pytest.approx(expected_m, rel=0.02)
 
 
 @pytest.mark.parametrize("scene, target_id, n_true, tol_deg", [
@@ -103,22 +103,22 @@ def test_range_sigma_is_a_quarter_pixel_of_disparity(scene, target_id, request):
 def test_surface_normal_is_the_plane_of_the_surface(scene, target_id, n_true, tol_deg, request):
     _, dl = request.getfixturevalue(scene)
     rec, left, _ = _designate_mark(dl, "pancam", target_id)
-    n = np.array(rec["surface_normal_rover"])
+    n = np.array(rec.surface_normal_rover)
     assert np.linalg.norm(n) == pytest.approx(1.0, abs=1e-12) and n[2] < 0  # unit, oriented up (rover z down)
-    assert rec["normal_points"] >= 10
+    assert rec.normal_points >= 10
     R_site_rover = left.pose.T_site_rover.R
     assert _angle_deg(R_site_rover @ n, n_true) < tol_deg
-    ray = np.array(rec["xyz_rover_m"]) - left.camera_model.C
-    assert rec["incidence_deg"] == pytest.approx(_angle_deg(ray, n) if ray @ n > 0 else 180 - _angle_deg(ray, n), abs=1e-9)
-    assert not rec["warnings"]
+    ray = np.array(rec.xyz_rover_m) - left.camera_model.C
+    assert rec.incidence_deg == pytest.approx(_angle_deg(ray, n) if ray @ n > 0 else 180 - _angle_deg(ray, n), abs=1e-9)
+    assert not rec.warnings
 
 
 def test_too_few_dense_points_give_no_normal_and_a_warning(near):
     _, dl = near
     rec, _, _ = _designate_mark(dl, "hazcam", "t_slab")  # 256 px hazcam: dense stereo finds nothing near the target
-    assert rec["ok"] and rec["surface_normal_rover"] is None and rec["normal_points"] < 10
-    assert any(w.startswith("no surface normal") for w in rec["warnings"])
-    assert "incidence_deg" not in rec
+    assert rec.ok and rec.surface_normal_rover is None and rec.normal_points < 10
+    assert any(w.startswith("no surface normal") for w in rec.warnings)
+    assert rec.incidence_deg is None and "incidence_deg" not in rec.to_dict()
 
 
 @pytest.mark.parametrize("uv", [(-0.51, 100.0), (100.0, -0.6), (S.SIZE - 0.49, 100.0), (100.0, S.SIZE + 3.0),
@@ -134,7 +134,7 @@ def test_image_edges_are_inside(far):
     _, dl = far
     left = dl.product("pancam_left_1_0")
     rec = designate(dl, left, (-0.5, S.SIZE - 0.5), with_normal=False)  # the corner pixel's outer edge: accepted
-    assert "near the image edge" in rec["warnings"]
+    assert "near the image edge" in rec.warnings
 
 
 def test_no_right_eye_is_an_input_error(far):
@@ -162,3 +162,88 @@ def test_pick_left_product(far):
         pick_left_product(dl, None, "chemcam")
     with pytest.raises(InputError):
         pick_left_product(dl, None, None)
+
+
+# ----------------------------------------------------------------------------- the record in targets.json
+def _json_round_trip(rec):
+    """``rec`` written as scipctl writes targets.json (sorted keys) and read back."""
+    import json
+
+    from scipctl.io.workspace import dumps
+
+    text = dumps({"targets": [rec.to_dict()]})
+    return text, designations_from_doc(json.loads(text))
+
+
+@pytest.mark.parametrize("camera, with_normal", [("pancam", True), ("navcam", False)])
+def test_a_designation_reads_back_to_the_same_record_and_bytes(far, camera, with_normal):
+    from scipctl.io.workspace import dumps
+
+    _, dl = far
+    rec, _, _ = _designate_mark(dl, camera, "t_slab", with_normal=with_normal)
+    rec = replace(rec, provenance={"tool": "scipctl", "inputs": {}})
+    text, (back,) = _json_round_trip(rec)
+    assert back == rec
+    assert dumps({"targets": [back.to_dict()]}) == text
+    # the optional keys are written only when present
+    d = rec.to_dict()
+    assert ("normal_points" in d) == with_normal and "designated_from" not in d and d["provenance"]
+
+
+def test_a_failed_designation_has_no_stereo_keys_and_reads_back():
+    rec = Designation(id="d2", product_id="p", camera="pancam", pixel_uv=(3.0, 4.0), ok=False, right_product_id="q",
+                      position=(1, 0), band_px=6.0, reason="textureless window", warnings=("low texture",))
+    d = rec.to_dict()
+    assert not ({"xyz_site_m", "xyz_rover_m", "range_m", "pose", "normal_points"} & set(d)) and not rec.has_position
+    assert d["position"] == {"site": 1, "drive": 0} and d["warnings"] == ["low texture"]
+    _, (back,) = _json_round_trip(rec)
+    assert back == rec
+
+
+def test_unknown_keys_of_a_read_record_are_kept():
+    d = {"id": "x", "product_id": "p", "camera": "navcam", "pixel_uv": [1.5, 2], "ok": True, "note": "by hand"}
+    rec = Designation.from_dict(d)
+    assert rec.extra == {"note": "by hand"} and rec.to_dict()["note"] == "by hand"
+    assert rec.pixel_uv == (1.5, 2) and rec.to_dict()["pixel_uv"] == [1.5, 2]  # values as read
+
+
+GOOD = {"id": "d1", "product_id": "p", "camera": "pancam", "pixel_uv": [10.0, 20.0], "ok": True,
+        "xyz_site_m": [1.0, 2.0, 3.0], "warnings": []}
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"pixel_uv": [1.0]}, "targets[1].pixel_uv"),
+    ({"pixel_uv": [1.0, float("nan")]}, "targets[1].pixel_uv"),
+    ({"pixel_uv": None}, "targets[1].pixel_uv"),
+    ({"id": ""}, "targets[1].id"),
+    ({"id": 7}, "targets[1].id"),
+    ({"camera": None}, "targets[1].camera"),
+    ({"ok": "yes"}, "targets[1].ok"),
+    ({"xyz_site_m": [1.0, 2.0, "3"]}, "targets[1].xyz_site_m"),
+    ({"range_m": float("inf")}, "targets[1].range_m"),
+    ({"warnings": "none"}, "targets[1].warnings"),
+    ({"position": {"site": 1}}, "targets[1].position"),
+    ({"normal_points": -1}, "targets[1].normal_points"),
+    ({"pose": [1, 2]}, "targets[1].pose"),
+])
+def test_a_bad_field_is_one_input_error_naming_targets_json_and_the_field(change, field):
+    bad = dict(GOOD, **change)
+    with pytest.raises(InputError) as e:
+        designations_from_doc({"targets": [GOOD, bad]})
+    msg = str(e.value)
+    assert msg.startswith(f"targets.json: {field}: ") and "\n" not in msg, msg
+    assert e.value.product == "targets.json" and e.value.field == field
+
+
+@pytest.mark.parametrize("missing", ["id", "product_id", "camera", "pixel_uv"])
+def test_a_missing_required_field_is_named(missing):
+    bad = {k: v for k, v in GOOD.items() if k != missing}
+    with pytest.raises(InputError, match=rf"^targets.json: targets\[0\]\.{missing}: .*missing"):
+        designations_from_doc({"targets": [bad]})
+
+
+@pytest.mark.parametrize("doc", [[], "x", {"targets": "d1"}, {"targets": [["d1"]]}])
+def test_a_malformed_document_is_an_input_error(doc):
+    with pytest.raises(InputError, match=r"^targets.json: targets"):
+        designations_from_doc(doc)
+    assert designations_from_doc(None) == [] and designations_from_doc({"provenance": {}}) == []

@@ -13,7 +13,8 @@ import pytest
 
 from scipctl.core.handoff import ALL_METHODS, PAPER_METHODS
 from scipctl.io.downlink import read_downlink
-from scipctl.pipeline.handoff import build_setup, marked_targets, run_targets, table1
+from scipctl.pipeline.handoff import (HandoffRecord, build_setup, handoff_records_from_doc, marked_targets,
+                                      run_targets, table1)
 
 ROOT = Path(__file__).resolve().parents[2]
 NOERR = ROOT / "tests/data/handoff/paper-s1-straight-noerr.mcap"
@@ -169,3 +170,42 @@ def test_registration_in_a_worker_thread_changes_nothing(noerr):
         assert a.predicted_uv == b.predicted_uv and a.diagnostics["icp_fitness"] == b.diagnostics["icp_fitness"]
     for case in setup.cases.values():
         assert case.registration_seconds > 0 and "whole_reg_future" not in case._cache
+
+
+def test_handoff_records_read_back_from_handoff_json(sample):
+    """The records as simulate-handoff saves them in handoff.json read back to the same records (and bytes)."""
+    import json
+
+    from scipctl.io.workspace import dumps
+
+    _, _, recs = sample
+    text = dumps({"results": [r.to_dict() for r in recs], "table1": table1(recs)})
+    back = handoff_records_from_doc(json.loads(text), "handoff.json")
+    assert dumps({"results": [b.to_dict() for b in back], "table1": table1(back)}) == text
+    assert [(b.target, b.method, b.navcam, b.predicted_uv, b.error_px) for b in back] == \
+        [(r.target, r.method, r.navcam, r.predicted_uv, r.error_px) for r in recs]
+    assert handoff_records_from_doc({"results": []}) == [] and handoff_records_from_doc(None) == []
+
+
+GOOD_RECORD = HandoffRecord("sol.mcap", "t1", "pure-kinematic", "near", "nav-L", [1.0, 2.0], [3.0, 4.0], [3.5, 4.0],
+                            0.5, True, True, "", {"ncc_peak": 0.9}, 0.01).to_dict()
+
+
+@pytest.mark.parametrize("change, field", [
+    ({"predicted_uv": [3.0]}, "results[1].predicted_uv"),
+    ({"success": "yes"}, "results[1].success"),
+    ({"ok": None}, "results[1].ok"),
+    ({"diagnostics": []}, "results[1].diagnostics"),
+    ({"method": None}, "results[1].method"),
+    ({"error_px": float("nan")}, "results[1].error_px"),
+])
+def test_a_bad_handoff_record_field_is_named(change, field):
+    from scipctl.model import InputError
+
+    assert HandoffRecord.from_dict(GOOD_RECORD).to_dict() == GOOD_RECORD
+    with pytest.raises(InputError) as e:
+        handoff_records_from_doc({"results": [GOOD_RECORD, dict(GOOD_RECORD, **change)]}, "handoff.json")
+    assert str(e.value).startswith(f"handoff.json: {field}: ") and "\n" not in str(e.value), str(e.value)
+    missing = {k: v for k, v in GOOD_RECORD.items() if k != "seconds"}
+    with pytest.raises(InputError, match=r"^handoff.json: results\[0\]\.seconds: missing"):
+        handoff_records_from_doc({"results": [missing]})

@@ -9,11 +9,12 @@ import pytest
 
 from scipctl.pipeline import predict as P
 from scipctl.pipeline import sequence as Q
+from scipctl.pipeline.designate import Designation
 from tests.pipeline.predict.helpers import box_fn, flat, heightfield_source, start_pose
 
 TARGET = np.array([9.0, 0.0, 0.0])
-RECORD = {"id": "t1", "ok": True, "product_id": "pancam_left_1_0", "camera": "pancam", "pixel_uv": [127.5, 127.5],
-          "xyz_site_m": TARGET.tolist(), "range_m": 9.1}
+RECORD = Designation(id="t1", product_id="pancam_left_1_0", camera="pancam", pixel_uv=(127.5, 127.5),
+                     xyz_site_m=tuple(TARGET.tolist()), range_m=9.1)
 
 
 def prediction(rc, terrain, target=TARGET, confidence=0.95, approach=None):

@@ -70,7 +70,7 @@ from .montecarlo import McResult, McView, monte_carlo, sample_pose_errors
 from .chain_sim import ChainResult, ChainSample, simulate_chain, success_px
 from .risks import Risk, assess_risks, foreshortening_changes
 from .from_downlink import STEREO_CAMERAS, TargetContext, resolve_target, sigmas_for, target_context, terrain_sources
-from .prediction import Designation, PoseSigmas, Prediction, confidence_of, predict_target, run_prediction
+from .prediction import PoseSigmas, Prediction, confidence_of, predict_target, run_prediction
 
 __all__ = [
     "ApproachParams", "ArmWorkspace", "PredictParams", "RoverBody", "UncertaintyParams",
@@ -82,5 +82,5 @@ __all__ = [
     "ChainResult", "ChainSample", "simulate_chain", "success_px",
     "Risk", "assess_risks", "foreshortening_changes",
     "STEREO_CAMERAS", "TargetContext", "resolve_target", "sigmas_for", "target_context", "terrain_sources",
-    "Designation", "PoseSigmas", "Prediction", "confidence_of", "predict_target", "run_prediction",
+    "PoseSigmas", "Prediction", "confidence_of", "predict_target", "run_prediction",
 ]

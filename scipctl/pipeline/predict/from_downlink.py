@@ -9,6 +9,7 @@ from typing import Optional
 import numpy as np
 
 from ...core.kinematics import RoverPose
+from ..designate import Designation
 from .params import UncertaintyParams
 from .terrain import TerrainSource
 
@@ -17,20 +18,23 @@ STEREO_CAMERAS = ("pancam", "navcam", "hazcam")
 _PRIORITY = {"pancam": 0, "navcam": 1, "hazcam": 2}
 
 
-def resolve_target(dl, target_id: str, targets_doc: Optional[dict], with_normal: bool = True) -> tuple:
-    """The designation record for ``target_id``: from ``targets.json`` (``targets_doc``) if designated there,
-    else designated on the fly from its mark in the first left pancam image (or navcam if there is no pancam).
+def resolve_target(dl, target_id: str, designations, with_normal: bool = True) -> tuple:
+    """The :class:`~scipctl.pipeline.designate.Designation` of ``target_id``: from ``designations`` (read from
+    ``targets.json``, :func:`~scipctl.pipeline.designate.designations_from_doc`) if designated there, else
+    designated on the fly from its mark in the first left pancam image (or navcam if there is no pancam).
 
-    Returns ``(record, designated_now: bool)``. Raises ``InputError`` when the id is neither designated nor
+    Returns ``(designation, designated_now: bool)``. Raises ``InputError`` when the id is neither designated nor
     marked, or the mark is in no usable image.
     """
+    from dataclasses import replace
+
     from ...model import InputError
 
-    for rec in (targets_doc or {}).get("targets", []) or []:
-        if isinstance(rec, dict) and rec.get("id") == target_id:
+    designations = list(designations or [])
+    for rec in designations:
+        if rec.id == target_id:
             return rec, False
-    known = sorted({r.get("id") for r in (targets_doc or {}).get("targets", []) or [] if isinstance(r, dict)} |
-                   {t.id for t in dl.targets})
+    known = sorted({r.id for r in designations} | {t.id for t in dl.targets})
     marks = next((t for t in dl.targets if t.id == target_id), None)
     if marks is None:
         raise InputError(target_id, "--target", "not designated (targets.json) and not a marked target in the downlink"
@@ -43,8 +47,7 @@ def resolve_target(dl, target_id: str, targets_doc: Optional[dict], with_normal:
             mk = marks.mark_in(im.product_id)
             if mk is not None and dl.stereo_pair(im) is not None:
                 rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal)
-                rec["designated_from"] = "mark"
-                return rec, True
+                return replace(rec, designated_from="mark"), True
         if lefts:
             break
     raise InputError(target_id, "marks", "the target is marked in no left pancam/navcam image with a stereo pair")
@@ -107,17 +110,17 @@ def sigmas_for(product, params: UncertaintyParams) -> tuple:
 class TargetContext:
     """What a prediction needs from the downlink for one target."""
 
-    record: dict
+    record: Designation
     designated_now: bool
     product: object  # ImageProduct of the designation
     start: RoverPose
     target_site_m: np.ndarray
 
 
-def target_context(dl, record: dict, designated_now: bool = False) -> TargetContext:
+def target_context(dl, record: Designation, designated_now: bool = False) -> TargetContext:
     from ...model import InputError
 
-    if not record.get("ok", True) or record.get("xyz_site_m") is None:
-        raise InputError(str(record.get("id")), "designation", f"the target has no 3-D position ({record.get('reason') or 'no stereo'})")
-    prod = dl.product(record["product_id"])
-    return TargetContext(record, designated_now, prod, prod.pose, np.asarray(record["xyz_site_m"], float))
+    if not record.has_position:
+        raise InputError(str(record.id), "designation", f"the target has no 3-D position ({record.reason or 'no stereo'})")
+    prod = dl.product(record.product_id)
+    return TargetContext(record, designated_now, prod, prod.pose, np.asarray(record.xyz_site_m, float))

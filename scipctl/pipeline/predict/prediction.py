@@ -10,6 +10,7 @@ import numpy as np
 
 from ...core.camera import CameraModel
 from ...core.kinematics import RoverConfig
+from ..designate import Designation
 from .chain_sim import ChainResult, simulate_chain
 from .from_downlink import sigmas_for, target_context, terrain_sources
 from .montecarlo import McResult, monte_carlo
@@ -64,17 +65,6 @@ def confidence_of(mc: Optional[McResult], chain: Optional[ChainResult]) -> float
 
 
 @dataclass(frozen=True)
-class Designation:
-    """Today's designation of the target, as the prediction uses it."""
-
-    image: np.ndarray  # (H, W) float32: the left image the target was designated in
-    model_site: CameraModel  # that image's camera model, site frame
-    uv: np.ndarray  # (2,) the designated pixel
-    target_site_m: np.ndarray  # (3,) the designated 3-D target, site frame
-    range_sigma_m: float = 0.0  # 1-sigma error of the designation's range (along its line of sight)
-
-
-@dataclass(frozen=True)
 class PoseSigmas:
     """The pose-estimate error of the approach's first leg (see :func:`sigmas_for`) and where it came from."""
 
@@ -83,19 +73,25 @@ class PoseSigmas:
     source: str  # e.g. "position: downlink, yaw: default"
 
 
-def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig,
-                   designation: Designation, sigmas: PoseSigmas, params: Optional[PredictParams] = None) -> Prediction:
+def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig, designation: Designation,
+                   image: np.ndarray, model_site: CameraModel, sigmas: PoseSigmas,
+                   params: Optional[PredictParams] = None) -> Prediction:
     """Views, Monte Carlo, chain simulation and risks for a planned approach (pure: arrays in, results out).
 
+    ``designation``: today's designation (its pixel, its 3-D point ``xyz_site_m`` and ``range_sigma_m``, the
+    1-sigma error of its range along its line of sight; None counts as 0); ``image`` ``(H, W)`` float32: the
+    left image it was designated in; ``model_site``: that image's camera model in the site frame.
     ``params`` (default :class:`PredictParams`) is checked first.
     """
     import time
 
     params = (params or PredictParams()).check()
     notes, secs = [], {}
-    X_T = np.asarray(designation.target_site_m, float)
+    uv = np.asarray(designation.pixel_uv, float)
+    X_T = np.asarray(designation.xyz_site_m, float)
+    range_sigma_m = float(designation.range_sigma_m or 0.0)
     # the target's point on the terrain surface: today's designation ray cast into the mesh
-    o, d = designation.model_site.unproject(np.asarray(designation.uv, float)[None])
+    o, d = model_site.unproject(uv[None])
     Xs = terrain.surface_point(o[0], d[0])
     if Xs is None or np.linalg.norm(Xs - X_T) > max(0.1, 0.05 * np.linalg.norm(X_T - o[0])):
         notes.append("the designation ray misses today's stereo surface near the target; using the designated point")
@@ -105,13 +101,12 @@ def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_c
     secs["views"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigmas.position_m, sigmas.yaw_rad,
-                     designation.range_sigma_m, params.occlusion_tol_m)
+                     range_sigma_m, params.occlusion_tol_m)
     secs["monte_carlo"] = time.perf_counter() - t0
     chain = None
     if params.run_chain:
         t0 = time.perf_counter()
-        chain = simulate_chain(plan, terrain, rover_config, designation.image, designation.model_site, designation.uv,
-                               Xs, mc, params)
+        chain = simulate_chain(plan, terrain, rover_config, image, model_site, uv, Xs, mc, params)
         secs["chain"] = time.perf_counter() - t0
     risks = assess_risks(plan, mc, chain, params)
     for (si, cam), ratio in sorted(foreshortening_changes(plan).items()):
@@ -132,11 +127,11 @@ def run_prediction(target_id: str, plan: ApproachPlan, terrain: Terrain, rover_c
                "mean_final_error_m": float(np.mean(kept)) if kept else None,
                "max_final_error_m": float(np.max(kept)) if kept else None, "samples_kept": len(kept),
                "goal_m": params.success_of("hazcam")}
-    return Prediction(target_id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigmas.source, notes,
+    return Prediction(designation.id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigmas.source, notes,
                       secs, acc, terrain)
 
 
-def predict_target(dl, record: dict, params: Optional[PredictParams] = None, designated_now: bool = False,
+def predict_target(dl, record: Designation, params: Optional[PredictParams] = None, designated_now: bool = False,
                    terrain: Optional[Terrain] = None) -> Prediction:
     """Plan and predict tomorrow's approach to a designated target from today's downlink (the designation's position)."""
     import time
@@ -146,7 +141,7 @@ def predict_target(dl, record: dict, params: Optional[PredictParams] = None, des
     t0 = time.perf_counter()
     if terrain is None:
         srcs = terrain_sources(dl, ctx.product.position, downsample=params.stereo_downsample,
-                               target_range_m=record.get("range_m"))
+                               target_range_m=record.range_m)
         terrain = Terrain(srcs, params.max_edge_ratio, params.min_edge_m, params.smooth_sigma_px)
     t_terrain = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -154,8 +149,7 @@ def predict_target(dl, record: dict, params: Optional[PredictParams] = None, des
                          designation_camera=ctx.product.camera, chain_params=params.chain)
     t_plan = time.perf_counter() - t0
     sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
-    designation = Designation(ctx.product.pixels_float(), ctx.product.camera_model.transformed(ctx.start.T_site_rover),
-                              record["pixel_uv"], ctx.target_site_m, float(record.get("range_sigma_m") or 0.0))
-    pred = run_prediction(record["id"], plan, terrain, dl.rover_config, designation, PoseSigmas(sp, sy, src), params)
+    pred = run_prediction(plan, terrain, dl.rover_config, record, ctx.product.pixels_float(),
+                          ctx.product.camera_model.transformed(ctx.start.T_site_rover), PoseSigmas(sp, sy, src), params)
     pred.seconds.update({"terrain": t_terrain, "plan": t_plan})
     return pred

@@ -1,5 +1,7 @@
 """scipctl.pipeline.predict.chain_sim: the tracking chain on rendered views of exact terrain."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -26,7 +28,7 @@ def test_chain_on_exact_terrain_keeps_the_slab_target(slab_case):
     # without pose error every sample is the nominal approach: certain success on exact terrain
     exact = P.UncertaintyParams(sigma_position_m=0.0, sigma_yaw_rad=0.0, drive_error_frac=0.0, yaw_error_rad_per_m=0.0,
                                 disparity_sigma_px=0.0, n_samples=100, n_track_samples=1)
-    p0 = P.predict_target(dl, dict(rec, range_sigma_m=0.0), P.PredictParams(uncertainty=exact), terrain=ter)
+    p0 = P.predict_target(dl, replace(rec, range_sigma_m=0.0), P.PredictParams(uncertainty=exact), terrain=ter)
     assert p0.mc.p_success_geometry == 1.0 and p0.confidence == 1.0
     assert all(reason.startswith("drift") for r in p0.risks for reason in r.reasons)  # accuracy notes only
     kinds = [s["kind"] for s in nominal.steps]

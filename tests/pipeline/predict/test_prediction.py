@@ -1,7 +1,5 @@
 """scipctl.pipeline.predict.prediction: run_prediction on its grouped inputs gives predict_target's answer."""
 
-import numpy as np
-
 from scipctl.pipeline import predict as P
 from tests.pipeline import scene as S
 
@@ -14,10 +12,9 @@ def test_run_prediction_on_a_designation_and_sigmas_is_predict_target(slab_case)
     ctx = P.target_context(dl, rec)
     plan = P.plan_approach(ctx.start, ctx.target_site_m, ter, dl.rover_config, params.approach,
                            designation_camera=ctx.product.camera)
-    des = P.Designation(ctx.product.pixels_float(), ctx.product.camera_model.transformed(ctx.start.T_site_rover),
-                        np.asarray(rec["pixel_uv"], float), ctx.target_site_m, float(rec.get("range_sigma_m") or 0.0))
     sig = P.PoseSigmas(*P.sigmas_for(ctx.product, params.uncertainty))
-    direct = P.run_prediction(rec["id"], plan, ter, dl.rover_config, des, sig, params)
+    direct = P.run_prediction(plan, ter, dl.rover_config, rec, ctx.product.pixels_float(),
+                              ctx.product.camera_model.transformed(ctx.start.T_site_rover), sig, params)
     a, b = via_target.to_dict(), direct.to_dict()
     a.pop("seconds"), b.pop("seconds")
     assert a == b
