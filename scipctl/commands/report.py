@@ -9,8 +9,9 @@ from ..errors import InputError
 from .output import emit_json, stderr_console
 
 
-def build(source, progress=None, params=None):
-    """(html text, summary dict, data) for an opened source. No file is written."""
+def build(source, progress=None, params=None, rule_set=None):
+    """(html text, summary dict, data) for an opened source. No file is written. ``rule_set``: the
+    :class:`~scipctl.pipeline.rules.RuleSet` the sequences are checked with (None: the package default)."""
     from ..io.provenance import provenance
     from ..io.report_html import render_report
     from ..pipeline.report_data import ReportParams, collect
@@ -31,7 +32,8 @@ def build(source, progress=None, params=None):
         if pred is None or rec is None:
             continue
         try:
-            doc, checks = document_for(dl, rec, pred, rows)
+            doc, checks = document_for(dl, rec, pred, rows, rules=None if rule_set is None else rule_set.flight,
+                                       rules_used=None if rule_set is None else rule_set.to_dict())
             sequences[t["id"]] = {"checks": [c.to_dict() for c in checks], "text": format_seqn(doc) if doc else None}
         except (InputError, ValueError) as e:
             sequences[t["id"]] = {"checks": [], "text": None, "error": str(e)}
@@ -72,7 +74,7 @@ def _summary(data, sequences) -> dict:
     }
 
 
-def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
+def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None):
     """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
     (and stdout with ``--json``)."""
     from ..io.atomic import atomic_write_text
@@ -83,14 +85,18 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
         raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
     from ..pipeline.operator_sigmas import uncertainty_params
     from ..pipeline.report_data import ReportParams
+    from ..pipeline.rules import load_rules
 
-    unc = uncertainty_params(sigma_position_m, sigma_yaw_deg).uncertainty
-    params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad)
+    uncertainty_params(sigma_position_m, sigma_yaw_deg)  # the options' own checks (positive numbers)
+    rule_set = load_rules(rules_path, {"--sigma-position-m": sigma_position_m, "--sigma-yaw-deg": sigma_yaw_deg})
+    unc = rule_set.predict.uncertainty
+    params = ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad,
+                          predict=rule_set.predict)
     source = open_source(src, products_root=products_root)
     con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
-                                    params=params)
+                                    params=params, rule_set=rule_set)
     try:
         atomic_write_text(out, html)
     except OSError as e:

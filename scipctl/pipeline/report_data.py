@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
@@ -40,6 +40,9 @@ class ReportParams:
     calib_points_per_pair: int = 5
     sigma_position_m: Optional[float] = None  # pose-error sigmas for the prediction (None: from the downlink)
     sigma_yaw_rad: Optional[float] = None
+    # the rule set's prediction parameters (``--rules``; None: the defaults); the report's sample counts above
+    # and sigmas replace its uncertainty fields
+    predict: Optional[object] = None
 
 
 @dataclass
@@ -407,7 +410,7 @@ def _all_target_ids(dl: Downlink, targets_doc) -> list:
 def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optional[dict],
             params: Optional[ReportParams] = None, progress=None) -> dict:
     """All report content for a downlink (see the module docstring). ``progress(str)`` is called as work proceeds."""
-    from .predict import PredictParams, Terrain, UncertaintyParams, predict_target, resolve_target, terrain_sources
+    from .predict import PredictParams, Terrain, predict_target, resolve_target, terrain_sources
 
     p = params or ReportParams()
     dl = source_dl
@@ -487,8 +490,10 @@ def collect(source_dl: Downlink, targets_doc: Optional[dict], handoff_doc: Optio
     t0 = time.perf_counter()
     predictions = {}
     if p.run_prediction:
-        pp = PredictParams(uncertainty=UncertaintyParams(n_track_samples=p.n_track_samples, n_samples=p.n_mc_samples,
-                                                         sigma_position_m=p.sigma_position_m, sigma_yaw_rad=p.sigma_yaw_rad))
+        base = p.predict or PredictParams()
+        pp = replace(base, uncertainty=replace(base.uncertainty, n_track_samples=p.n_track_samples,
+                                               n_samples=p.n_mc_samples, sigma_position_m=p.sigma_position_m,
+                                               sigma_yaw_rad=p.sigma_yaw_rad))
         terrains = {}
         for tid, rec in records.items():
             if not rec.get("ok", True) or rec.get("xyz_site_m") is None:

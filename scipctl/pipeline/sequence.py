@@ -48,6 +48,22 @@ class FlightRules:
     max_tilt_rad: float = math.radians(15.0)  # terrain tilt at the final pose
     min_confidence: float = 0.7  # predicted P(success)
     hazcam_fov_margin_px: float = 20.0
+    min_terrain_known_fraction: float = 0.5  # advisory: share of the path under today's stereo
+
+    def check(self) -> "FlightRules":
+        """Raise ValueError naming the first bad field; return self (the rules file: ``pipeline/rules.py``)."""
+        from .predict.params import _check_number
+
+        c = "FlightRules"
+        _check_number(c, "max_drive_m", self.max_drive_m, 0.0, lo_open=True)
+        _check_number(c, "min_standoff_m", self.min_standoff_m, 0.0)
+        _check_number(c, "target_keep_out_m", self.target_keep_out_m, 0.0)
+        _check_number(c, "rock_keep_out_m", self.rock_keep_out_m, 0.0)
+        _check_number(c, "max_tilt_rad", self.max_tilt_rad, 0.0, math.pi / 2)
+        _check_number(c, "min_confidence", self.min_confidence, 0.0, 1.0)
+        _check_number(c, "hazcam_fov_margin_px", self.hazcam_fov_margin_px, 0.0)
+        _check_number(c, "min_terrain_known_fraction", self.min_terrain_known_fraction, 0.0, 1.0)
+        return self
 
 
 @dataclass(frozen=True)
@@ -145,7 +161,8 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
     out.append(RuleCheck("prediction-confidence", pred.confidence >= r.min_confidence, pred.confidence, r.min_confidence,
                          "", f"predicted P(success) {pred.confidence:.2f} (minimum {r.min_confidence:.2f})"))
     kf = plan.clearance.get("terrain_known_fraction", 0.0)
-    out.append(RuleCheck("terrain-known-along-path", kf >= 0.5, kf, 0.5, "",
+    out.append(RuleCheck("terrain-known-along-path", kf >= r.min_terrain_known_fraction, kf,
+                         r.min_terrain_known_fraction, "",
                          f"{100 * kf:.0f}% of the path is covered by today's stereo (obstacles elsewhere are unchecked)",
                          blocking=False))
     return out
@@ -322,8 +339,10 @@ def time_tag(seconds: float) -> str:
 
 
 def sequence_document(pred: Prediction, record: dict, checks: list, commands: list, handoff: dict,
-                      provenance: dict, mission: str = "", sol: Optional[int] = None) -> dict:
-    """The deterministic document both formats are written from."""
+                      provenance: dict, mission: str = "", sol: Optional[int] = None,
+                      rules_used: Optional[dict] = None) -> dict:
+    """The deterministic document the formats are written from (``rules_used``: the rule set's file, SHA-256
+    and effective values, :meth:`scipctl.pipeline.rules.RuleSet.to_dict`)."""
     plan = pred.plan
     seq_id = f"scip_{_ident(record['id'])}" + (f"_sol{sol}" if sol is not None else "")
     cmd_docs = []
@@ -355,6 +374,7 @@ def sequence_document(pred: Prediction, record: dict, checks: list, commands: li
                        "p_arm_workspace": None if pred.mc is None else pred.mc.p_arm_workspace,
                        "risks": [r.to_dict() for r in pred.risks]},
         "rules": [c.to_dict() for c in checks],
+        "rules_used": rules_used,
         "total_duration_s": t + prev,
         "commands": cmd_docs,
     }
@@ -417,6 +437,7 @@ def format_seqn(doc: dict) -> str:
             ("handoff", doc["handoff"]),
             ("prediction", {"confidence": doc["prediction"]["confidence"], "risks": len(doc["prediction"]["risks"])}),
             ("rules", [{"rule": r["rule"], "ok": r["ok"]} for r in doc["rules"]]),
+            ("rules_used", doc.get("rules_used")),
             ("total_duration_s", doc["total_duration_s"])]
     for k, v in meta:
         lines.append(f"@METADATA {json.dumps(k)} {json.dumps(v, sort_keys=True, separators=(',', ':'))}")
