@@ -164,7 +164,7 @@ def sequence(
     src: Path = typer.Argument(..., help="Workspace or downlink."),
     target: str = typer.Option(..., "--target", help="Target id."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Output file (default: stdout)."),
-    fmt: str = typer.Option("seqn", "--format", help="seqn | json | text"),
+    fmt: str = typer.Option("seqn", "--format", help="seqn | seqjson | json | text"),
     sigma_position_m: Optional[float] = typer.Option(
         None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the Monte Carlo (default: from the downlink)."),
     sigma_yaw_deg: Optional[float] = typer.Option(

@@ -1,5 +1,5 @@
 """`scipctl sequence`: plan the single-cycle approach to a target, predict it, check the flight rules, and
-emit the uplink command sequence (SeqN-style text, JSON, or plain text). No sequence when a rule is broken."""
+emit the uplink command sequence (SeqN-style text, SeqJSON, JSON, or plain text). No sequence when a rule is broken."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import sys
 from ..errors import CommandFailed, InputError
 from .output import emit_json, stderr_console
 
-FORMATS = ("seqn", "json", "text")
+FORMATS = ("seqn", "seqjson", "json", "text")
 
 
 def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None,
