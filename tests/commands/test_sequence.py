@@ -114,6 +114,17 @@ def test_rules_file_and_options_decide_and_are_recorded(tmp_path, slab_dir):
     assert used["overrides"] == {"--max-drive-m": 50.0} and used["values"]["flight_rules"]["max_drive_m"] == 50.0
     assert used["values"]["flight_rules"]["min_p_success"] == 0.7  # the default file's value for keys not given
     assert meta["provenance"]["inputs"]["rules_file"]["sha256"] == used["sha256"]
+    # the same through --format seqjson: valid against Aerie's SeqJSON schema, the same metadata
+    import jsonschema
+
+    from tests.pipeline.seqjson_schema import SEQJSON_SCHEMA
+
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--rules", str(rules),
+                            "--max-drive-m", "50", "--format", "seqjson"])
+    assert r.exit_code == 0, r.stderr
+    seq = json.loads(r.stdout)
+    jsonschema.Draft202012Validator(SEQJSON_SCHEMA).validate(seq)
+    assert seq["metadata"] == meta and [s["stem"] for s in seq["steps"]][-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"]
 
 
 def test_a_bad_rules_file_is_one_line_and_exit_2(tmp_path):

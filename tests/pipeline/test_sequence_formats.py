@@ -4,7 +4,6 @@
 import copy
 import json
 import math
-from pathlib import Path
 
 import jsonschema
 import pytest
@@ -12,9 +11,10 @@ import pytest
 from scipctl.pipeline import sequence as Q
 from scipctl.pipeline.rules import load_rules
 from tests.pipeline import seqn_grammar as G
+from tests.pipeline.seqjson_schema import SEQJSON_SCHEMA
 from tests.pipeline.sequence_doc import sequence_doc
 
-SCHEMA = json.loads((Path(__file__).resolve().parents[1] / "data" / "seqjson" / "schema.json").read_text())
+SCHEMA = SEQJSON_SCHEMA
 
 
 @pytest.fixture(scope="module")
