@@ -493,7 +493,12 @@ def format_text(doc: dict) -> str:
            f"(detour {math.degrees(doc['plan']['detour_rad']):+.0f} deg), {len(doc['plan']['stops']) - 1} stops, "
            f"~{doc['total_duration_s'] / 60:.0f} min",
            f"handoff navcam->hazcam: {doc['handoff']['primary']} (fallback {doc['handoff']['fallback']}); {doc['handoff']['basis']}",
-           f"predicted P(success) {doc['prediction']['confidence']:.2f}", "", "stops:"]
+           f"predicted P(success) {doc['prediction']['confidence']:.2f}"]
+    ru = doc.get("rules_used")
+    if ru:
+        out.append(f"rules: {ru['file']} (sha256 {ru['sha256'][:12]}...)"
+                   + (f", options {', '.join(f'{k} {v:g}' for k, v in ru['overrides'].items())}" if ru["overrides"] else ""))
+    out += ["", "stops:"]
     for s in doc["plan"]["stops"]:
         out.append(f"  {s['index']:2d} {s['kind']:<22s} {s['distance_m']:6.2f} m  xy ({s['xy_site_m'][0]:7.2f}, {s['xy_site_m'][1]:7.2f})"
                    f"  heading {math.degrees(s['heading_rad']):6.1f} deg  tilt {math.degrees(s['tilt_rad']):4.1f} deg  {'+'.join(s['cameras'])}")
