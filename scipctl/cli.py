@@ -42,6 +42,12 @@ def _products_dir_option():
         "instead of beside them (docs/workspace.md).")
 
 
+def _rules_option():
+    return typer.Option(
+        None, "--rules", help="Rules file (YAML): flight-rule limits and approach parameters "
+        "(default: the package's scipctl/data/rules.yaml; docs/sequence.md).")
+
+
 def _version_cb(value: bool):
     if value:
         sys.stdout.write(f"scipctl {__version__}\n")
@@ -158,11 +164,22 @@ def sequence(
     src: Path = typer.Argument(..., help="Workspace or downlink."),
     target: str = typer.Option(..., "--target", help="Target id."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Output file (default: stdout)."),
-    fmt: str = typer.Option("seqn", "--format", help="seqn | json | text"),
+    fmt: str = typer.Option("seqn", "--format", help="seqn | seqjson | json | text"),
     sigma_position_m: Optional[float] = typer.Option(
         None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the Monte Carlo (default: from the downlink)."),
     sigma_yaw_deg: Optional[float] = typer.Option(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
+    rules: Optional[Path] = _rules_option(),
+    min_p_success: Optional[float] = typer.Option(
+        None, "--min-p-success", help="Flight rule prediction-confidence: minimum predicted P(success) (overrides the rules file)."),
+    rock_keep_out_m: Optional[float] = typer.Option(
+        None, "--rock-keep-out-m", help="Flight rule rock-keep-out, metres (overrides the rules file)."),
+    target_keep_out_m: Optional[float] = typer.Option(
+        None, "--target-keep-out-m", help="Flight rule target-keep-out, metres (overrides the rules file)."),
+    max_drive_m: Optional[float] = typer.Option(
+        None, "--max-drive-m", help="Flight rule max-drive-distance, metres (overrides the rules file)."),
+    standoff_m: Optional[float] = typer.Option(
+        None, "--standoff-m", help="Final rover-origin-to-target distance, metres (overrides the rules file; default: arm workspace centre)."),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
@@ -170,7 +187,10 @@ def sequence(
     from .commands import sequence as command
 
     command.sequence(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
-        products_root=products_dir)
+        products_root=products_dir, rules_path=rules,
+        rule_options={"--min-p-success": min_p_success, "--rock-keep-out-m": rock_keep_out_m,
+                      "--target-keep-out-m": target_keep_out_m, "--max-drive-m": max_drive_m,
+                      "--standoff-m": standoff_m})
 
 
 @app.command()
@@ -182,6 +202,7 @@ def report(
         None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the prediction (default: from the downlink)."),
     sigma_yaw_deg: Optional[float] = typer.Option(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
+    rules: Optional[Path] = _rules_option(),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
 ):
@@ -189,7 +210,7 @@ def report(
     from .commands import report as command
 
     command.report(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
-        products_root=products_dir)
+        products_root=products_dir, rules_path=rules)
 
 
 def main() -> None:

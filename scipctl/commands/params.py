@@ -52,10 +52,25 @@ def predict_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Opti
     return uncertainty_params(sigma_position_m, sigma_yaw_deg).check()
 
 
-def report_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Optional[float] = None):
+def rule_set(rules_path=None, rule_options: Optional[dict] = None, sigma_position_m: Optional[float] = None,
+             sigma_yaw_deg: Optional[float] = None):
+    """``scipctl sequence`` / ``report``: the :class:`~scipctl.pipeline.rules.RuleSet` (flight rules and
+    :class:`~scipctl.pipeline.predict.PredictParams`) from the rules file ``--rules`` (None: the package default),
+    overridden by the options ``rule_options`` (``{option: value}``, :data:`scipctl.pipeline.rules.OPTIONS`) and
+    the operator's pose-error sigmas (``--sigma-position-m``, ``--sigma-yaw-deg``; None: from the downlink)."""
+    from ..pipeline.rules import load_rules
+
+    predict_params(sigma_position_m, sigma_yaw_deg)  # the options' own checks (positive numbers)
+    return load_rules(rules_path, {**(rule_options or {}), "--sigma-position-m": sigma_position_m,
+                                   "--sigma-yaw-deg": sigma_yaw_deg})
+
+
+def report_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Optional[float] = None, rules=None):
     """``scipctl report``: :class:`~scipctl.pipeline.report_data.ReportParams` with the operator's pose-error
-    sigmas for its predictions."""
+    sigmas for its predictions and, given ``rules`` (a :class:`~scipctl.pipeline.rules.RuleSet`, :func:`rule_set`),
+    its prediction parameters."""
     from ..pipeline.report_data import ReportParams
 
     unc = predict_params(sigma_position_m, sigma_yaw_deg).uncertainty
-    return ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad).check()
+    return ReportParams(sigma_position_m=unc.sigma_position_m, sigma_yaw_rad=unc.sigma_yaw_rad,
+                        predict=None if rules is None else rules.predict).check()

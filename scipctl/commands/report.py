@@ -9,8 +9,9 @@ from ..errors import InputError
 from .output import emit_json, stderr_console
 
 
-def build(source, progress=None, params=None):
-    """(html text, summary dict, data) for an opened source. No file is written."""
+def build(source, progress=None, params=None, rule_set=None):
+    """(html text, summary dict, data) for an opened source. No file is written. ``rule_set``: the
+    :class:`~scipctl.pipeline.rules.RuleSet` the sequences are checked with (None: the package default)."""
     from ..io.provenance import provenance
     from ..io.report_html import render_report
     from ..pipeline.designate import designations_from_doc
@@ -36,7 +37,8 @@ def build(source, progress=None, params=None):
         if pred is None or rec is None:
             continue
         try:
-            doc, checks = document_for(dl, rec, pred, rows)
+            doc, checks = document_for(dl, rec, pred, rows, rules=None if rule_set is None else rule_set.flight,
+                                       rules_used=None if rule_set is None else rule_set.to_dict())
             sequences[t["id"]] = {"checks": [c.to_dict() for c in checks], "text": format_seqn(doc) if doc else None}
         except (InputError, ValueError) as e:
             sequences[t["id"]] = {"checks": [], "text": None, "error": str(e)}
@@ -77,7 +79,7 @@ def _summary(data, sequences) -> dict:
     }
 
 
-def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
+def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None):
     """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
     (and stdout with ``--json``)."""
     from ..io.atomic import atomic_write_text
@@ -87,13 +89,15 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     if out.exists() and out.is_dir():
         raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
     from .params import report_params
+    from .params import rule_set as load_rule_set
 
-    params = report_params(sigma_position_m, sigma_yaw_deg)
+    rule_set = load_rule_set(rules_path, None, sigma_position_m, sigma_yaw_deg)
+    params = report_params(sigma_position_m, sigma_yaw_deg, rule_set)
     source = open_source(src, products_root=products_root)
     con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
-                                    params=params)
+                                    params=params, rule_set=rule_set)
     try:
         atomic_write_text(out, html)
     except OSError as e:

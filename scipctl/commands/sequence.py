@@ -1,5 +1,5 @@
 """`scipctl sequence`: plan the single-cycle approach to a target, predict it, check the flight rules, and
-emit the uplink command sequence (SeqN-style text, JSON, or plain text). No sequence when a rule is broken."""
+emit the uplink command sequence (SeqN-style text, SeqJSON, JSON, or plain text). No sequence when a rule is broken."""
 
 from __future__ import annotations
 
@@ -8,30 +8,34 @@ import sys
 from ..errors import CommandFailed, InputError
 from .output import emit_json, stderr_console
 
-FORMATS = ("seqn", "json", "text")
+FORMATS = ("seqn", "seqjson", "json", "text")
 
 
-def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None):
+def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None,
+             rules_path=None, rule_options=None):
     """``scipctl sequence``: write the sequence (``out`` or stdout) and print the rule checks; CommandFailed
-    (exit 1, no sequence) when a flight rule is broken."""
+    (exit 1, no sequence) when a flight rule is broken. ``rules_path``: the rules file (None: the package
+    default); ``rule_options``: ``{option: value}`` overriding it (``scipctl.pipeline.rules.OPTIONS``)."""
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, broken
     from ..pipeline.target_sequence import make_sequence
-    from .params import predict_params
+    from .params import rule_set as load_rule_set
 
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
-    params = predict_params(sigma_position_m, sigma_yaw_deg)
+    rule_set = load_rule_set(rules_path, rule_options, sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
-    doc, checks, pred, record = make_sequence(source, target, params=params)
+    doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
+                                              rules_used=rule_set.to_dict())
     summary = {
         "target": target, "designated_now": record.designated_from == "mark",
         "confidence": pred.confidence, "rules": [c.to_dict() for c in checks],
         "risks": [r.to_dict() for r in pred.risks], "path_length_m": pred.plan.path_length_m,
         "stops": len(pred.plan.stops) - 1, "seconds": pred.seconds,
         "products_read": {k: str(v) for k, v in source.read_from.items()},
+        "rules_file": {"file": rule_set.source, "sha256": rule_set.sha256, "overrides": rule_set.overrides},
     }
     bad = broken(checks)
     _print(checks, pred, target)

@@ -160,7 +160,8 @@ def plot_chain(targets: list) -> Optional[bytes]:
 
 
 def plot_prediction(pred) -> Optional[bytes]:
-    """Per planned view: P(in field of view), P(in search region), P(visible), P(kept by tracking) and the rms offset."""
+    """Per planned view: P(in field of view), P(in search region), P(visible), P(kept by tracking) and the pointing offset
+    (90th percentile over the samples in view)."""
     if pred.mc is None or not pred.mc.views:
         return None
     fig = _figure(8.0, 3.2)
@@ -178,8 +179,8 @@ def plot_prediction(pred) -> Optional[bytes]:
     ax.set_xticklabels(labels, fontsize=7)
     ax.set_xlabel("stop:camera")
     ax2 = ax.twinx()
-    ax2.bar(x, [v.offset_px_rms for v in pred.mc.views], 0.5, color="#cccccc", alpha=0.5)
-    ax2.set_ylabel("rms pointing offset (px)", fontsize=8)
+    ax2.bar(x, [v.offset_px_p90 for v in pred.mc.views], 0.5, color="#cccccc", alpha=0.5)
+    ax2.set_ylabel("pointing offset, p90 in view (px)", fontsize=8)
     ax.set_zorder(ax2.get_zorder() + 1)
     ax.patch.set_visible(False)
     ax.legend(fontsize=7, loc="lower left")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
@@ -47,6 +47,9 @@ class ReportParams:
     # lower-cased camera name, the window by the name as given)
     calibration_stereo: PointStereoParams = field(default_factory=lambda: PointStereoParams(
         window_px={"pancam": 15}, other_window_px=11, other_band_px=6.0))
+    # the rule set's prediction parameters (``--rules``; None: the defaults); the report's sample counts above
+    # and sigmas replace its uncertainty fields
+    predict: Optional[object] = None
 
     def check(self) -> "ReportParams":
         """Raise ValueError naming the first bad field; return self."""
@@ -439,7 +442,7 @@ def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Op
     (:class:`~scipctl.pipeline.chain.ChainStep` list) and ``handoff``
     (:class:`~scipctl.pipeline.handoff.HandoffRecord` list).
     """
-    from .predict import PredictParams, Terrain, UncertaintyParams, predict_target, resolve_target, terrain_sources
+    from .predict import PredictParams, Terrain, predict_target, resolve_target, terrain_sources
 
     p = (params or ReportParams()).check()
     dl = source_dl
@@ -517,8 +520,10 @@ def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Op
     t0 = time.perf_counter()
     predictions = {}
     if p.run_prediction:
-        pp = PredictParams(uncertainty=UncertaintyParams(n_track_samples=p.n_track_samples, n_samples=p.n_mc_samples,
-                                                         sigma_position_m=p.sigma_position_m, sigma_yaw_rad=p.sigma_yaw_rad))
+        base = p.predict or PredictParams()
+        pp = replace(base, uncertainty=replace(base.uncertainty, n_track_samples=p.n_track_samples,
+                                               n_samples=p.n_mc_samples, sigma_position_m=p.sigma_position_m,
+                                               sigma_yaw_rad=p.sigma_yaw_rad))
         terrains = {}
         for tid, rec in records.items():
             if not rec.has_position:

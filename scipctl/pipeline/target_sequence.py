@@ -6,12 +6,13 @@ from __future__ import annotations
 from ..errors import CommandFailed
 
 
-def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None):
+def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
     :class:`~scipctl.io.workspace` source): returns ``(doc or None, checks, prediction, record)`` (``record``:
     the target's :class:`~scipctl.pipeline.designate.Designation`).
 
     ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
+    ``rules_used``: :meth:`scipctl.pipeline.rules.RuleSet.to_dict` of the rule set, recorded in the document.
     :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
     """
     from .designate import designations_from_doc
@@ -29,11 +30,12 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
         pred = predict_target(dl, record, params, designated_now=now)
     handoff_doc = source.load_json("handoff.json")
     rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
-    doc, checks = document_for(dl, record, pred, rows, rules, chain_params=None if params is None else params.chain)
+    doc, checks = document_for(dl, record, pred, rows, rules, chain_params=None if params is None else params.chain,
+                               rules_used=rules_used)
     return doc, checks, pred, record
 
 
-def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=None):
+def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=None, rules_used=None):
     """(sequence document or None when a blocking rule is broken, rule checks) for a prediction.
 
     ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method;
@@ -51,7 +53,10 @@ def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=No
     inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash(record.to_dict())}
     if table1_rows:
         inputs["handoff_results"] = canonical_hash(table1_rows)
+    if rules_used is not None:
+        inputs["rules_file"] = rules_used["sha256"]
     prov = provenance(inputs, deterministic=True)
     cmds = build_commands(pred, record, handoff, _exposures(dl, dl.product(record.product_id).position),
                           chain_params=chain_params)
-    return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol), checks
+    return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol,
+                             rules_used=rules_used), checks

@@ -108,3 +108,45 @@ def test_bad_pose_sigma_flag_is_exit_2():
 
     r = CliRunner().invoke(app, ["sequence", "whatever.mcap", "--target", "t1", "--sigma-position-m", "-1"])
     assert r.exit_code == 2 and "sigma" in r.stderr
+
+
+def test_rules_file_and_options_decide_and_are_recorded(tmp_path, slab_dir):
+    import hashlib
+
+    rules = tmp_path / "short.yaml"
+    rules.write_text("flight_rules:\n  max_drive_m: 1.0\n")
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--rules", str(rules), "--json"])
+    assert r.exit_code == 1 and "max-drive-distance" in r.stderr.strip().splitlines()[-1]
+    assert json.loads(r.stdout)["rules_file"]["sha256"] == hashlib.sha256(rules.read_bytes()).hexdigest()
+    out = tmp_path / "t.seqn"
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--rules", str(rules),
+                            "--max-drive-m", "50", "-o", str(out)])
+    assert r.exit_code == 0, r.stderr
+    meta = {ln.split(" ", 2)[1].strip('"'): json.loads(ln.split(" ", 2)[2])
+            for ln in out.read_text().splitlines() if ln.startswith("@METADATA")}
+    used = meta["rules_used"]
+    assert used["file"] == str(rules) and used["sha256"] == hashlib.sha256(rules.read_bytes()).hexdigest()
+    assert used["overrides"] == {"--max-drive-m": 50.0} and used["values"]["flight_rules"]["max_drive_m"] == 50.0
+    assert used["values"]["flight_rules"]["min_p_success"] == 0.7  # the default file's value for keys not given
+    assert meta["provenance"]["inputs"]["rules_file"]["sha256"] == used["sha256"]
+    # the same through --format seqjson: valid against Aerie's SeqJSON schema, the same metadata
+    import jsonschema
+
+    from tests.pipeline.seqjson_schema import SEQJSON_SCHEMA
+
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--rules", str(rules),
+                            "--max-drive-m", "50", "--format", "seqjson"])
+    assert r.exit_code == 0, r.stderr
+    seq = json.loads(r.stdout)
+    jsonschema.Draft202012Validator(SEQJSON_SCHEMA).validate(seq)
+    assert seq["metadata"] == meta and [s["stem"] for s in seq["steps"]][-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"]
+
+
+def test_a_bad_rules_file_is_one_line_and_exit_2(tmp_path):
+    rules = tmp_path / "bad.yaml"
+    rules.write_text("flight_rules:\n  rock_keep_out: 0.1\n")
+    r = runner.invoke(app, ["sequence", "whatever.mcap", "--target", "t1", "--rules", str(rules)])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1
+    assert str(rules) in r.stderr and "flight_rules.rock_keep_out" in r.stderr and "unknown key" in r.stderr
+    r = runner.invoke(app, ["sequence", "whatever.mcap", "--target", "t1", "--min-p-success", "2"])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "--min-p-success" in r.stderr

@@ -9,18 +9,8 @@ import pytest
 
 from scipctl.pipeline import predict as P
 from scipctl.pipeline import sequence as Q
-from scipctl.pipeline.designate import Designation
-from tests.pipeline.predict.helpers import box_fn, flat, heightfield_source, start_pose
-
-TARGET = np.array([9.0, 0.0, 0.0])
-RECORD = Designation(id="t1", product_id="pancam_left_1_0", camera="pancam", pixel_uv=(127.5, 127.5),
-                     xyz_site_m=tuple(TARGET.tolist()), range_m=9.1)
-
-
-def prediction(rc, terrain, target=TARGET, confidence=0.95, approach=None):
-    plan = P.plan_approach(start_pose(), target, terrain, rc, approach or P.ApproachParams())
-    return P.Prediction("t1", plan, None, None, [], {}, np.asarray(target, float), confidence, "test")
-
+from tests.pipeline.predict.helpers import box_fn, flat, heightfield_source
+from tests.pipeline.sequence_doc import RECORD, prediction, sequence_doc
 
 def broken_names(pred, rc, rules=None):
     return sorted(c.rule for c in Q.broken(Q.check_rules(pred, rc, rules)))
@@ -90,17 +80,8 @@ def test_choose_handoff_from_results_and_default():
 # ----------------------------------------------------------------------------- commands and formats
 
 
-def _doc(rc, terrain):
-    pred = prediction(rc, terrain)
-    checks = Q.check_rules(pred, rc)
-    handoff = Q.choose_handoff(None)
-    cmds = Q.build_commands(pred, RECORD, handoff, {"pancam": 12.5, "navcam": None, "hazcam": 4.0})
-    prov = {"tool": "scipctl", "version": "test", "command": "scipctl sequence X --target t1", "inputs": {}}
-    return pred, Q.sequence_document(pred, RECORD, checks, cmds, handoff, prov, mission="m", sol=3)
-
-
 def test_commands_cover_every_stop_and_end_with_the_arm(rc, flat_terrain):
-    pred, doc = _doc(rc, flat_terrain)
+    pred, doc = sequence_doc(rc, flat_terrain)
     stems = [c["stem"] for c in doc["commands"]]
     assert stems[0] == "SCIP_BEGIN" and stems[-1] == "SCIP_END" and stems[-2] == "ARM_PLACE_AT_TARGET"
     for st in pred.plan.stops[1:]:
@@ -128,8 +109,8 @@ def test_commands_cover_every_stop_and_end_with_the_arm(rc, flat_terrain):
 
 
 def test_formats_are_deterministic_and_consistent(rc, flat_terrain):
-    _, d1 = _doc(rc, flat_terrain)
-    _, d2 = _doc(rc, P.Terrain([heightfield_source(flat)], smooth_sigma_px=0))  # recomputed from scratch
+    _, d1 = sequence_doc(rc, flat_terrain)
+    _, d2 = sequence_doc(rc, P.Terrain([heightfield_source(flat)], smooth_sigma_px=0))  # recomputed from scratch
     for name, fmt in Q.FORMATTERS.items():
         assert fmt(d1) == fmt(d2), name
     assert json.loads(Q.format_json(d1)) == d1
@@ -144,7 +125,7 @@ _CMD = re.compile(r'^R\d\d:\d\d:\d\d [A-Za-z][A-Za-z0-9_-]*(?: ' + _ARG + r')*(?
 
 
 def test_seqn_text_follows_the_notation(rc, flat_terrain):
-    _, doc = _doc(rc, flat_terrain)
+    _, doc = sequence_doc(rc, flat_terrain)
     lines = Q.format_seqn(doc).splitlines()
     kinds = []
     for ln in lines:

@@ -66,7 +66,7 @@ from .planning import (
     stop_distances,
 )
 from .views import check_views
-from .montecarlo import McResult, McView, monte_carlo, sample_pose_errors
+from .montecarlo import McResult, McView, monte_carlo, pointing_offset_p90, sample_pose_errors
 from .chain_sim import ChainResult, ChainSample, simulate_chain, success_px
 from .risks import Risk, assess_risks, foreshortening_changes
 from .from_downlink import STEREO_CAMERAS, TargetContext, resolve_target, sigmas_for, target_context, terrain_sources
@@ -78,7 +78,7 @@ __all__ = [
     "RayHits", "RenderedView", "Terrain", "TerrainSource", "grid_mesh", "smooth_grid",
     "ApproachPlan", "CameraShot", "PlannedStop", "camera_model_at", "clearance_of", "plan_approach", "stop_distances",
     "check_views",
-    "McResult", "McView", "monte_carlo", "sample_pose_errors",
+    "McResult", "McView", "monte_carlo", "pointing_offset_p90", "sample_pose_errors",
     "ChainResult", "ChainSample", "simulate_chain", "success_px",
     "Risk", "assess_risks", "foreshortening_changes",
     "STEREO_CAMERAS", "TargetContext", "resolve_target", "sigmas_for", "target_context", "terrain_sources",

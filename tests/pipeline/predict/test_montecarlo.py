@@ -26,7 +26,7 @@ def test_monte_carlo_without_error_keeps_everything_in_view(rc, flat_terrain):
     up = P.UncertaintyParams(n_samples=200, drive_error_frac=0.0, yaw_error_rad_per_m=0.0, disparity_sigma_px=0.0)
     mc = P.monte_carlo(plan, flat_terrain, rc, T, up, 0.0, 0.0)
     for v in mc.views:
-        assert v.p_ok == 1.0 and v.offset_px_rms < 1e-6
+        assert v.p_ok == 1.0 and v.offset_px_p90 < 1e-6
     assert mc.p_arm_workspace == 1.0 and mc.p_success_geometry == 1.0
 
 
@@ -40,7 +40,13 @@ def test_monte_carlo_probability_falls_with_the_pose_error(rc, flat_terrain):
     p_big = min(v.p_in_search for v in big.views)
     assert p_big < p_small and p_big < 0.9
     assert big.p_success_geometry < small.p_success_geometry
-    assert max(v.offset_px_rms for v in big.views) > 3 * max(v.offset_px_rms for v in small.views)
+    # larger pointing offsets in every view (of the samples in view: a 256 px image caps them, so no ratio of the
+    # maxima is promised; measured 36 -> 91 px pancam, 4 -> 63 px hazcam)
+    assert all(b.offset_px_p90 > s.offset_px_p90 for s, b in zip(small.views, big.views))
+    # an offset is measured over the samples that see the target: never beyond the image
+    for v in big.views:
+        spec = rc.spec(v.camera, "left")
+        assert v.offset_px_p90 <= max(spec.width, spec.height)
 
 
 def test_occlusion_by_a_wall_is_seen_in_the_views_the_monte_carlo_and_the_risks(rc):
@@ -55,3 +61,15 @@ def test_occlusion_by_a_wall_is_seen_in_the_views_the_monte_carlo_and_the_risks(
     assert far and all(v.p_visible == 0.0 for v in far)
     risks = P.assess_risks(plan, mc, None, P.PredictParams())
     assert any("occlusion" in " ".join(r.reasons) for r in risks)
+
+
+def test_the_pointing_offset_counts_only_samples_that_see_the_target():
+    # 10 samples in view at offsets 0..9 px (|du| or |dv|, whichever is larger), one beside the camera (near its
+    # image plane: 6e5 px), one behind it (NaN), one in view with a NaN prediction
+    k = np.arange(10.0)
+    uv_pred = np.zeros((13, 2))
+    uv_true = np.r_[np.c_[k, -0.5 * k], [[6e5, 1.0]], [[np.nan, np.nan]], [[1.0, 1.0]]]
+    uv_pred[12] = np.nan
+    in_view = np.r_[np.ones(10, bool), False, False, True]
+    assert P.pointing_offset_p90(uv_true, uv_pred, in_view) == pytest.approx(8.1, abs=1e-12)  # 9th of 0..9: 8.1
+    assert np.isnan(P.pointing_offset_p90(uv_true, uv_pred, np.zeros(13, bool)))

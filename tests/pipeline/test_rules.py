@@ -1,0 +1,72 @@
+"""The rule set: the shipped default file equals the dataclass defaults; a file and options override it;
+range errors name the file (or option) and the key."""
+
+import dataclasses
+import math
+
+import pytest
+
+from scipctl.errors import InputError
+from scipctl.io.rules_file import DEFAULT_RULES_PATH, read_rules_file
+from scipctl.pipeline.predict import PredictParams
+from scipctl.pipeline.rules import OPTIONS, SPEC, load_rules
+from scipctl.pipeline.sequence import FlightRules
+
+
+def test_the_default_file_gives_exactly_the_dataclass_defaults():
+    rs = load_rules()
+    assert rs.flight == FlightRules() and rs.predict == PredictParams()
+    # every key of the spec is in the default file (a user's file may omit any)
+    content = read_rules_file(DEFAULT_RULES_PATH, SPEC)
+    assert {s: set(kv) for s, kv in content.values.items()} == {s: set(kv) for s, kv in SPEC.items()}
+    assert rs.to_dict()["sha256"] == content.sha256 and rs.overrides == {}
+
+
+def test_a_user_file_overrides_only_its_keys(tmp_path):
+    p = tmp_path / "mine.yaml"
+    p.write_text("flight_rules:\n  rock_keep_out_m: 0.05\n  max_tilt_deg: 20\napproach:\n  detour_bearings_deg: [0, 60]\n"
+                 "tracking:\n  search_radius_px: {pancam: 200.0, navcam: 90.0, hazcam: 70.0}\n")
+    rs = load_rules(p)
+    assert rs.flight == dataclasses.replace(FlightRules(), rock_keep_out_m=0.05, max_tilt_rad=math.radians(20))
+    a = rs.predict.approach
+    assert a.rock_keep_out_m == 0.05 and a.target_keep_out_m == FlightRules().target_keep_out_m  # planned with the rule
+    assert a.detour_bearings_rad == (0.0, math.radians(60))
+    assert rs.predict.chain.search_radius("pancam") == 200.0
+    assert dataclasses.replace(rs.predict, approach=PredictParams().approach, chain=PredictParams().chain) == PredictParams()
+    assert rs.source == str(p) and rs.values["flight_rules"]["max_tilt_deg"] == 20
+
+
+def test_options_override_the_file_and_are_recorded(tmp_path):
+    p = tmp_path / "mine.yaml"
+    p.write_text("flight_rules:\n  min_p_success: 0.9\n")
+    rs = load_rules(p, {"--min-p-success": 0.5, "--rock-keep-out-m": None, "--standoff-m": 0.7})
+    assert rs.flight.min_confidence == 0.5 and rs.predict.approach.standoff_m == 0.7
+    assert rs.overrides == {"--min-p-success": 0.5, "--standoff-m": 0.7}
+    assert rs.to_dict()["values"]["flight_rules"]["min_p_success"] == 0.5
+    assert set(OPTIONS) >= {"--min-p-success", "--rock-keep-out-m"}
+
+
+@pytest.mark.parametrize("text, key", [
+    ("flight_rules:\n  min_p_success: 1.5\n", "flight_rules.min_p_success"),
+    ("flight_rules:\n  max_tilt_deg: -1\n", "flight_rules.max_tilt_deg"),
+    ("approach:\n  detour_bearings_deg: [15, 0]\n", "approach.detour_bearings_deg"),
+    ("approach:\n  hazcam_stops_m: [1.4, -1]\n", "approach.hazcam_stops_m"),
+    ("arm_workspace:\n  r_max_m: 0.5\n", "arm_workspace.r_max_m"),
+    ("rover_body:\n  rear_m: 0.6\n", "rover_body.rear_m"),
+    ("uncertainty:\n  n_samples: 0\n", "uncertainty.n_samples"),
+    ("tracking:\n  search_radius_px: {pancam: -1.0}\n", "tracking.search_radius_px"),
+    ("tracking:\n  handoff_search_radius_px: 0\n", "tracking.handoff_search_radius_px"),
+    ("prediction:\n  max_incidence_deg: 95\n", "prediction.max_incidence_deg"),
+])
+def test_an_out_of_range_value_names_the_file_and_the_key(tmp_path, text, key):
+    p = tmp_path / "bad.yaml"
+    p.write_text(text)
+    with pytest.raises(InputError) as e:
+        load_rules(p)
+    assert (e.value.product, e.value.field) == (str(p), key)
+
+
+def test_an_out_of_range_option_names_the_option():
+    with pytest.raises(InputError) as e:
+        load_rules(None, {"--rock-keep-out-m": -0.1})
+    assert (e.value.product, e.value.field) == ("--rock-keep-out-m", "flight_rules.rock_keep_out_m")

@@ -1,0 +1,106 @@
+"""SeqJSON against the schema Aerie/PlanDev validates imports with, and SeqN against Aerie's SeqN grammar
+(a recogniser written from it, tests/pipeline/seqn_grammar.py); both carry the same commands and metadata."""
+
+import copy
+import json
+import math
+
+import jsonschema
+import pytest
+
+from scipctl.pipeline import sequence as Q
+from scipctl.pipeline.rules import load_rules
+from tests.pipeline import seqn_grammar as G
+from tests.pipeline.seqjson_schema import SEQJSON_SCHEMA
+from tests.pipeline.sequence_doc import sequence_doc
+
+SCHEMA = SEQJSON_SCHEMA
+
+
+@pytest.fixture(scope="module")
+def doc(rc, flat_terrain):
+    return sequence_doc(rc, flat_terrain, rules_used=load_rules().to_dict())[1]
+
+
+def _errors(seq):
+    return list(jsonschema.Draft202012Validator(SCHEMA).iter_errors(seq))
+
+
+def test_seqjson_is_valid_against_the_aerie_schema(doc):
+    seq = json.loads(Q.format_seqjson(doc))
+    assert _errors(seq) == []
+    assert seq["id"] == doc["sequence_id"] and len(seq["steps"]) == len(doc["commands"])
+    # the validator is not vacuous: our own argument type "enum", a missing time, an extra key are rejected
+    bad = copy.deepcopy(seq)
+    bad["steps"][1]["args"][3]["type"] = "enum"
+    assert _errors(bad)
+    bad = copy.deepcopy(seq)
+    del bad["steps"][0]["time"]
+    assert _errors(bad)
+    bad = copy.deepcopy(seq)
+    bad["steps"][0]["stop"] = 1
+    assert _errors(bad)
+
+
+def test_seqjson_steps_carry_the_commands(doc):
+    seq = json.loads(Q.format_seqjson(doc))
+    kinds = {"enum": "symbol", "string": "string", "bool": "boolean", "int": "number", "float": "number"}
+    for step, c in zip(seq["steps"], doc["commands"]):
+        assert step["type"] == "command" and step["stem"] == c["stem"]
+        assert step["time"] == {"type": "COMMAND_RELATIVE", "tag": c["time_tag"][1:]}
+        assert [(a["name"], a["type"], a["value"]) for a in step["args"]] == \
+               [(a["name"], kinds[a["type"]], a["value"]) for a in c["args"]]
+        assert step.get("description", "") == c["comment"]
+        assert step.get("metadata") == (None if c["stop"] is None else {"stop": c["stop"]})
+    assert seq["metadata"]["notional"] is True and seq["metadata"]["rules_used"] == doc["rules_used"]
+    assert seq["metadata"]["provenance"] == doc["provenance"]
+
+
+def test_seqn_is_recognised_by_the_aerie_grammar_and_matches_the_document(doc):
+    text = Q.format_seqn(doc)
+    seqn = G.parse(text)
+    assert seqn.id == doc["sequence_id"] and seqn.directives == []
+    seq = json.loads(Q.format_seqjson(doc))
+    assert dict(seqn.metadata) == seq["metadata"]  # the same metadata in both forms
+    assert len(seqn.commands) == len(doc["commands"])
+    for c, d in zip(seqn.commands, doc["commands"]):
+        assert (c.time_tag, c.stem, c.comment) == (d["time_tag"], d["stem"], d["comment"])
+        kinds = [k for k, _ in c.args]
+        assert kinds == [{"enum": "enum", "string": "str", "bool": "bool", "int": "num", "float": "num"}[a["type"]]
+                         for a in d["args"]]
+        for (k, t), a in zip(c.args, d["args"]):
+            if k == "num":
+                assert float(t) == pytest.approx(a["value"], abs=5e-7)  # 6 decimals written
+            elif k == "str":
+                assert json.loads(t) == a["value"]
+            else:
+                assert t == str(a["value"])
+
+
+@pytest.mark.parametrize("bad", [
+    "R0:00:00 SCIP_BEGIN",  # hh must be two digits
+    'R00:00:00 SCIP_BEGIN "t1',  # unterminated String
+    "R00:00:00 SCIP_BEGIN 1.2.3",
+    "R00:00:00SCIP_BEGIN",  # a time tag ends in whiteSpace
+    "@METADATA key 1",  # the Key is a String
+    '@METADATA "k" {"a" 1}',
+])
+def test_the_recogniser_rejects_what_the_grammar_rejects(bad):
+    with pytest.raises(G.SeqNError):
+        G.parse('@ID "x"\n' + bad + "\n")
+
+
+def test_the_recogniser_rejects_metadata_after_the_commands():
+    with pytest.raises(G.SeqNError, match="after the commands"):
+        G.parse('@ID "x"\nR00:00:01 A_B 1\n@METADATA "k" 1\n')
+    ok = G.parse('# c\n@ID "x"\n@METADATA "k" {"a": [1, -2.5e-3, null, true]}\nC A_B ON "s" 3 # note\nA2026-327T12:00:00 X\n')
+    assert ok.metadata == [("k", {"a": [1, -2.5e-3, None, True]})]
+    assert [(c.time_tag, c.stem, c.args, c.comment) for c in ok.commands] == [
+        ("C", "A_B", [("enum", "ON"), ("str", '"s"'), ("num", "3")], "note"), ("A2026-327T12:00:00", "X", [], "")]
+
+
+def test_long_time_tags_and_missing_numbers_stay_in_the_grammar():
+    assert Q.time_tag(99 * 3600 + 59 * 60 + 59) == "R99:59:59"
+    assert Q.time_tag(100 * 3600) == "R004T04:00:00"  # SeqN hours have two digits; beyond: DDDThh:mm:ss
+    assert G.parse(f"{Q.time_tag(100 * 3600 + 61)} X\n").commands[0].time_tag == "R004T04:01:01"
+    assert Q._arg_doc("x_m", math.nan) == {"name": "x_m", "type": "enum", "value": "UNKNOWN"}
