@@ -90,8 +90,11 @@ class HeightField:
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
-def random_height_field(rng: np.random.Generator, n_waves: int = 48, roughness: float = 0.004) -> HeightField:
-    lam = np.exp(rng.uniform(np.log(0.2), np.log(60.0), size=n_waves))
+def random_height_field(rng: np.random.Generator, n_waves: int = 48, roughness: float = 0.004,
+                        wavelength_range_m: tuple = (0.2, 60.0)) -> HeightField:
+    """``n_waves`` sinusoids, wavelengths log-uniform in ``wavelength_range_m``, amplitude ``roughness`` x
+    wavelength x U(0.4, 1), random directions and phases."""
+    lam = np.exp(rng.uniform(np.log(wavelength_range_m[0]), np.log(wavelength_range_m[1]), size=n_waves))
     lam.sort()
     ang = rng.uniform(0, 2 * np.pi, size=n_waves)
     k = (2 * np.pi / lam)[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
@@ -130,3 +133,202 @@ def grid_mesh(xs: np.ndarray, ys: np.ndarray):
     d = idx[:-1, 1:].ravel()
     tris = np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
     return xy, tris, spacing
+
+
+# ----------------------------------------------------------------------------- bedrock slabs
+def _smoothstep(t: np.ndarray) -> np.ndarray:
+    t = np.clip(t, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+@dataclass(frozen=True)
+class SlabField:
+    """Bedrock slabs: flat plates (Voronoi cells of jittered seeds on a ``cell_m`` grid, each a tilted plane) on a
+    low rolling ``base``, meeting in small steps (blended over ``step_blend_m``) and dust-filled cracks (up to
+    ``crack_depth_m`` deep, ``crack_half_width_m`` each side of the border, each crack as strong as the product of
+    its two plates' ``crack_strength``). The cells are looked up at ``xy + warp(xy)`` (a few sinusoids), so the
+    cracks wander. Same interface as :class:`HeightField` (heights positive up, site +z down); the slabs'
+    gradients are central differences (1 mm), the base's analytic."""
+
+    base: HeightField
+    cell_m: float
+    jitter: np.ndarray  # (n, n, 2) seed offsets in cells, [-0.4, 0.4]
+    plate_height_m: np.ndarray  # (n, n)
+    plate_slope: np.ndarray  # (n, n, 2) dh/dx, dh/dy of each plate
+    crack_strength: np.ndarray  # (n, n) in (0, 1]
+    warp: HeightField  # its sinusoids displace x (even-numbered waves) and y (odd-numbered)
+    step_blend_m: float = 0.05
+    crack_half_width_m: float = 0.03
+    crack_depth_m: float = 0.02
+    half_extent_m: float = OUTER_HALF_M + 8.0
+
+    def _cells(self, xy):
+        """Nearest and second-nearest plate seeds of ``xy`` ``(N, 2)``: ``(cell1 (N, 2) int, seed1_xy (N, 2), cell2,
+        seed2_xy, border_m (N,), crack strength (N,))``, ``border_m`` the distance to the bisector of the two seeds (in
+        the warped plane)."""
+        n = self.plate_height_m.shape[0]
+        ph = xy @ self.warp.wavevectors.T + self.warp.phases_rad
+        w = np.sin(ph) * self.warp.amplitudes_m
+        xy = xy + np.stack([w[:, 0::2].sum(axis=1), w[:, 1::2].sum(axis=1)], axis=1)
+        g = (xy + self.half_extent_m) / self.cell_m
+        ci = np.floor(g).astype(np.int64)
+        best = [np.full(len(xy), np.inf), np.full(len(xy), np.inf)]
+        idx = [np.zeros((len(xy), 2), np.int64), np.zeros((len(xy), 2), np.int64)]
+        for di in (-1, 0, 1):
+            for dj in (-1, 0, 1):
+                c = np.clip(ci + np.array([di, dj]), 0, n - 1)
+                s = (c + 0.5 + self.jitter[c[:, 0], c[:, 1]]) * self.cell_m - self.half_extent_m
+                d2 = np.sum((xy - s) ** 2, axis=1)
+                first = d2 < best[0]
+                second = ~first & (d2 < best[1])
+                best[1] = np.where(first, best[0], np.where(second, d2, best[1]))
+                idx[1] = np.where(first[:, None], idx[0], np.where(second[:, None], c, idx[1]))
+                best[0] = np.where(first, d2, best[0])
+                idx[0] = np.where(first[:, None], c, idx[0])
+        s1 = (idx[0] + 0.5 + self.jitter[idx[0][:, 0], idx[0][:, 1]]) * self.cell_m - self.half_extent_m
+        s2 = (idx[1] + 0.5 + self.jitter[idx[1][:, 0], idx[1][:, 1]]) * self.cell_m - self.half_extent_m
+        border = (best[1] - best[0]) / (2.0 * np.maximum(np.linalg.norm(s2 - s1, axis=1), 1e-9))
+        strength = self.crack_strength[idx[0][:, 0], idx[0][:, 1]] * self.crack_strength[idx[1][:, 0], idx[1][:, 1]]
+        return idx[0], s1, idx[1], s2, border, strength
+
+    def _plate(self, idx, s, xy):
+        return self.plate_height_m[idx[:, 0], idx[:, 1]] + np.sum(self.plate_slope[idx[:, 0], idx[:, 1]] * (xy - s), axis=1)
+
+    def _slab_height(self, xy, spacing_m):
+        i1, s1, i2, s2, b, strength = self._cells(xy)
+        p1, p2 = self._plate(i1, s1, xy), self._plate(i2, s2, xy)
+        sp = np.zeros(len(xy)) if spacing_m is None else np.broadcast_to(np.asarray(spacing_m, float), (len(xy),))
+        blend = np.maximum(self.step_blend_m, 1.5 * sp)
+        h = p1 + (p2 - p1) * 0.5 * (1.0 - _smoothstep(b / blend))
+        w = np.maximum(self.crack_half_width_m, 1.5 * sp)  # a grid too coarse for the crack gets a wide shallow one
+        h -= strength * self.crack_depth_m * (self.crack_half_width_m / w) * (1.0 - _smoothstep(b / w))
+        return h
+
+    def exposure(self, xy) -> np.ndarray:
+        """``(N,)`` float32: 1 on bare plate, 0 in the dust of a crack (for the appearance)."""
+        _, _, _, _, b, strength = self._cells(np.asarray(xy, float).reshape(-1, 2))
+        dust = 1.0 - _smoothstep((b - self.crack_half_width_m) / self.crack_half_width_m)
+        return (1.0 - strength * dust).astype(np.float32)
+
+    def height_and_gradient(self, xy, spacing_m=None):
+        """``xy`` ``(N, 2)`` -> heights ``(N,)`` (positive up) and gradients ``(N, 2)``."""
+        xy = np.asarray(xy, float)
+        if xy.ndim != 2 or xy.shape[1] != 2:
+            raise ValueError(f"xy: expected shape (N, 2), got {xy.shape}")
+        e = 1e-3
+        h, g = self.base.height_and_gradient(xy, spacing_m)
+        h = h + self._slab_height(xy, spacing_m)
+        g = g + np.stack([self._slab_height(xy + [e, 0.0], spacing_m) - self._slab_height(xy - [e, 0.0], spacing_m),
+                          self._slab_height(xy + [0.0, e], spacing_m) - self._slab_height(xy - [0.0, e], spacing_m)], axis=1) / (2 * e)
+        return h, g
+
+    def height_m(self, xy, spacing_m=None) -> np.ndarray:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        return self.base.height_m(xy, spacing_m) + self._slab_height(xy, spacing_m)
+
+    def gradient(self, xy, spacing_m=None) -> np.ndarray:
+        return self.height_and_gradient(xy, spacing_m)[1]
+
+    def normal_site(self, xy, spacing_m=None) -> np.ndarray:
+        g = self.gradient(xy, spacing_m)
+        n = np.concatenate([-g, -np.ones((g.shape[0], 1))], axis=1)
+        return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+# ----------------------------------------------------------------------------- terrain kinds
+@dataclass(frozen=True)
+class GroundParams:
+    """What a terrain kind sets besides its height field: rocks, pebbles and drift sand around the target rock.
+
+    ``near_rocks``: rocks tried ``near_rock_min_m``-4 m from the target rock (sizes ``near_rock_size_m``), ``far_rock_tries``: rocks
+    tried 4-25 m out (``far_rock_size_m``); ``pebble_counts``: pebbles tried in the three zones (fine near, coarse
+    near, outer 4-16 m), ``pebble_size_scale`` multiplies their sizes; ``sand_patches``: drift-sand patches near the
+    rock (radius ``sand_radius_m``); ``sand_sheet_m``: radius of a sand sheet covering the ground around the rock
+    (0: none; pebbles may lie on it); ``bedrock``: the height field is a :class:`SlabField` whose plates look like
+    rock; ``corridor_rock_max_m``: rocks up to this length may lie in the rover's approach corridors (cobbles a
+    rover drives over; its wheels do not feel them, as with pebbles)."""
+
+    near_rocks: int = 5
+    near_rock_size_m: tuple = (0.2, 0.45)
+    near_rock_min_m: float = 1.0
+    far_rock_tries: int = 40
+    far_rock_size_m: tuple = (0.2, 0.6)
+    pebble_counts: tuple = (1100, 160, 900)
+    pebble_size_scale: float = 1.0
+    sand_patches: int = 3
+    sand_radius_m: tuple = (0.3, 0.55)
+    sand_sheet_m: float = 0.0
+    bedrock: bool = False
+    corridor_rock_max_m: float = 0.0
+
+    def check(self) -> "GroundParams":
+        if self.near_rocks < 0 or self.far_rock_tries < 0 or self.sand_patches < 0 or min(self.pebble_counts) < 0:
+            raise ValueError("GroundParams: counts must be >= 0")
+        if len(self.pebble_counts) != 3:
+            raise ValueError("GroundParams.pebble_counts: three zones")
+        for lo, hi in (self.near_rock_size_m, self.far_rock_size_m, self.sand_radius_m):
+            if not 0 < lo <= hi:
+                raise ValueError("GroundParams: size ranges must be 0 < lo <= hi")
+        if not 0 < self.pebble_size_scale <= 3 or self.sand_sheet_m < 0:
+            raise ValueError("GroundParams: pebble_size_scale in (0, 3], sand_sheet_m >= 0")
+        return self
+
+
+@dataclass(frozen=True)
+class Ground:
+    """A terrain kind's draw: the height field (:class:`HeightField` or :class:`SlabField`) and its :class:`GroundParams`."""
+
+    field: object
+    params: GroundParams
+
+
+def rolling_ground(rng: np.random.Generator) -> Ground:
+    """Today's ground (the ``default`` family): rolling soil with cm bumps, a few rocks, pebbles, 1-3 sand patches."""
+    return Ground(random_height_field(rng), GroundParams())
+
+
+def bedrock_slabs(rng: np.random.Generator) -> Ground:
+    """Flat bedrock plates ~1.6 m across, 1-2 cm steps and wandering dusty cracks of varied strength between them,
+    on a gentle roll; few pebbles, one small sand patch."""
+    base = random_height_field(rng, roughness=0.0015, wavelength_range_m=(2.0, 60.0))
+    cell = 1.6
+    n = int(np.ceil(2 * (OUTER_HALF_M + 8.0) / cell)) + 1
+    jitter = rng.uniform(-0.4, 0.4, size=(n, n, 2))
+    heights = rng.normal(0.0, 0.012, size=(n, n))
+    slopes = rng.normal(0.0, 0.015, size=(n, n, 2))
+    strength = rng.uniform(0.15, 1.0, size=(n, n))
+    warp = random_height_field(rng, n_waves=8, roughness=0.04, wavelength_range_m=(1.0, 4.0))
+    field = SlabField(base, cell, jitter, heights, slopes, strength, warp)
+    return Ground(field, GroundParams(near_rocks=3, pebble_counts=(250, 40, 300), sand_patches=1, bedrock=True))
+
+
+def sand_sheet(rng: np.random.Generator) -> Ground:
+    """A smooth sand sheet (no relief shorter than 0.8 m) over the whole scene, wind ripples, sparse pebbles lying
+    on it and few rocks: low texture everywhere."""
+    field = random_height_field(rng, roughness=0.0025, wavelength_range_m=(0.8, 60.0))
+    return Ground(field, GroundParams(near_rocks=2, far_rock_tries=15, pebble_counts=(120, 20, 200), sand_patches=0,
+                                      sand_sheet_m=200.0))
+
+
+def pebble_field(rng: np.random.Generator) -> Ground:
+    """Rolling ground paved with pebbles: three times today's count, up to 1.5 times larger; no sand."""
+    return Ground(random_height_field(rng), GroundParams(pebble_counts=(3300, 480, 2700), pebble_size_scale=1.5,
+                                                         sand_patches=0))
+
+
+def rock_strewn(rng: np.random.Generator) -> Ground:
+    """Rolling ground strewn with rocks: 30 tried within 0.6-4 m of the target rock, 150 further out; cobbles up to
+    18 cm long may lie in the approach corridors, larger rocks stay outside."""
+    return Ground(random_height_field(rng), GroundParams(near_rocks=30, near_rock_size_m=(0.08, 0.45), near_rock_min_m=0.6,
+                                                         far_rock_tries=150,
+                                                         far_rock_size_m=(0.1, 0.7), corridor_rock_max_m=0.18))
+
+
+# name -> generator(rng) -> Ground; one signature, siblings
+TERRAIN_KINDS = {
+    "rolling": rolling_ground,
+    "bedrock-slabs": bedrock_slabs,
+    "sand-sheet": sand_sheet,
+    "pebble-field": pebble_field,
+    "rock-strewn": rock_strewn,
+}
