@@ -34,7 +34,7 @@ class Appearance:
     sand_albedo: float = 0.44
     rock_albedo: float = 0.26
     texture: Optional[object] = None  # a sim.texture.SurfaceTexture: real relative albedo replacing the soil's grain
-    bedrock: Optional[object] = None  # a sim.terrain.SlabField: its plates (``exposure(xy)`` -> 1) look like rock
+    bedrock_exposure: Optional[object] = None  # xy (N, 2) -> (N,) in [0, 1]: where 1, the ground is bedrock (sim.terrain.GridValues)
     bedrock_albedo: float = 0.30
     bedrock_cover: float = 0.6  # the plates' rock shows through a dust film: this much rock, the rest soil
 
@@ -98,8 +98,8 @@ class Appearance:
                 dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
                 bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
                 a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
-            if self.bedrock is not None:  # bare plates: rock-like albedo; dust in the cracks and under sand stays soil
-                w = f32(self.bedrock_cover) * self.bedrock.exposure(P[ter, :2]) * (1 - ws)
+            if self.bedrock_exposure is not None:  # bare plates: rock-like albedo; dust in cracks and under sand stays soil
+                w = f32(self.bedrock_cover) * self.bedrock_exposure(P[ter, :2]) * (1 - ws)
                 bare = np.flatnonzero(w > 0)
                 if len(bare):
                     a[bare] = (1 - w[bare]) * a[bare] + w[bare] * self._rock_like(

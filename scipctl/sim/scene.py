@@ -37,7 +37,7 @@ from .appearance import MAT_PEBBLE, MAT_ROCK, MAT_SKY, MAT_TERRAIN, Appearance, 
 from .mesh import hull_mesh
 from .noise import LatticeNoise
 from .rocks import ROCK_SHAPES, Rock, make_rock
-from .terrain import TERRAIN_KINDS, HeightField, graded_axis, grid_mesh
+from .terrain import TERRAIN_KINDS, GridValues, HeightField, graded_axis, grid_mesh
 
 GEOM_TERRAIN, GEOM_ROCKS, GEOM_PEBBLES = 0, 1, 2
 
@@ -414,8 +414,8 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: Optional[int] = None, sun
 
     if texture is not None:
         app = _replace(app, texture=texture)
-    if gp.bedrock:
-        app = _replace(app, bedrock=field_)
+    if gp.bedrock:  # the plates' exposure at the mesh's vertices, interpolated as the mesh is
+        app = _replace(app, bedrock_exposure=GridValues(xs, field_.exposure(xy, spacing)))
     el = np.deg2rad(sun_elevation_deg if sun_elevation_deg is not None else r_sun.uniform(lo_el, hi_el))
     az = r_sun.uniform(0, 2 * np.pi)
     if sun_azimuth_rad is not None:

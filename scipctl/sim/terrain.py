@@ -147,8 +147,10 @@ class SlabField:
     low rolling ``base``, meeting in small steps (blended over ``step_blend_m``) and dust-filled cracks (up to
     ``crack_depth_m`` deep, ``crack_half_width_m`` each side of the border, each crack as strong as the product of
     its two plates' ``crack_strength``). The cells are looked up at ``xy + warp(xy)`` (a few sinusoids), so the
-    cracks wander. Same interface as :class:`HeightField` (heights positive up, site +z down); the slabs'
-    gradients are central differences (1 mm), the base's analytic."""
+    cracks wander. Same interface as :class:`HeightField` (heights positive up, site +z down); gradients: the
+    base's analytic, a plate's plane inside it, central differences (1 mm) within a blend width of a border. The
+    height is continuous except near plate corners (three plates), where the step and crack switch to the nearer
+    border: measured over 400 000 random 0.5 mm steps within 4 m, 0.003 % changed the height by > 1 mm (max 11 mm)."""
 
     base: HeightField
     cell_m: float
@@ -162,39 +164,48 @@ class SlabField:
     crack_depth_m: float = 0.02
     half_extent_m: float = OUTER_HALF_M + 8.0
 
+    def _seed(self, c):
+        return (c + 0.5 + self.jitter[c[:, 0], c[:, 1]]) * self.cell_m - self.half_extent_m
+
     def _cells(self, xy):
-        """Nearest and second-nearest plate seeds of ``xy`` ``(N, 2)``: ``(cell1 (N, 2) int, seed1_xy (N, 2), cell2,
-        seed2_xy, border_m (N,), crack strength (N,))``, ``border_m`` the distance to the bisector of the two seeds (in
-        the warped plane)."""
+        """The plate of ``xy`` ``(N, 2)`` and its nearest border: ``(cell1 (N, 2) int, seed1_xy (N, 2), cell2,
+        seed2_xy, border_m (N,), crack strength (N,))`` -- cell 1 holds the nearest seed, ``border_m`` is the
+        distance to the nearest Voronoi edge (the bisector with seed 2, over the 3 x 3 neighbouring cells; continuous),
+        all in the warped plane."""
         n = self.plate_height_m.shape[0]
         ph = xy @ self.warp.wavevectors.T + self.warp.phases_rad
         w = np.sin(ph) * self.warp.amplitudes_m
         xy = xy + np.stack([w[:, 0::2].sum(axis=1), w[:, 1::2].sum(axis=1)], axis=1)
-        g = (xy + self.half_extent_m) / self.cell_m
-        ci = np.floor(g).astype(np.int64)
-        best = [np.full(len(xy), np.inf), np.full(len(xy), np.inf)]
-        idx = [np.zeros((len(xy), 2), np.int64), np.zeros((len(xy), 2), np.int64)]
-        for di in (-1, 0, 1):
-            for dj in (-1, 0, 1):
-                c = np.clip(ci + np.array([di, dj]), 0, n - 1)
-                s = (c + 0.5 + self.jitter[c[:, 0], c[:, 1]]) * self.cell_m - self.half_extent_m
-                d2 = np.sum((xy - s) ** 2, axis=1)
-                first = d2 < best[0]
-                second = ~first & (d2 < best[1])
-                best[1] = np.where(first, best[0], np.where(second, d2, best[1]))
-                idx[1] = np.where(first[:, None], idx[0], np.where(second[:, None], c, idx[1]))
-                best[0] = np.where(first, d2, best[0])
-                idx[0] = np.where(first[:, None], c, idx[0])
-        s1 = (idx[0] + 0.5 + self.jitter[idx[0][:, 0], idx[0][:, 1]]) * self.cell_m - self.half_extent_m
-        s2 = (idx[1] + 0.5 + self.jitter[idx[1][:, 0], idx[1][:, 1]]) * self.cell_m - self.half_extent_m
-        border = (best[1] - best[0]) / (2.0 * np.maximum(np.linalg.norm(s2 - s1, axis=1), 1e-9))
-        strength = self.crack_strength[idx[0][:, 0], idx[0][:, 1]] * self.crack_strength[idx[1][:, 0], idx[1][:, 1]]
-        return idx[0], s1, idx[1], s2, border, strength
+        ci = np.floor((xy + self.half_extent_m) / self.cell_m).astype(np.int64)
+        cands = [np.clip(ci + np.array([di, dj]), 0, n - 1) for di in (-1, 0, 1) for dj in (-1, 0, 1)]
+        best = np.full(len(xy), np.inf)
+        c1 = np.zeros((len(xy), 2), np.int64)
+        for c in cands:
+            d2 = np.sum((xy - self._seed(c)) ** 2, axis=1)
+            first = d2 < best
+            best = np.where(first, d2, best)
+            c1 = np.where(first[:, None], c, c1)
+        s1 = self._seed(c1)
+        border = np.full(len(xy), np.inf)
+        c2 = c1.copy()
+        for c in cands:
+            sc = self._seed(c)
+            gap = np.linalg.norm(sc - s1, axis=1)
+            other = np.any(c != c1, axis=1)
+            bj = np.where(other, (np.sum((xy - sc) ** 2, axis=1) - best) / (2.0 * np.maximum(gap, 1e-9)), np.inf)
+            closer = bj < border
+            border = np.where(closer, bj, border)
+            c2 = np.where(closer[:, None], c, c2)
+        s2 = self._seed(c2)
+        strength = self.crack_strength[c1[:, 0], c1[:, 1]] * self.crack_strength[c2[:, 0], c2[:, 1]]
+        return c1, s1, c2, s2, border, strength
 
     def _plate(self, idx, s, xy):
         return self.plate_height_m[idx[:, 0], idx[:, 1]] + np.sum(self.plate_slope[idx[:, 0], idx[:, 1]] * (xy - s), axis=1)
 
-    def _slab_height(self, xy, spacing_m):
+    def _slab_height(self, xy, spacing_m, detail: bool = False):
+        """Slab part of the height ``(N,)``; ``detail``: also ``(border_m, nearest cell (N, 2), reach_m)``, where
+        farther than ``reach_m`` from the border the height is the nearest plate's plane."""
         i1, s1, i2, s2, b, strength = self._cells(xy)
         p1, p2 = self._plate(i1, s1, xy), self._plate(i2, s2, xy)
         sp = np.zeros(len(xy)) if spacing_m is None else np.broadcast_to(np.asarray(spacing_m, float), (len(xy),))
@@ -202,12 +213,16 @@ class SlabField:
         h = p1 + (p2 - p1) * 0.5 * (1.0 - _smoothstep(b / blend))
         w = np.maximum(self.crack_half_width_m, 1.5 * sp)  # a grid too coarse for the crack gets a wide shallow one
         h -= strength * self.crack_depth_m * (self.crack_half_width_m / w) * (1.0 - _smoothstep(b / w))
-        return h
+        return (h, b, i1, np.maximum(blend, w)) if detail else h
 
-    def exposure(self, xy) -> np.ndarray:
-        """``(N,)`` float32: 1 on bare plate, 0 in the dust of a crack (for the appearance)."""
-        _, _, _, _, b, strength = self._cells(np.asarray(xy, float).reshape(-1, 2))
-        dust = 1.0 - _smoothstep((b - self.crack_half_width_m) / self.crack_half_width_m)
+    def exposure(self, xy, spacing_m=None) -> np.ndarray:
+        """``(N,)`` float32: 1 on bare plate, down to 0 in the dust of a strong crack (for the appearance). With
+        ``spacing_m`` ``(N,)`` a grid too coarse for the crack gets a wide faint one, as the height does."""
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        _, _, _, _, b, strength = self._cells(xy)
+        sp = np.zeros(len(xy)) if spacing_m is None else np.broadcast_to(np.asarray(spacing_m, float), (len(xy),))
+        w = np.maximum(self.crack_half_width_m, 1.5 * sp)
+        dust = (self.crack_half_width_m / w) * (1.0 - _smoothstep((b - w) / w))
         return (1.0 - strength * dust).astype(np.float32)
 
     def height_and_gradient(self, xy, spacing_m=None):
@@ -217,9 +232,18 @@ class SlabField:
             raise ValueError(f"xy: expected shape (N, 2), got {xy.shape}")
         e = 1e-3
         h, g = self.base.height_and_gradient(xy, spacing_m)
-        h = h + self._slab_height(xy, spacing_m)
-        g = g + np.stack([self._slab_height(xy + [e, 0.0], spacing_m) - self._slab_height(xy - [e, 0.0], spacing_m),
-                          self._slab_height(xy + [0.0, e], spacing_m) - self._slab_height(xy - [0.0, e], spacing_m)], axis=1) / (2 * e)
+        hs, b, i1, reach = self._slab_height(xy, spacing_m, detail=True)
+        h = h + hs
+        # inside a plate (beyond the blends, with 2 mm to spare for the 1 mm steps stretched by the warp) the slab
+        # is its plate's plane; near a border, central differences
+        g = g + self.plate_slope[i1[:, 0], i1[:, 1]]
+        near = np.flatnonzero(b <= reach + 2e-3)
+        if len(near):
+            q = xy[near]
+            sp = None if spacing_m is None else np.broadcast_to(np.asarray(spacing_m, float), (len(xy),))[near]
+            fd = np.stack([self._slab_height(q + [e, 0.0], sp) - self._slab_height(q - [e, 0.0], sp),
+                           self._slab_height(q + [0.0, e], sp) - self._slab_height(q - [0.0, e], sp)], axis=1) / (2 * e)
+            g[near] += fd - self.plate_slope[i1[near, 0], i1[near, 1]]
         return h, g
 
     def height_m(self, xy, spacing_m=None) -> np.ndarray:
@@ -233,6 +257,32 @@ class SlabField:
         g = self.gradient(xy, spacing_m)
         n = np.concatenate([-g, -np.ones((g.shape[0], 1))], axis=1)
         return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class GridValues:
+    """Values ``(n * n,)`` at the vertices of the tensor grid ``axis_m`` x ``axis_m`` (vertex ``i * n + j`` at
+    ``(axis[i], axis[j])``, as :func:`grid_mesh`), interpolated on the grid's triangles (a, b, c) / (a, c, d) as the
+    terrain mesh is: ``values(xy)`` -> ``(N,)`` float32 (points outside the grid take the border's values). Used for
+    the bedrock's exposure: computed once per vertex, so the albedo costs a lookup per sample."""
+
+    axis_m: np.ndarray  # (n,)
+    values: np.ndarray  # (n * n,)
+
+    def __call__(self, xy) -> np.ndarray:
+        xy = np.asarray(xy, float).reshape(-1, 2)
+        ax = self.axis_m
+        n = len(ax)
+        x = np.clip(xy[:, 0], ax[0], ax[-1])
+        y = np.clip(xy[:, 1], ax[0], ax[-1])
+        i = np.clip(np.searchsorted(ax, x, side="right") - 1, 0, n - 2)
+        j = np.clip(np.searchsorted(ax, y, side="right") - 1, 0, n - 2)
+        fx = (x - ax[i]) / (ax[i + 1] - ax[i])
+        fy = (y - ax[j]) / (ax[j + 1] - ax[j])
+        v = self.values
+        va, vb, vc, vd = v[i * n + j], v[(i + 1) * n + j], v[(i + 1) * n + j + 1], v[i * n + j + 1]
+        out = np.where(fx >= fy, va + fx * (vb - va) + fy * (vc - vb), va + fy * (vd - va) + fx * (vc - vd))
+        return out.astype(np.float32)
 
 
 # ----------------------------------------------------------------------------- terrain kinds

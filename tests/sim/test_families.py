@@ -125,10 +125,12 @@ def test_terrain_families_differ_from_default_as_described():
     assert strewn["near_rocks"] >= 2 * max(d["near_rocks"], 1)
     # bedrock: the plates show as rock in the albedo (exposure 1 off the cracks), the field has steps and cracks
     sc = slabs["scene"]
-    assert sc.appearance.bedrock is sc.field
-    xy = np.random.default_rng(4).uniform(-3, 3, (5000, 2))
-    e = sc.field.exposure(xy)
+    ex = sc.appearance.bedrock_exposure  # the field's exposure at the mesh vertices, interpolated
+    k = np.arange(0, len(sc.terrain_xy), 97)
+    assert np.allclose(ex(sc.terrain_xy[k]), sc.field.exposure(sc.terrain_xy[k], sc.terrain_spacing_m[k]), atol=1e-6)
+    e = ex(np.random.default_rng(4).uniform(-3, 3, (5000, 2)))
     assert 0.5 < np.mean(e == 1.0) < 0.99 and e.min() < 0.5
+    assert d["scene"].appearance.bedrock_exposure is None
 
 
 def test_rock_shape_families_change_the_rocks():

@@ -56,3 +56,15 @@ def test_slab_field_is_continuous_with_steps_and_cracks_and_its_gradient_is_the_
     fd = np.stack([(f.height_m(xy + [eps, 0]) - f.height_m(xy - [eps, 0])) / (2 * eps),
                    (f.height_m(xy + [0, eps]) - f.height_m(xy - [0, eps])) / (2 * eps)], 1)
     assert np.abs(g - fd).max() < 0.02  # the smoothstep's curvature over 1 mm: measured max 0.01
+
+
+def test_grid_values_interpolate_as_the_mesh_triangles():
+    from scipctl.sim.terrain import GridValues
+
+    ax = graded_axis(1.0, 0.1, 5.0, 1.3, 1.0)
+    xy, _, _ = grid_mesh(ax, ax)
+    lin = 0.3 + 2.0 * xy[:, 0] - 0.7 * xy[:, 1]  # linear: reproduced exactly on every triangle
+    gv = GridValues(ax, lin)
+    q = np.random.default_rng(1).uniform(-5, 5, (1000, 2))
+    assert np.allclose(gv(q), 0.3 + 2.0 * q[:, 0] - 0.7 * q[:, 1], atol=1e-5)  # float32 output
+    assert np.array_equal(gv(xy), lin.astype(np.float32))
