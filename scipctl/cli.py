@@ -108,12 +108,15 @@ def synth(
     texture_crop: Optional[str] = typer.Option(
         None, "--texture-crop", help="X0,Y0,X1,Y1: the part of each picture to use, fractions of width/height (default 0.1,0.55,0.9,0.92)."),
     texture_pixel_mm: float = typer.Option(2.5, "--texture-pixel-mm", help="Ground size of one texture pixel, mm."),
+    family: Optional[str] = typer.Option(
+        None, "--family", help="Scene family (terrain, rocks, texture, sun, error scale, rover), e.g. default, bedrock-slabs, "
+                               "sand-sheet, low-sun, errors-double, m2020, mixed; all in docs/simulator.md."),
 ):
     """Render synthetic downlinks with exact truth."""
     from .commands import synth as command
 
     command.synth(scenario, seed, out, container, runs, no_errors, json_out, rover=rover, rover_dir=rover_dir,
-        texture_from=texture_from, texture_crop=texture_crop, texture_pixel_mm=texture_pixel_mm)
+        texture_from=texture_from, texture_crop=texture_crop, texture_pixel_mm=texture_pixel_mm, family=family)
 
 
 @app.command()

@@ -11,6 +11,13 @@ from ``--rover-dir`` (``m2020-camera-models.json`` + ``m2020.urdf``);
 ``--texture-from DIR`` drapes the texture of the pictures under DIR on the
 terrain. Both are recorded (file SHA-256s) in the ``.sim.json``; without them
 the output is byte-identical to what it was before they existed.
+
+``--family NAME`` builds every run from a scene family of
+:data:`scipctl.sim.families.FAMILIES` (terrain, rock shape, texture, sun,
+error scale, rover); it is recorded in the ``.sim.json`` (``family``) and in the
+regenerate command. ``--rover`` / ``--rover-dir`` / ``--texture-from`` may only
+supply what the family itself uses (its Mars 2020 models folder or its real
+texture folder; default ``shared/real``).
 """
 
 from __future__ import annotations
@@ -43,17 +50,9 @@ M2020_FOLDER_PREFIX = "12_"
 
 def _default_m2020_dir() -> Optional[Path]:
     """``shared/real/12_*`` beside the checkout (``$SCIPCTL_SHARED_REAL`` first), as the tests find it."""
-    import os
+    from ..io.shared_real import shared_real_sub
 
-    repo = Path(__file__).resolve().parents[2]
-    env = os.environ.get("SCIPCTL_SHARED_REAL")
-    cands = ([Path(env)] if env else []) + [repo / ".." / "shared" / "real", repo / ".." / ".." / "shared" / "real"]
-    for c in cands:
-        if c.is_dir():
-            hits = sorted(c.glob(M2020_FOLDER_PREFIX + "*"))
-            if hits:
-                return hits[0].resolve()
-    return None
+    return shared_real_sub(M2020_FOLDER_PREFIX)
 
 
 def load_rover(rover: str, rover_dir: Optional[Path]):
@@ -73,17 +72,42 @@ def load_rover(rover: str, rover_dir: Optional[Path]):
 
 
 def m2020_sim_rover(folder, **config_kwargs):
-    """The Mars 2020 rover for the simulator's scenarios (:class:`~scipctl.sim.rover.SimRover`), from the two files
-    in ``folder`` (:func:`scipctl.io.m2020_geometry.m2020_rover_files`); :class:`InputError` naming the folder if
-    the configuration does not fit the simulator."""
-    from ..io.m2020_geometry import MODELS_FILE, m2020_rover_files
-    from ..sim.rover import sim_rover_from_config
+    """The Mars 2020 rover for the simulator's scenarios (:func:`scipctl.sim.families.m2020_sim_rover`)."""
+    from ..sim.families import m2020_sim_rover as load
 
-    config, wheels, inputs, notes = m2020_rover_files(folder, **config_kwargs)
-    try:
-        return sim_rover_from_config("m2020", config, wheels, inputs, notes)
-    except ValueError as e:
-        raise InputError(str(folder), MODELS_FILE, str(e)) from None
+    return load(folder, **config_kwargs)
+
+
+def load_family(name: Optional[str], scenario: str, seed: int, runs: list, rover: str, rover_dir: Optional[Path],
+                texture_from: Optional[Path]):
+    """``--family``: ``(family, sim_rover, texture)`` -- the :class:`~scipctl.sim.families.SceneFamily` (None without
+    ``--family``) and the rover / texture it needs, loaded now (from ``--rover-dir`` / ``--texture-from`` if given,
+    else ``shared/real``), so that bad input stops before anything is written. A randomised family's needs are
+    loaded for each run's scene. InputError for an unknown name or options the family does not use."""
+    from ..sim.families import FAMILIES, family_rover, family_texture
+
+    if name is None:
+        return None, None, None
+    if name not in FAMILIES:
+        raise InputError("synth", "--family", f"unknown family {name!r} (want one of: {', '.join(FAMILIES)})")
+    fam = FAMILIES[name]
+    if rover != "default" and (fam.randomised or fam.rover != rover):
+        raise InputError("synth", "--rover", f"family {name} sets the rover ({'drawn per scene' if fam.randomised else fam.rover}): leave --rover out")
+    if rover_dir is not None and (fam.randomised or fam.rover != "m2020"):
+        raise InputError("synth", "--rover-dir", f"family {name} does not use a fixed Mars 2020 rover")
+    if texture_from is not None and (fam.randomised or fam.texture != "real"):
+        raise InputError("synth", "--texture-from", f"family {name} does not use a fixed real texture")
+    if fam.randomised:  # load what each run's scene draws (cached), and check it exists
+        for r in runs:
+            real = fam.realise(seed, scenario, int(r.split("-")[0][1:]))
+            family_rover(real)
+            family_texture(real)
+        return fam, None, None
+    sim_rover = None
+    if fam.rover == "m2020":
+        sim_rover = load_rover("m2020", rover_dir) if rover_dir is not None else family_rover(fam)
+    texture = read_texture_sources(texture_from) if texture_from is not None else family_texture(fam)
+    return fam, sim_rover, texture
 
 
 def read_texture_sources(folder, crop_frac=None, pixel_m=None):
@@ -119,7 +143,7 @@ _plain = json_default
 
 def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
         rover: str = "default", rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
-        texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5) -> None:
+        texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5, family: Optional[str] = None) -> None:
     from ..sim.scenarios import SCENARIOS, list_runs
 
     if scenario not in SCENARIOS:
@@ -140,23 +164,44 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
         raise InputError(str(out), "-o/--out", "exists and is not a directory")
     image_scale, supersample = _env_quality()
     # everything that can be bad input is checked before anything is written
-    sim_rover = load_rover(rover, rover_dir)
-    _check_scale(image_scale, sim_rover)
-    crop = parse_crop(texture_crop)
-    if not (0.1 <= texture_pixel_mm <= 100.0):
-        raise InputError("synth", "--texture-pixel-mm", f"{texture_pixel_mm:g}: want 0.1 .. 100")
-    texture = None
-    extra = []
-    if sim_rover is not None:
-        extra.append(f"--rover {rover}" + (f" --rover-dir {rover_dir}" if rover_dir is not None else ""))
-    if texture_from is not None:
-        texture = read_texture_sources(texture_from, crop, texture_pixel_mm * 1e-3)
-        extra.append(f"--texture-from {texture_from}" + (f" --texture-crop {texture_crop}" if texture_crop else "")
-                     + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
-    elif texture_crop is not None or texture_pixel_mm != 2.5:
-        raise InputError("synth", "--texture-crop" if texture_crop is not None else "--texture-pixel-mm", "only with --texture-from")
-    written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample,
-                         rover=sim_rover, texture=texture, extra_args=" ".join(extra))
+    if family is not None:
+        if texture_crop is not None or texture_pixel_mm != 2.5:
+            raise InputError("synth", "--texture-crop" if texture_crop is not None else "--texture-pixel-mm",
+                             "not with --family (a family's real texture uses the default crop and pixel size)")
+        fam, sim_rover, texture = load_family(family, scenario, seed, selected, rover, rover_dir, texture_from)
+        rovers = [sim_rover]
+        if fam.randomised:
+            from ..sim.families import family_rover
+
+            rovers = [family_rover(fam.realise(seed, scenario, int(r.split("-")[0][1:]))) for r in selected]
+        for rv in rovers:
+            _check_scale(image_scale, rv)
+        extra = [f"--family {family}"]
+        if rover_dir is not None:
+            extra.append(f"--rover-dir {rover_dir}")
+        if texture_from is not None:
+            extra.append(f"--texture-from {texture_from}")
+        written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale,
+                             supersample=supersample, rover=sim_rover, texture=texture, extra_args=" ".join(extra),
+                             family=fam)
+    else:
+        sim_rover = load_rover(rover, rover_dir)
+        _check_scale(image_scale, sim_rover)
+        crop = parse_crop(texture_crop)
+        if not (0.1 <= texture_pixel_mm <= 100.0):
+            raise InputError("synth", "--texture-pixel-mm", f"{texture_pixel_mm:g}: want 0.1 .. 100")
+        texture = None
+        extra = []
+        if sim_rover is not None:
+            extra.append(f"--rover {rover}" + (f" --rover-dir {rover_dir}" if rover_dir is not None else ""))
+        if texture_from is not None:
+            texture = read_texture_sources(texture_from, crop, texture_pixel_mm * 1e-3)
+            extra.append(f"--texture-from {texture_from}" + (f" --texture-crop {texture_crop}" if texture_crop else "")
+                         + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
+        elif texture_crop is not None or texture_pixel_mm != 2.5:
+            raise InputError("synth", "--texture-crop" if texture_crop is not None else "--texture-pixel-mm", "only with --texture-from")
+        written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample,
+                             rover=sim_rover, texture=texture, extra_args=" ".join(extra))
     if json_out:
         emit_json({"scenario": scenario, "seed": seed, "container": container, "no_errors": no_errors, "runs": written})
     else:
@@ -201,12 +246,13 @@ def _check_scale(scale: float, sim_rover) -> None:
 
 def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, no_errors: bool,
                image_scale: float = 1.0, supersample: int = 2, show_progress: bool = True,
-               rover=None, texture=None, extra_args: str = "") -> list[dict]:
+               rover=None, texture=None, extra_args: str = "", family=None) -> list[dict]:
     """Build and write each run; returns one summary per run (path, counts, sha256).
 
-    ``rover``: a :class:`~scipctl.sim.rover.SimRover` (None: default); ``texture``: a
-    :class:`~scipctl.sim.texture.TextureSources` (None: procedural); ``extra_args``: their options, for the
-    record's ``regenerate`` command."""
+    ``rover``: a :class:`~scipctl.sim.rover.SimRover` (None: default, or the family's); ``texture``: a
+    :class:`~scipctl.sim.texture.TextureSources` (None: procedural, or the family's); ``family``: a
+    :class:`~scipctl.sim.families.SceneFamily` or None; ``extra_args``: their options, for the record's
+    ``regenerate`` command."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.atomic import atomic_write_text
@@ -228,9 +274,14 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
             def cb(done, total, pid, task=task, name=name):
                 bar.update(task, total=total, completed=done, description=f"{name}: {pid}")
 
-            errors = ErrorSettings.none() if no_errors else default_errors(scenario)
+            if no_errors:
+                errors = ErrorSettings.none()
+            elif family is not None:
+                errors = None  # the scenario's default errors scaled by the family's error scale
+            else:
+                errors = default_errors(scenario)
             sim = build_run(scenario, run_name, seed, errors=errors, image_scale=image_scale, supersample=supersample, progress=cb,
-                            rover=rover, texture=texture)
+                            rover=rover, texture=texture, family=family)
             path = out / (f"{name}.mcap" if container == "mcap" else name)
             bar.update(task, description=f"{name}: writing {path.name}")
             write_downlink(sim.downlink, path, container)

@@ -34,6 +34,9 @@ class Appearance:
     sand_albedo: float = 0.44
     rock_albedo: float = 0.26
     texture: Optional[object] = None  # a sim.texture.SurfaceTexture: real relative albedo replacing the soil's grain
+    bedrock_exposure: Optional[object] = None  # xy (N, 2) -> (N,) in [0, 1]: where 1, the ground is bedrock (sim.terrain.GridValues)
+    bedrock_albedo: float = 0.30
+    bedrock_cover: float = 0.6  # the plates' rock shows through a dust film: this much rock, the rest soil
 
     def sand_weight(self, xy: np.ndarray) -> np.ndarray:
         """0 (soil) .. 1 (drift sand) ``(N,)``: irregular patches (radius modulated by the angle) with a soft 4 cm edge."""
@@ -68,7 +71,8 @@ class Appearance:
             f = sub(footprint_m, ter)
             ws = self.sand_weight(P[ter, :2])
             base = (1 - ws) * f32(self.soil_albedo) + ws * f32(self.sand_albedo)
-            base *= f32(1.0) + self.patches.eval_T(PT, f)
+            patch = self.patches.eval_T(PT, f)
+            base *= f32(1.0) + patch
             soil = np.flatnonzero(ws < 1)
             tex = np.zeros(len(ter), np.float32)
             if self.texture is not None:  # real texture: a function of the ground point (x, y), faded by the footprint
@@ -94,18 +98,28 @@ class Appearance:
                 dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
                 bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
                 a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
+            if self.bedrock_exposure is not None:  # bare plates: rock-like albedo; dust in cracks and under sand stays soil
+                w = f32(self.bedrock_cover) * self.bedrock_exposure(P[ter, :2]) * (1 - ws)
+                bare = np.flatnonzero(w > 0)
+                if len(bare):
+                    a[bare] = (1 - w[bare]) * a[bare] + w[bare] * self._rock_like(
+                        np.ascontiguousarray(PT[:, bare]), sub(f, bare), f32(self.bedrock_albedo) * (f32(1.0) + patch[bare]))
             out[ter] = a
         rk = np.flatnonzero((material == MAT_ROCK) | (material == MAT_PEBBLE))
         if len(rk):
             PT = np.ascontiguousarray(P[rk].T, np.float32)
-            f = sub(footprint_m, rk)
-            a = f32(self.rock_albedo) * obj_scale[rk].astype(np.float32) * (f32(1.0) + self.rock.eval_T(PT, f))
-            s = self.rock_spots.eval_T(PT, f)
-            bright = np.clip((s - f32(0.19)) / f32(0.05), 0, 1)
-            dark = np.clip((-s - f32(0.21)) / f32(0.05), 0, 1)
-            a = a * (1 - f32(0.6) * dark) + f32(0.4) * bright
-            out[rk] = a
+            out[rk] = self._rock_like(PT, sub(footprint_m, rk), f32(self.rock_albedo) * obj_scale[rk].astype(np.float32))
         return np.clip(out, 0.02, 0.98).astype(np.float32)
+
+    def _rock_like(self, PT: np.ndarray, footprint_m: Optional[np.ndarray], level: np.ndarray) -> np.ndarray:
+        """Rock albedo ``(N,)`` float32 at points ``PT`` ``(3, N)`` float32: ``level`` ``(N,)`` x mottling, with bright
+        and dark spots."""
+        f32 = np.float32
+        a = level * (f32(1.0) + self.rock.eval_T(PT, footprint_m))
+        s = self.rock_spots.eval_T(PT, footprint_m)
+        bright = np.clip((s - f32(0.19)) / f32(0.05), 0, 1)
+        dark = np.clip((-s - f32(0.21)) / f32(0.05), 0, 1)
+        return a * (1 - f32(0.6) * dark) + f32(0.4) * bright
 
 
 def make_appearance(rng: np.random.Generator, sand_patches: np.ndarray) -> Appearance:

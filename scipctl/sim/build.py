@@ -8,7 +8,7 @@ the scene the runs of one scenario scene share. The scenarios themselves are def
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Optional
+from typing import Callable, Optional, Union
 
 import numpy as np
 
@@ -16,6 +16,7 @@ from ..core.kinematics import RoverPose
 from ..model import Downlink, ImageProduct, ImageTruth, MastAngles, TargetTruth
 from . import rover as rover_mod
 from .errors import ErrorSettings
+from .families import FAMILIES, SceneFamily, family_rover, family_texture, resolve_family
 from .marks import compute_marks
 from .products import estimated_pose, plan_products
 from .scenarios import RunPlan, _rng, default_errors, list_runs, plan_run
@@ -29,20 +30,23 @@ EXPOSURE_MS_PER_UNIT = {"pancam": 40.0, "navcam": 25.0, "hazcam": 15.0}
 
 # ----------------------------------------------------------------------------- scene cache
 _SCENES: dict = {}
+DEFAULT_SCENE_KEY = FAMILIES["default"].scene_key
 
 
-def scene_for(plan: RunPlan, texture=None) -> Scene:
-    """The plan's scene (cached per scene seed, rover and texture: both runs of a scene share it).
+def scene_for(plan: RunPlan, texture=None, family: Optional[SceneFamily] = None) -> Scene:
+    """The plan's scene (cached per scene seed, rover, texture and family: both runs of a scene share it).
 
     ``texture``: a :class:`~scipctl.sim.texture.TextureSources` to drape on the terrain (None: procedural albedo);
-    its atlas is built from the scene seed, so the texture is a property of the scene.
+    its atlas is built from the scene seed, so the texture is a property of the scene. ``family``: a realised
+    :class:`~scipctl.sim.families.SceneFamily` whose terrain, rock shape and sun range make the scene (None: today's).
     """
+    scene_key = None if family is None or family.scene_key == DEFAULT_SCENE_KEY else family.scene_key
     rover_key = None if plan.rover is None or plan.rover.is_default else (plan.rover.key, plan.rover.corridor_extra_m,
                                                                           plan.rover.mast_ref_x_m, plan.rover.navcam_ref_x_m,
                                                                           plan.rover.hazcam_ref_x_m)
     key = (plan.scenario, plan.scene_seed)
-    if rover_key is not None or texture is not None:
-        key = key + (rover_key, None if texture is None else texture.digest)
+    if rover_key is not None or texture is not None or scene_key is not None:
+        key = key + (rover_key, None if texture is None else texture.digest, scene_key)
     if key not in _SCENES:
         if len(_SCENES) >= 4:  # ~170 MB each
             _SCENES.pop(next(iter(_SCENES)))
@@ -56,8 +60,9 @@ def scene_for(plan: RunPlan, texture=None) -> Scene:
             from .texture import build_surface_texture
 
             surface_texture = build_surface_texture(texture, plan.scene_seed)
+        terrain, rocks, sun_range = DEFAULT_SCENE_KEY if scene_key is None else scene_key
         _SCENES[key] = make_scene(plan.scene_seed, keep_clear=keep, sun_azimuth_rad=plan.sun_azimuth_rad,
-                                  texture=surface_texture)
+                                  texture=surface_texture, terrain=terrain, rock_shape=rocks, sun_elevation_range_deg=sun_range)
     return _SCENES[key]
 
 
@@ -77,7 +82,8 @@ class SimRun:
 def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings] = None, image_scale: float = 1.0,
               supersample: int = 2, render: bool = True, bits: Optional[dict] = None,
               progress: Optional[Callable[[int, int, str], None]] = None,
-              rover: Optional[rover_mod.SimRover] = None, texture=None) -> SimRun:
+              rover: Optional[rover_mod.SimRover] = None, texture=None,
+              family: Union[SceneFamily, str, None] = None) -> SimRun:
     """Simulate one run into an in-memory :class:`~scipctl.model.Downlink` with truth.
 
     ``errors`` defaults to :func:`default_errors` (all errors on); ``image_scale`` resamples every camera
@@ -87,13 +93,35 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     (None: the default ``rocky8-sim``; e.g. ``commands.synth.m2020_sim_rover(folder)``); ``texture``: a
     :class:`~scipctl.sim.texture.TextureSources` draped on the terrain (None: procedural albedo). The record gains
     ``rover`` / ``texture`` entries only when they are not the defaults.
+
+    ``family``: a :class:`~scipctl.sim.families.SceneFamily` or a name of
+    :data:`~scipctl.sim.families.FAMILIES` (None: today's scenes, as ``"default"``). It sets the terrain, rock
+    shape and sun range of the scene, the error scale (when ``errors`` is None: the scenario's default errors
+    scaled), and loads the rover and texture it needs from ``shared/real`` when ``rover`` / ``texture`` are None
+    (given ones must agree with it). A randomised family (``mixed``) is realised per scene. The record gains
+    ``family`` (the realised family) when a family is given.
     """
     from ..io.images import encode_png
     from .render import Sensor, auto_exposure, expose, render_radiance
 
+    fam = resolve_family(family)
+    if fam is not None:
+        if run not in list_runs(scenario):
+            raise ValueError(f"run: unknown {run!r} for scenario {scenario} (want one of {', '.join(list_runs(scenario))})")
+        fam = fam.realise(seed, scenario, int(run.split("-")[0][1:]))
+        if rover is None:
+            rover = family_rover(fam)
+        elif rover.key != fam.rover:
+            raise ValueError(f"rover {rover.key!r} given for family {fam.name} whose rover is {fam.rover!r}")
+        if texture is None:
+            texture = family_texture(fam)
+        elif fam.texture != "real":
+            raise ValueError(f"a texture given for family {fam.name} whose texture is {fam.texture!r}")
+        if errors is None:
+            errors = default_errors(scenario).scaled(fam.error_scale)
     errors = default_errors(scenario) if errors is None else errors
     plan = plan_run(scenario, run, seed, rover)
-    scene = scene_for(plan, texture)
+    scene = scene_for(plan, texture, fam)
     calibrated = rover_mod.default_rover_config() if rover is None else rover.config
     if image_scale != 1.0:
         calibrated = rover_mod.scale_rover_config(calibrated, image_scale)
@@ -147,4 +175,6 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
         record["rover"] = rover.to_record()
     if texture is not None:
         record["texture"] = dict(texture.to_record(), **scene.appearance.texture.to_record())
+    if fam is not None:
+        record["family"] = fam.to_dict()
     return SimRun(plan, dl, record, scene, products, targets)

@@ -95,6 +95,32 @@ class ErrorSettings:
             responsivity={}, washed_out=(), stale_camera=None, sensor_noise=sensor_noise,
         )
 
+    def scaled(self, scale: float) -> "ErrorSettings":
+        """These errors with their magnitudes times ``scale`` in [0, 2]: 0 is :meth:`none` (sensor noise as here),
+        1 is ``self``. Offsets, sigmas and the vibration / pointing-noise sizes scale linearly; the multiplicative
+        errors scale in log space (responsivity ``r -> r ** scale``, the washed-out exposure factor ``f -> f ** scale``,
+        the stale-calibration scales ``s -> s ** scale``), so 2 is the same error applied twice."""
+        s = float(scale)
+        if not 0.0 <= s <= 2.0:
+            raise ValueError(f"error scale: want 0 .. 2, got {scale}")
+        if s == 0.0:
+            return ErrorSettings.none(self.sensor_noise)
+        if s == 1.0:
+            return self
+        return replace(
+            self, mast_tilt_offset_rad=s * self.mast_tilt_offset_rad, mast_pan_offset_rad=s * self.mast_pan_offset_rad,
+            mast_tilt_axis_error_rad=s * self.mast_tilt_axis_error_rad,
+            mast_head_offset_m=tuple(s * float(v) for v in self.mast_head_offset_m),
+            odometry_scale_sigma=s * self.odometry_scale_sigma, odometry_scale_leg_sigma=s * self.odometry_scale_leg_sigma,
+            heading_drift_sigma_rad_per_m=s * self.heading_drift_sigma_rad_per_m,
+            heading_noise_sigma_rad=s * self.heading_noise_sigma_rad, turn_scale_sigma=s * self.turn_scale_sigma,
+            tilt_sensor_sigma_rad=s * self.tilt_sensor_sigma_rad, vibration_max_rad=s * self.vibration_max_rad,
+            vibration_body_max_rad=s * self.vibration_body_max_rad, pointing_noise_frac=s * self.pointing_noise_frac,
+            responsivity={k: tuple(float(v) ** s for v in pair) for k, pair in self.responsivity.items()},
+            washed_out_factor=float(self.washed_out_factor) ** s,
+            stale_baseline_scale=float(self.stale_baseline_scale) ** s, stale_focal_scale=float(self.stale_focal_scale) ** s,
+        )
+
     @property
     def mast_is_exact(self) -> bool:
         return (self.mast_tilt_offset_rad == 0 and self.mast_pan_offset_rad == 0 and self.mast_tilt_axis_error_rad == 0

@@ -44,11 +44,18 @@ def hull_mesh(rng: np.random.Generator, n_points: int, subdiv: int, radius_jitte
     Returns ``(V (N, 3), F (M, 3), corner_idx (K,), corner_sharpness (K,))``; corners are the hull
     vertices, ``sharpness`` = angle deficit (rad; high = pointed).
     """
-    from scipy.spatial import ConvexHull
-
     d = rng.normal(size=(n_points, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     P = d * rng.uniform(*radius_jitter, size=(n_points, 1))
+    return hull_of_points(P, subdiv)
+
+
+def hull_of_points(P: np.ndarray, subdiv: int):
+    """The convex hull of points ``P`` ``(n, 3)`` (around the origin), outward-oriented, ``subdiv`` midpoint
+    subdivisions: ``(V (N, 3), F (M, 3), corner_idx (K,), corner_sharpness (K,))`` as :func:`hull_mesh`."""
+    from scipy.spatial import ConvexHull
+
+    n_points = len(P)
     hull = ConvexHull(P)
     used = np.unique(hull.simplices)
     remap = -np.ones(n_points, int)

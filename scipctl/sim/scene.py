@@ -36,8 +36,8 @@ import numpy as np
 from .appearance import MAT_PEBBLE, MAT_ROCK, MAT_SKY, MAT_TERRAIN, Appearance, make_appearance
 from .mesh import hull_mesh
 from .noise import LatticeNoise
-from .rocks import Rock, make_rock
-from .terrain import HeightField, graded_axis, grid_mesh, random_height_field
+from .rocks import ROCK_SHAPES, Rock, make_rock
+from .terrain import TERRAIN_KINDS, GridValues, HeightField, graded_axis, grid_mesh
 
 GEOM_TERRAIN, GEOM_ROCKS, GEOM_PEBBLES = 0, 1, 2
 
@@ -65,7 +65,7 @@ class Hits:
 @dataclass
 class Scene:
     seed: int
-    field: HeightField
+    field: HeightField  # or a terrain.SlabField (same interface)
     terrain_axis_m: np.ndarray  # (n,) grid line positions, the same for x and y
     terrain_xy: np.ndarray  # (Nv, 2) = all (x_i, y_j), index i * n + j
     terrain_tris: np.ndarray  # (Mt, 3)
@@ -283,24 +283,41 @@ def _dist_to_segments(xy, segments):
     return out
 
 
-def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_deg: Optional[float] = None,
-               sun_azimuth_rad: Optional[float] = None, texture=None) -> Scene:
+def make_scene(seed: int, keep_clear=(), n_near_rocks: Optional[int] = None, sun_elevation_deg: Optional[float] = None,
+               sun_azimuth_rad: Optional[float] = None, texture=None, terrain: str = "rolling", rock_shape: str = "faceted",
+               sun_elevation_range_deg: tuple = (35.0, 60.0)) -> Scene:
     """A scene from ``seed`` (any int). ``keep_clear``: ``[(p0_xy, p1_xy, half_width_m), ...]`` corridors free of rocks.
 
     The target rock is ``scene.rocks[0]`` at the origin. ``sun_azimuth_rad``: direction (from north towards
-    east) in which the sun stands; default random. ``texture``: a :class:`~scipctl.sim.texture.SurfaceTexture`
+    east) in which the sun stands; default random. ``sun_elevation_deg``: the sun's elevation; default drawn
+    uniformly in ``sun_elevation_range_deg``. ``texture``: a :class:`~scipctl.sim.texture.SurfaceTexture`
     whose relative albedo replaces the procedural soil grain and specks (geometry and random draws unchanged).
+    ``terrain``: a key of :data:`~scipctl.sim.terrain.TERRAIN_KINDS` (the height field, rocks, pebbles and sand
+    around the rock); ``rock_shape``: a key of :data:`~scipctl.sim.rocks.ROCK_SHAPES`; ``n_near_rocks``
+    overrides the terrain kind's count of rocks near the target. The defaults make today's scene.
     """
+    if terrain not in TERRAIN_KINDS:
+        raise ValueError(f"terrain: unknown {terrain!r} (want one of {', '.join(TERRAIN_KINDS)})")
+    if rock_shape not in ROCK_SHAPES:
+        raise ValueError(f"rock_shape: unknown {rock_shape!r} (want one of {', '.join(ROCK_SHAPES)})")
+    lo_el, hi_el = (float(v) for v in sun_elevation_range_deg)
+    if not 0 < lo_el <= hi_el < 90:
+        raise ValueError(f"sun_elevation_range_deg: want 0 < lo <= hi < 90, got {sun_elevation_range_deg}")
+    shape = ROCK_SHAPES[rock_shape].check()
     ss = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, 0x5C1B])
     r_field, r_rock, r_peb, r_app, r_sun = (np.random.default_rng(s) for s in ss.spawn(5))
-    field_ = random_height_field(r_field)
+    ground = TERRAIN_KINDS[terrain](r_field)
+    gp = ground.params.check()
+    field_ = ground.field
+    n_near_rocks = gp.near_rocks if n_near_rocks is None else int(n_near_rocks)
     xs = graded_axis()
     xy, tris, spacing = grid_mesh(xs, xs)
     lattice = LatticeNoise(r_rock, 48)
 
     rocks = []
-    tsize = np.array([r_rock.uniform(0.52, 0.6), r_rock.uniform(0.42, 0.5), r_rock.uniform(0.28, 0.34)])
-    rocks.append(make_rock("rock00", r_rock, lattice, field_, (0.0, 0.0), tsize, 34, 5, 0.012, r_rock.uniform(0.9, 1.15), True, 0.25))
+    tsize = np.array([r_rock.uniform(0.52, 0.6), r_rock.uniform(0.42, 0.5), r_rock.uniform(0.28, 0.34) * shape.height_scale])
+    rocks.append(make_rock("rock00", r_rock, lattice, field_, (0.0, 0.0), tsize, 34, 5, 0.012, r_rock.uniform(0.9, 1.15), True, 0.25,
+                           shape=shape))
     # other rocks: a few near the target, more scattered further out, none in the corridors
     placed = [(np.zeros(2), rocks[0].radius_m)]
 
@@ -310,9 +327,9 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_de
             ang = r_rock.uniform(0, 2 * np.pi)
             c = np.array([rad * np.cos(ang), rad * np.sin(ang)])
             L = r_rock.uniform(size_lo, size_hi)
-            sz = np.array([L, L * r_rock.uniform(0.6, 0.95), L * r_rock.uniform(0.35, 0.6)])
+            sz = np.array([L, L * r_rock.uniform(0.6, 0.95), L * r_rock.uniform(0.35, 0.6) * shape.height_scale])
             rr = 0.5 * sz[0]
-            if keep_clear and _dist_to_segments(c[None], keep_clear)[0] < rr + 0.15:
+            if keep_clear and L > gp.corridor_rock_max_m and _dist_to_segments(c[None], keep_clear)[0] < rr + 0.15:
                 continue
             if any(np.linalg.norm(c - pc) < rr + pr + 0.25 for pc, pr in placed):
                 continue
@@ -322,26 +339,26 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_de
 
     specs = []
     for _ in range(n_near_rocks):
-        s = try_place(1.0, 4.0, 0.2, 0.45, 4)
+        s = try_place(gp.near_rock_min_m, 4.0, *gp.near_rock_size_m, 4)
         if s:
             specs.append(s)
-    for _ in range(40):
-        s = try_place(4.0, 25.0, 0.2, 0.6, 3)
+    for _ in range(gp.far_rock_tries):
+        s = try_place(4.0, 25.0, *gp.far_rock_size_m, 3)
         if s:
             specs.append(s)
     for k, (c, sz, sd) in enumerate(specs, start=1):
         rocks.append(make_rock(f"rock{k:02d}", r_rock, lattice, field_, c, sz, int(r_rock.integers(16, 30)), sd, 0.015,
-                               r_rock.uniform(0.75, 1.25)))
+                               r_rock.uniform(0.75, 1.25), shape=shape))
 
     # drift-sand patches near the target rock (pebble-free)
     sand = []
-    for _ in range(12):
-        if len(sand) >= 3:
+    for _ in range(4 * gp.sand_patches):
+        if len(sand) >= gp.sand_patches:
             break
         rad = r_peb.uniform(0.8, 2.2)
         ang = r_peb.uniform(0, 2 * np.pi)
         c = np.array([rad * np.cos(ang), rad * np.sin(ang)])
-        R = r_peb.uniform(0.3, 0.55)
+        R = r_peb.uniform(*gp.sand_radius_m)
         if any(np.linalg.norm(c - pc) < R + pr + 0.05 for pc, pr in placed):
             continue
         sand.append((c[0], c[1], R))
@@ -371,8 +388,10 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_de
                          > sand[None, :, 2] + 0.5 * L[:, None], axis=1)
         return [(cs[i], sz[i], yaw[i], proto[i], alb[i]) for i in np.nonzero(ok)[0]]
 
-    items = zone(1100, 0.35, 4.0, 0.01, 0.03, 0, 40) + zone(160, 0.35, 4.0, 0.03, 0.07, 40, 52) \
-        + zone(900, 4.0, 16.0, 0.02, 0.08, 0, 40)
+    n_fine, n_coarse, n_outer = gp.pebble_counts
+    k = gp.pebble_size_scale
+    items = zone(n_fine, 0.35, 4.0, 0.01 * k, 0.03 * k, 0, 40) + zone(n_coarse, 0.35, 4.0, 0.03 * k, 0.07 * k, 40, 52) \
+        + zone(n_outer, 4.0, 16.0, 0.02 * k, 0.08 * k, 0, 40)
     ground = field_.height_m(np.array([it[0] for it in items]).reshape(-1, 2))
     Vp, Fp, Sp, off = [], [], [], 0
     for (c, sz, yaw, k, alb), g in zip(items, ground):
@@ -388,12 +407,16 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: int = 5, sun_elevation_de
         Sp.append(np.full(len(F), alb, np.float32))
         off += len(V)
 
+    if gp.sand_sheet_m > 0:  # the sheet covers the ground (the appearance); pebbles above were kept out of the patches only
+        sand = np.concatenate([sand, [[0.0, 0.0, gp.sand_sheet_m]]])
     app = make_appearance(r_app, sand)
-    if texture is not None:
-        from dataclasses import replace as _replace
+    from dataclasses import replace as _replace
 
+    if texture is not None:
         app = _replace(app, texture=texture)
-    el = np.deg2rad(sun_elevation_deg if sun_elevation_deg is not None else r_sun.uniform(35, 60))
+    if gp.bedrock:  # the plates' exposure at the mesh's vertices, interpolated as the mesh is
+        app = _replace(app, bedrock_exposure=GridValues(xs, field_.exposure(xy, spacing)))
+    el = np.deg2rad(sun_elevation_deg if sun_elevation_deg is not None else r_sun.uniform(lo_el, hi_el))
     az = r_sun.uniform(0, 2 * np.pi)
     if sun_azimuth_rad is not None:
         az = float(sun_azimuth_rad)

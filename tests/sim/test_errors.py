@@ -190,3 +190,23 @@ def test_small_scale_error_free_run_has_exact_pointing(run_exact):
             off.append(uv - [(p.width - 1) / 2, (p.height - 1) / 2])
     # -1 deg tilt error at 8x the navcam IFOV (128 px images): ~2.7 px upwards, plus pointing noise
     assert all(o[1] < -1.0 for o in off)
+
+
+def test_error_scale_multiplies_the_magnitudes():
+    from scipctl.sim.scenarios import default_errors
+
+    base = default_errors("paper")
+    assert base.scaled(0.0) == ErrorSettings.none() and base.scaled(1.0) is base
+    for s in (0.5, 2.0):
+        e = base.scaled(s)
+        assert e.mast_tilt_offset_rad == pytest.approx(s * base.mast_tilt_offset_rad)
+        assert e.mast_head_offset_m == pytest.approx(tuple(s * v for v in base.mast_head_offset_m))
+        assert e.odometry_scale_sigma == pytest.approx(s * base.odometry_scale_sigma)
+        assert e.vibration_max_rad == pytest.approx(s * base.vibration_max_rad)
+        assert e.pointing_noise_frac == pytest.approx(s * base.pointing_noise_frac)
+        # multiplicative errors in log space: twice the error is the gain applied twice
+        assert e.responsivity["hazcam"] == pytest.approx(tuple(r ** s for r in base.responsivity["hazcam"]))
+        assert e.washed_out_factor == pytest.approx(base.washed_out_factor ** s)
+        assert e.washed_out == base.washed_out and e.sensor_noise
+    with pytest.raises(ValueError):
+        base.scaled(2.5)

@@ -77,3 +77,52 @@ def test_ground_height_is_the_mesh_height(seed, run_exact):
     assert sc.ground_height_m([mid])[0] == pytest.approx(-(v[i * n + j, 2] + v[(i + 1) * n + j + 1, 2]) / 2, abs=1e-12)
     with pytest.raises(ValueError):
         sc.ground_height_m([[500.0, 0.0]])
+
+
+def _box_scene(sun_elevation_deg: float, sun_azimuth_rad: float):
+    """A synthetic scene with exact truth: level ground z = 0 (site, z down) on a 0.5 m grid and one box
+    1 m high over x, y in [-0.5, 0.5], the sun at the given elevation and azimuth; no pebbles."""
+    from scipctl.sim.appearance import make_appearance
+    from scipctl.sim.rocks import Rock
+    from scipctl.sim.scene import Scene
+    from scipctl.sim.terrain import HeightField, grid_mesh
+
+    flat = HeightField(np.zeros((1, 2)) + [1.0, 0.0], np.zeros(1), np.zeros(1))
+    ax = np.arange(-10.0, 10.0 + 1e-9, 0.5)
+    xy, tris, spacing = grid_mesh(ax, ax)
+    c = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0.0, -1.0)])
+    from scipy.spatial import ConvexHull
+
+    F = ConvexHull(c).simplices.astype(np.int64)
+    box = Rock("box", np.zeros(2), np.array([1.0, 1.0, 1.0]), c, F, np.arange(8), np.ones(8), 1.0, True)
+    el, az = np.radians(sun_elevation_deg), sun_azimuth_rad
+    sun = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), -np.sin(el)])
+    app = make_appearance(np.random.default_rng(0), np.zeros((0, 3)))
+    return Scene(0, flat, ax, xy, tris, spacing, [box], np.zeros((0, 3)), np.zeros((0, 3), np.int64), np.zeros(0, np.float32),
+                 app, sun)
+
+
+@pytest.mark.parametrize("el_deg", [12.0, 45.0, 80.0])
+def test_a_point_whose_sun_ray_is_blocked_is_darker_than_the_same_albedo_lit(el_deg):
+    # the sun stands towards +x (north): the box's shadow on level ground reaches from x = -0.5 to
+    # x = -0.5 - 1 m / tan(elevation) along -x, for |y| < 0.5; points there see the box towards the sun.
+    sc = _box_scene(el_deg, 0.0)
+    L_shadow = 1.0 / np.tan(np.radians(el_deg))
+    x_in = -0.5 - np.array([0.05, 0.5, 0.95]) * L_shadow  # inside the shadow
+    x_out = -0.5 - np.array([1.05, 1.5]) * L_shadow  # beyond its tip
+    pts = np.concatenate([np.stack([x_in, np.zeros(3)], 1), np.stack([x_out, np.zeros(2)], 1),
+                          [[-0.75, 0.8], [2.0, 0.0]]])  # beside the shadow, and on the sunny side
+    in_shadow = np.array([True, True, True, False, False, False, False])
+    o = np.concatenate([pts, np.full((len(pts), 1), -3.0)], 1)
+    d = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    h = sc.cast(o, d)
+    assert h.hit.all() and np.abs(h.points[:, 2]).max() < 1e-6  # on the ground
+    with_shadows = sc.radiance(h, d, None, shadows=True)
+    without = sc.radiance(h, d, None, shadows=False)
+    alb = sc.appearance.albedo(h.points, h.material, h.obj_scale, None)
+    s = sc.sun_dir_site
+    lit = alb * (sc.ambient + (1 - sc.ambient) * (-s[2]) / max(-s[2], 0.3))  # level ground: cos = -s_z
+    np.testing.assert_allclose(without, lit, rtol=1e-5)
+    np.testing.assert_allclose(with_shadows[in_shadow], alb[in_shadow] * sc.ambient, rtol=1e-5)
+    np.testing.assert_allclose(with_shadows[~in_shadow], lit[~in_shadow], rtol=1e-5)
+    assert np.all(with_shadows[in_shadow] < without[in_shadow])

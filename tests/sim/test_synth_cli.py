@@ -88,3 +88,75 @@ def test_bad_arguments_exit_2_naming_the_option(tmp_path, args, field):
 def test_bad_environment_hook_exit_2(tmp_path):
     r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o")], env={"SCIPCTL_SYNTH_IMAGE_SCALE": "0.3"})
     assert r.exit_code == 2 and "SCIPCTL_SYNTH_IMAGE_SCALE" in r.stderr
+
+
+def test_unknown_family_exits_2_naming_the_option_and_the_families(tmp_path):
+    r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), "--family", "moon-dust"], env=SMALL_ENV)
+    assert r.exit_code == 2 and "Traceback" not in r.stderr
+    line = r.stderr.strip()
+    assert "\n" not in line and "--family" in line and "moon-dust" in line and "bedrock-slabs" in line and "mixed" in line
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+@pytest.mark.parametrize("args,field", [
+    (["--family", "low-sun", "--rover", "m2020"], "--rover"),
+    (["--family", "default", "--texture-from", "."], "--texture-from"),
+    (["--family", "mixed", "--rover-dir", "."], "--rover-dir"),
+    (["--family", "real-texture", "--texture-crop", "0,0,1,1"], "--texture-crop"),
+])
+def test_family_with_options_it_does_not_use_exits_2(tmp_path, args, field):
+    r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), *args], env=SMALL_ENV)
+    assert r.exit_code == 2 and field in r.stderr and "Traceback" not in r.stderr
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_family_default_writes_todays_downlink_and_records_the_family(written, tmp_path):
+    base, res = written
+    r = _synth(tmp_path / "f", "--family", "default", "--json")
+    assert r.exit_code == 0, r.stderr
+    got = json.loads(r.stdout)["runs"][0]
+    assert got["sha256"] == res["mcap"]["runs"][0]["sha256"]  # the same downlink bytes as without --family
+    rec = json.loads((tmp_path / "f" / "paper-s1-straight.sim.json").read_text())
+    assert rec["family"]["name"] == "default" and rec["family"]["error_scale"] == 1.0
+    assert " --family default " in rec["written_by"]["regenerate"]
+    plain = json.loads((base / "a" / "paper-s1-straight.sim.json").read_text())
+    assert "family" not in plain and "--family" not in plain["written_by"]["regenerate"]
+
+
+def test_family_changes_the_scene_and_the_errors(tmp_path):
+    r = _synth(tmp_path / "f", "--family", "errors-none", "--json")
+    assert r.exit_code == 0, r.stderr
+    rec = json.loads((tmp_path / "f" / "paper-s1-straight.sim.json").read_text())
+    assert rec["family"]["error_scale"] == 0.0 and rec["errors"]["mast_tilt_offset_rad"] == 0.0
+    assert rec["no_errors"] is False  # the family's scale, not --no-errors
+    dl = read_downlink(tmp_path / "f" / "paper-s1-straight.mcap")
+    for im in dl.images:  # no injected error: the products carry the true models and poses
+        tr = dl.truth_for(im.product_id)
+        assert np.allclose(im.camera_model.C, tr.camera_model.C) and np.allclose(im.pose.T_site_rover.t, tr.pose.T_site_rover.t)
+
+
+@pytest.mark.skipif(not __import__("os").environ.get("SCIPCTL_REFERENCE_CHECKOUT"),
+                    reason="set SCIPCTL_REFERENCE_CHECKOUT to a checkout from before scene families to compare bytes")
+def test_default_output_is_byte_identical_to_a_reference_checkout(tmp_path):
+    """Without --family (and with --family default) the downlink is the bytes a reference checkout writes (same
+    machine and library build); the .sim.json too without --family."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    ref = Path(os.environ["SCIPCTL_REFERENCE_CHECKOUT"])
+    here = Path(__file__).resolve().parents[2]
+    args = ["synth", "--seed", "1", "--runs", "s2-arc", "--container", "mcap"]
+
+    def run(checkout, out, *extra):
+        env = dict(os.environ, PYTHONPATH=str(checkout), **SMALL_ENV)
+        subprocess.run([sys.executable, "-c", "from scipctl.cli import app; app()", *args, "-o", str(out), *extra],
+                       env=env, check=True, capture_output=True)
+
+    run(ref, tmp_path / "ref")
+    run(here, tmp_path / "new")
+    run(here, tmp_path / "fam", "--family", "default")
+    for name in ("paper-s2-arc.mcap", "paper-s2-arc.sim.json"):
+        assert (tmp_path / "ref" / name).read_bytes() == (tmp_path / "new" / name).read_bytes(), name
+    assert (tmp_path / "ref" / "paper-s2-arc.mcap").read_bytes() == (tmp_path / "fam" / "paper-s2-arc.mcap").read_bytes()

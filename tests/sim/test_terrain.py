@@ -20,3 +20,51 @@ def test_height_field_gradient_graded_axis_and_grid_mesh():
     assert np.all(np.diff(ax) > 0) and ax[-1] == 150.0 and ax[0] == -150.0
     xyg, tris, sp = grid_mesh(ax[:5], ax[:4])
     assert len(xyg) == 20 and len(tris) == 2 * 4 * 3
+
+
+def test_terrain_kinds_share_one_signature_and_draw_reproducibly():
+    from scipctl.sim.terrain import TERRAIN_KINDS
+
+    xy = np.random.default_rng(1).uniform(-4, 4, (500, 2))
+    for name, make in TERRAIN_KINDS.items():
+        a, b = make(np.random.default_rng(9)), make(np.random.default_rng(9))
+        assert a.params.check() == b.params
+        h, g = a.field.height_and_gradient(xy)
+        assert h.shape == (500,) and g.shape == (500, 2) and np.array_equal(h, b.field.height_m(xy)), name
+        assert np.abs(h).max() < 0.5, name  # centimetre-to-decimetre relief near the rock, not cliffs
+
+
+def test_slab_field_is_continuous_with_steps_and_cracks_and_its_gradient_is_the_slope():
+    from scipctl.sim.terrain import bedrock_slabs
+
+    f = bedrock_slabs(np.random.default_rng(2)).field
+    # a dense transect crosses several plate borders: the height is continuous (no jump over 0.5 mm steps of
+    # 0.5 mm: the steepest part of a blended 3 cm step over 5 cm, or of a 2 cm crack over 3 cm, is < 1.2 slope)
+    t = np.arange(0.0, 8.0, 0.0005)
+    line = np.stack([t - 4.0, 0.3 * t - 1.0], 1)
+    h = f.height_m(line)
+    assert np.abs(np.diff(h)).max() < 0.0005 * 1.5
+    # cracks are there: an 8.4 m transect over ~1.6 m plates crosses at least 3 (exposure < 1: dust; a crack's
+    # strength is the product of two U(0.15, 1) draws, so some are faint), and most of it is bare plate
+    e = f.exposure(line)
+    crossings = np.count_nonzero(np.diff((e < 0.999).astype(int)) == 1)
+    assert crossings >= 3 and np.mean(e == 1.0) > 0.5
+    # the gradient agrees with finite differences of the height (1 mm central differences inside; 0.1 mm here)
+    xy = np.random.default_rng(0).uniform(-3, 3, (300, 2))
+    g = f.gradient(xy)
+    eps = 1e-4
+    fd = np.stack([(f.height_m(xy + [eps, 0]) - f.height_m(xy - [eps, 0])) / (2 * eps),
+                   (f.height_m(xy + [0, eps]) - f.height_m(xy - [0, eps])) / (2 * eps)], 1)
+    assert np.abs(g - fd).max() < 0.02  # the smoothstep's curvature over 1 mm: measured max 0.01
+
+
+def test_grid_values_interpolate_as_the_mesh_triangles():
+    from scipctl.sim.terrain import GridValues
+
+    ax = graded_axis(1.0, 0.1, 5.0, 1.3, 1.0)
+    xy, _, _ = grid_mesh(ax, ax)
+    lin = 0.3 + 2.0 * xy[:, 0] - 0.7 * xy[:, 1]  # linear: reproduced exactly on every triangle
+    gv = GridValues(ax, lin)
+    q = np.random.default_rng(1).uniform(-5, 5, (1000, 2))
+    assert np.allclose(gv(q), 0.3 + 2.0 * q[:, 0] - 0.7 * q[:, 1], atol=1e-5)  # float32 output
+    assert np.array_equal(gv(xy), lin.astype(np.float32))
