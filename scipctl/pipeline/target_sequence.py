@@ -8,28 +8,39 @@ from ..errors import CommandFailed, InputError
 
 def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
-    :class:`~scipctl.io.workspace` source): returns ``(doc or None, checks, prediction, record)``.
-
-    ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
-    :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
-    """
-    from .predict import predict_target, resolve_target
-
-    dl = source.downlink
+    :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
+    :func:`sequence_for` on its downlink."""
+    targets_doc = None
     if pred is None or record is None:
         targets_doc = source.load_json("targets.json")
         if targets_doc is not None and not isinstance(targets_doc, dict):
             raise InputError(str(source.read_from["targets.json"]), "targets",
                              "expected a JSON object with a 'targets' list")
+    handoff_doc = source.load_json("handoff.json")
+    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
+    return sequence_for(source.downlink, target, targets_doc, rows, params=params, rules=rules, pred=pred, record=record)
+
+
+def sequence_for(dl, target: str, targets_doc=None, table1_rows=None, params=None, rules=None, pred=None, record=None):
+    """The prediction and sequence for ``target`` of the downlink ``dl``: returns
+    ``(doc or None, checks, prediction, record)``.
+
+    The target is the one designated in ``targets_doc`` (``targets.json``), else designated now from its mark in
+    the first left pancam image (:func:`~.predict.resolve_target`). ``table1_rows``: the handoff accuracy rows
+    (``handoff.json``'s ``table1``) that choose the handoff method. ``doc`` is None when a blocking rule is
+    broken. A ready ``pred`` (and its ``record``) is reused. :class:`CommandFailed` if the target has no reliable
+    3-D position; :class:`InputError` for bad products.
+    """
+    from .predict import predict_target, resolve_target
+
+    if pred is None or record is None:
         record, now = resolve_target(dl, target, targets_doc)
         if not record.get("ok", True) or record.get("xyz_site_m") is None:
             raise CommandFailed(f"{target}: no reliable 3-D position for the target "
                                 f"({record.get('reason') or 'no stereo match'}); no sequence",
                                 payload={"target": target, "designation": record})
         pred = predict_target(dl, record, params, designated_now=now)
-    handoff_doc = source.load_json("handoff.json")
-    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
-    doc, checks = document_for(dl, record, pred, rows, rules)
+    doc, checks = document_for(dl, record, pred, table1_rows, rules)
     return doc, checks, pred, record
 
 
