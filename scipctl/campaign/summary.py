@@ -50,8 +50,14 @@ def final_step(steps: list) -> Optional[dict]:
     return next((s for s in steps if (s.get("extra") or {}).get("final")), steps[-1])
 
 
-def _within(err, success_px: float) -> Optional[bool]:
-    return None if err is None else bool(err <= success_px)
+def step_success(step: Optional[dict], success_px: float) -> Optional[bool]:
+    """A chain step's answer within ``success_px`` of its mark; None when the step has no mark to score against;
+    False for no step (the chain stopped before any answer) or no answer."""
+    if step is None:
+        return False
+    if step.get("mark_uv") is None:
+        return None
+    return step.get("error_px") is not None and bool(step["error_px"] <= success_px)
 
 
 def reliability(pairs: list) -> Optional[dict]:
@@ -74,9 +80,10 @@ def reliability(pairs: list) -> Optional[dict]:
 
 
 def go_table(items: list) -> Optional[dict]:
-    """(go bool, success bool or None, error px or None) triples -> the GO/NO-GO counts and rates, and the error
+    """(go bool, success bool or None, error px or None) triples (those with no truth to score against left
+    out) -> the GO/NO-GO counts and rates, and the error
     histograms of GO and NO-GO answers (edges ``ERROR_EDGES_PX``; unanswered counted apart)."""
-    items = [(bool(g), s, e) for g, s, e in items if g is not None]
+    items = [(bool(g), bool(s), e) for g, s, e in items if g is not None and s is not None]  # scored answers only
     if not items:
         return None
     c = {"go_success": 0, "go_miss": 0, "nogo_success": 0, "nogo_miss": 0}
@@ -114,23 +121,25 @@ def _section(results: list, success_px: float) -> dict:
             finals[(res.job.job_id, ch["target"])] = fs
             for s in ch.get("steps") or []:
                 if s.get("p_success") is not None:
-                    rel_steps.append((s["p_success"], _within(s.get("error_px"), success_px)))
+                    rel_steps.append((s["p_success"], step_success(s, success_px)))
             if fs is not None and fs.get("go") is not None:
-                go_chain.append((fs["go"], _within(fs.get("error_px"), success_px), fs.get("error_px")))
+                go_chain.append((fs["go"], step_success(fs, success_px), fs.get("error_px")))
+    scored = {k: step_success(f, success_px) for k, f in finals.items()}
+    scored = {k: v for k, v in scored.items() if v is not None}
     answered = [f for f in finals.values() if f is not None and f.get("error_px") is not None]
-    success = [f for f in answered if f["error_px"] <= success_px]
-    misses = [f for f in finals.values() if f is None or f.get("error_px") is None or f["error_px"] > success_px]
+    misses = [finals[k] for k, v in scored.items() if not v]
     out["chain"] = None if not finals else {
-        "chains": len(finals), "errors": chain_errors, "answered": len(answered), "within_success_px": len(success),
-        "success_rate": len(success) / len(finals), "final_error_px": _stats([f["error_px"] for f in answered]),
+        "chains": len(finals), "errors": chain_errors, "scored": len(scored), "answered": len(answered),
+        "within_success_px": sum(scored.values()),
+        "success_rate": sum(scored.values()) / len(scored) if scored else None,
+        "final_error_px": _stats([f["error_px"] for f in answered]),
         "misses": len(misses), "misses_reported_ok": sum(1 for f in misses if f is not None and f.get("ok"))}
     # predictions, and P(success) against what the chain then did
     preds = [(res.job.job_id, p) for res in results for p in res.predictions]
     rel_pred = []
     for jid, p in preds:
-        fs = finals.get((jid, p["target"]))
-        if p.get("confidence") is not None and fs is not None:
-            rel_pred.append((p["confidence"], _within(fs.get("error_px"), success_px) or False))
+        if p.get("confidence") is not None and (jid, p["target"]) in scored:
+            rel_pred.append((p["confidence"], scored.get((jid, p["target"]))))
     out["prediction"] = None if not preds else {
         "targets": len(preds), "errors": sum(1 for _, p in preds if p.get("error")),
         "sequences_written": sum(1 for _, p in preds if p.get("sequence_written")),

@@ -100,7 +100,7 @@ def _print_summary(con, summary) -> None:
         succ = sum(round(r["success_rate"] * r["cases"]) for r in rows)
         ch, pr = sec.get("chain"), sec.get("prediction")
         tab.add_row(name, str(sec["downlinks"]), f"{succ}/{cases}" if cases else "-",
-                    f"{ch['within_success_px']}/{ch['chains']}" if ch else "-",
+                    f"{ch['within_success_px']}/{ch['scored']}" if ch else "-",
                     f"{pr['sequences_written']}/{pr['targets']}" if pr else "-")
     con.print(tab)
     for f in summary["failed"]:

@@ -99,8 +99,8 @@ def _section_html(name: str, sec: dict, paper: Optional[dict]) -> str:
     ch = sec.get("chain")
     if ch:
         out += ["<h3>Chains (pancam designation to the final hazcam answer)</h3>", _table(
-            ["chains", "within success px", "answered", "final error px", "misses", "misses reported ok", "errors"],
-            [[str(ch["chains"]), f"{ch['within_success_px']} ({_pct(ch['success_rate'])})", str(ch["answered"]),
+            ["chains", "within success px / scored", "answered", "final error px", "misses", "misses reported ok", "errors"],
+            [[str(ch["chains"]), f"{ch['within_success_px']} / {ch['scored']} ({_pct(ch['success_rate'])})", str(ch["answered"]),
               _stats(ch["final_error_px"]), str(ch["misses"]), str(ch["misses_reported_ok"]), str(ch["errors"])]])]
     pr = sec.get("prediction")
     if pr:

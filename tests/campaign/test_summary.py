@@ -41,10 +41,11 @@ def _make_store(tmp_path, with_trust: bool, n_per_family: int = 30):
             ch_err, ch_p, conf = float(rng.exponential(6.0)), float(rng.uniform()), float(rng.uniform())
             go = p > 0.5
             res.handoff = [_handoff(name, "t1", err, p if with_trust else None, go)]
-            step = {"error_px": ch_err, "ok": True, "extra": {"final": True}}
+            step = {"error_px": ch_err, "mark_uv": [10.0, 20.0], "ok": True, "extra": {"final": True}}
             if with_trust:
                 step.update(p_success=ch_p, go=ch_p > 0.5)
-            res.chains = [{"downlink": name, "target": "t1", "steps": [{"error_px": 1.0, "ok": True, "extra": {}}, step]}]
+            res.chains = [{"downlink": name, "target": "t1", "steps": [{"error_px": 1.0, "mark_uv": [1.0, 2.0], "ok": True, "extra": {}},
+                                                                          step]}]
             res.predictions = [{"target": "t1", "confidence": conf, "sequence_written": conf > 0.3}]
             res.seconds, res.cpu_s = {"total": 1.0 + i, "handoff": 0.5}, 2.0
             store.write(res)
