@@ -216,6 +216,38 @@ def report(
         products_root=products_dir, rules_path=rules)
 
 
+@app.command()
+@guarded
+def campaign(
+    srcs: Optional[List[Path]] = typer.Argument(None, help="Downlinks: .mcap files, downlink folders, folders of downlinks, globs."),
+    out: Optional[Path] = typer.Option(None, "-o", "--out", help="Campaign folder: records/, manifest.json, summary.json, "
+                                       "summary.html. A re-run into the same folder skips the downlinks already done."),
+    synth: Optional[str] = typer.Option(None, "--synth", help="SCENARIO: render synthetic downlinks on the workers (paper | traverse)."),
+    seeds: Optional[str] = typer.Option(None, "--seeds", help="With --synth: seeds A-B (inclusive), or A,B,C."),
+    runs: Optional[str] = typer.Option(None, "--runs", help="With --synth: comma-separated run names (default: all of the scenario)."),
+    families: Optional[str] = typer.Option(None, "--families", help="With --synth: comma-separated scene families (default: default)."),
+    no_errors: bool = typer.Option(False, "--no-errors", help="With --synth: inject no errors."),
+    handoff: bool = typer.Option(True, "--handoff/--no-handoff", help="Run the handoff methods."),
+    chain: bool = typer.Option(True, "--chain/--no-chain", help="Run the chain from the pancam designation."),
+    predict: bool = typer.Option(True, "--predict/--no-predict", help="Run the pre-uplink prediction of each marked target."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: all)."),
+    success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
+    fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo for the handoff (as simulate-handoff --fast)."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="ADDRESS of an existing Dask scheduler (default: a local cluster)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Local cluster: worker processes (default: one per core)."),
+    memory_limit: Optional[str] = typer.Option(None, "--memory-limit", help="Local cluster: memory per worker, e.g. 4GiB (default: machine memory / workers)."),
+    summarize: Optional[Path] = typer.Option(None, "--summarize", help="OUT: only re-aggregate the campaign folder OUT."),
+    json_out: bool = typer.Option(False, "--json", help="The summary as JSON on stdout."),
+):
+    """Run the handoff, the chain and the prediction over many downlinks on a Dask cluster (docs/campaign.md).
+
+    Exit 0: every downlink ran; 1: some downlink failed (recorded with its error, the others ran); 2: bad arguments."""
+    from .commands import campaign as command
+
+    command.campaign(srcs, out, synth, seeds, runs, families, no_errors, handoff, chain, predict, methods, success_px,
+        fast, scheduler, workers, memory_limit, summarize, json_out)
+
+
 def main() -> None:
     app()
 

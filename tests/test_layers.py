@@ -19,9 +19,11 @@ Layers, lowest first; a module may import its own layer or lower ones, never a h
              ``scipctl.sim`` (synthetic downlinks: renders through core's camera models into ``model`` records,
              encodes with ``io.images``) and ``scipctl.pipeline`` (designate, handoff, chain, predict, sequence,
              report data: core algorithms over a ``model.Downlink``). Beside each other: neither imports the other.
-4. commands  ``scipctl.commands`` -- one module per command: parse arguments, call the pipeline, print
-             (``commands.output``: JSON/stderr helpers and exit codes).
-5. cli       ``scipctl.cli`` -- the typer application; imports ``commands`` inside each command.
+4. campaign  ``scipctl.campaign`` -- validation campaigns: orchestrates ``sim`` (rendering synthetic downlinks) and
+             ``pipeline`` (handoff, chain, prediction) over many downlinks on a Dask cluster; never prints.
+5. commands  ``scipctl.commands`` -- one module per command: parse arguments, call the pipeline (or the campaign),
+             print (``commands.output``: JSON/stderr helpers and exit codes).
+6. cli       ``scipctl.cli`` -- the typer application; imports ``commands`` inside each command.
 """
 
 from __future__ import annotations
@@ -44,10 +46,11 @@ LAYERS = {
     "scipctl.io": 2,
     "scipctl.sim": 3,
     "scipctl.pipeline": 3,
-    "scipctl.commands": 4,
-    "scipctl.cli": 5,
+    "scipctl.campaign": 4,
+    "scipctl.commands": 5,
+    "scipctl.cli": 6,
 }
-LAYER_NAMES = {0: "base", 1: "core", 2: "model/io", 3: "sim/pipeline", 4: "commands", 5: "cli"}
+LAYER_NAMES = {0: "base", 1: "core", 2: "model/io", 3: "sim/pipeline", 4: "campaign", 5: "commands", 6: "cli"}
 # siblings in one layer that must not import each other (either way)
 APART = (("scipctl.sim", "scipctl.pipeline"),)
 

@@ -51,6 +51,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.designate import parse_pixel
+    from ..pipeline.chain_targets import run_marked_chains
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
 
@@ -111,7 +112,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                            "dense_stereo_s": {k: round(c.nav.dense_seconds, 3) for k, c in setup.cases.items()},
                            "input_sha256": dl.source_sha256, "saved_to": str(saved)})
             if chain:
-                chains.extend(_chains(dl, name, target))
+                chains.extend(run_marked_chains(dl, name, target))
             del done
     rows = table1(records)
     doc = {
@@ -128,28 +129,6 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     _print_table(con, rows, records)
     if chain:
         _print_chains(con, chains)
-
-
-def _chains(dl, name, only):
-    from ..pipeline.chain import run_chain
-
-    out = []
-    starts = sorted((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
-    if not starts:
-        return out
-    start = starts[0]
-    for t in dl.targets:
-        if only and t.id != only:
-            continue
-        mk = t.mark_in(start.product_id)
-        if mk is None:
-            continue
-        try:
-            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id)
-            out.append({"downlink": name, "target": t.id, "steps": steps})
-        except InputError as e:
-            out.append({"downlink": name, "target": t.id, "error": str(e), "steps": []})
-    return out
 
 
 def _print_table(con, rows, records):

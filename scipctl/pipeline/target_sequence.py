@@ -8,30 +8,44 @@ from ..errors import CommandFailed
 
 def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
-    :class:`~scipctl.io.workspace` source): returns ``(doc or None, checks, prediction, record)`` (``record``:
-    the target's :class:`~scipctl.pipeline.designate.Designation`).
-
-    ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
-    ``rules_used``: :meth:`scipctl.pipeline.rules.RuleSet.to_dict` of the rule set, recorded in the document.
-    :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
-    """
+    :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
+    :func:`sequence_for` on its downlink."""
     from .designate import designations_from_doc
-    from .predict import predict_target, resolve_target
 
-    dl = source.downlink
+    designations = None
     if pred is None or record is None:
         targets_doc = source.load_json("targets.json")
         designations = designations_from_doc(targets_doc, str(source.read_from.get("targets.json", "targets.json")))
+    handoff_doc = source.load_json("handoff.json")
+    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
+    return sequence_for(source.downlink, target, designations, rows, params=params, rules=rules, pred=pred,
+                        record=record, rules_used=rules_used)
+
+
+def sequence_for(dl, target: str, designations=None, table1_rows=None, params=None, rules=None, pred=None,
+                 record=None, rules_used=None):
+    """The prediction and sequence for ``target`` of the downlink ``dl``: returns
+    ``(doc or None, checks, prediction, record)`` (``record``: the target's
+    :class:`~scipctl.pipeline.designate.Designation`).
+
+    The target is the one designated in ``designations`` (the :class:`Designation` records of ``targets.json``),
+    else designated now from its mark in the first left pancam image (:func:`~.predict.resolve_target`).
+    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method.
+    ``rules_used``: :meth:`scipctl.pipeline.rules.RuleSet.to_dict` of the rule set, recorded in the document.
+    ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
+    :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
+    """
+    from .predict import predict_target, resolve_target
+
+    if pred is None or record is None:
         record, now = resolve_target(dl, target, designations)
         if not record.has_position:
             raise CommandFailed(f"{target}: no reliable 3-D position for the target "
                                 f"({record.reason or 'no stereo match'}); no sequence",
                                 payload={"target": target, "designation": record.to_dict()})
         pred = predict_target(dl, record, params, designated_now=now)
-    handoff_doc = source.load_json("handoff.json")
-    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
-    doc, checks = document_for(dl, record, pred, rows, rules, chain_params=None if params is None else params.chain,
-                               rules_used=rules_used)
+    doc, checks = document_for(dl, record, pred, table1_rows, rules,
+                               chain_params=None if params is None else params.chain, rules_used=rules_used)
     return doc, checks, pred, record
 
 

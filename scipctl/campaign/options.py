@@ -1,0 +1,71 @@
+"""What a campaign runs on each downlink (:class:`CampaignOptions`), and the key that says two runs computed the same."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+
+from ..errors import InputError
+
+NAVCAMS = ("near", "far")
+
+
+@dataclass(frozen=True)
+class CampaignOptions:
+    """The work done on every downlink of a campaign.
+
+    ``methods``: the handoff methods in run order (names from the handoff registry); ``pairs``: the
+    (method, navcam) pairs to run (``--methods`` may name ``METHOD-near`` / ``METHOD-far``); ``fast``: the
+    handoff's half-resolution dense stereo (``simulate-handoff --fast``); ``success_px``: a handoff (and a chain's
+    final answer) within this many hazcam pixels of the mark is a success.
+    """
+
+    handoff: bool = True
+    chain: bool = True
+    predict: bool = True
+    methods: tuple = ()
+    pairs: tuple = ()  # ((method, navcam), ...), sorted
+    success_px: float = 4.0
+    fast: bool = False
+
+    def check(self) -> "CampaignOptions":
+        if not (self.handoff or self.chain or self.predict):
+            raise InputError("campaign", "--no-handoff/--no-chain/--no-predict", "nothing left to run on a downlink")
+        if not (isinstance(self.success_px, (int, float)) and math.isfinite(self.success_px) and self.success_px > 0):
+            raise InputError("campaign", "--success-px", f"must be a positive finite number, got {self.success_px}")
+        if self.handoff:
+            if not self.methods or not self.pairs:
+                raise InputError("campaign", "--methods", "no handoff method to run")
+            for m, nc in self.pairs:
+                if m not in self.methods or nc not in NAVCAMS:
+                    raise InputError("campaign", "--methods", f"pair ({m}, {nc}) is not among the methods and navcams")
+        return self
+
+    @property
+    def navcams(self) -> list:
+        """The navcams in use, near first."""
+        return [n for n in NAVCAMS if any(p[1] == n for p in self.pairs)]
+
+    def to_dict(self) -> dict:
+        return {"handoff": self.handoff, "chain": self.chain, "predict": self.predict,
+                "methods": list(self.methods), "pairs": [list(p) for p in self.pairs],
+                "success_px": float(self.success_px), "fast": self.fast}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "CampaignOptions":
+        return cls(bool(d["handoff"]), bool(d["chain"]), bool(d["predict"]), tuple(d["methods"]),
+                   tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]))
+
+    def key(self) -> str:
+        """SHA-256 of everything here that changes an answer, and of the tool's version."""
+        from .. import __version__
+
+        text = json.dumps({"options": self.to_dict(), "version": __version__}, sort_keys=True)
+        return hashlib.sha256(text.encode()).hexdigest()
+
+
+def job_key(input_sha256: str, options_key: str) -> str:
+    """The key of one downlink's records: its input and the options (a re-run with the same key is skipped)."""
+    return hashlib.sha256(f"{input_sha256}\n{options_key}".encode()).hexdigest()

@@ -1,0 +1,34 @@
+"""The tracking chain for every marked target of a downlink, from its first pancam stop: what
+``simulate-handoff --chain`` and ``campaign`` run (:func:`run_marked_chains`); :func:`run_chain` follows one."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+from ..errors import InputError
+from ..model import Downlink
+
+
+def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = None) -> list:
+    """One entry per target marked in the first left pancam image (or only the target ``only``):
+    ``{"downlink", "target", "steps": [ChainStep, ...]}``, or with ``"error"`` (one line) and no steps
+    when the chain stops on bad input. Empty when the downlink has no left pancam image."""
+    from .chain import run_chain
+
+    out = []
+    starts = sorted((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    if not starts:
+        return out
+    start = starts[0]
+    for t in dl.targets:
+        if only and t.id != only:
+            continue
+        mk = t.mark_in(start.product_id)
+        if mk is None:
+            continue
+        try:
+            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id)
+            out.append({"downlink": downlink_name, "target": t.id, "steps": steps})
+        except InputError as e:
+            out.append({"downlink": downlink_name, "target": t.id, "error": str(e), "steps": []})
+    return out

@@ -1,0 +1,92 @@
+"""The downlinks of a campaign: SRC arguments (files, folders of downlinks, globs), seeds, synthetic recipes,
+scene families, and which records count as done."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from scipctl.campaign.jobs import (DEFAULT_FAMILY, FILES_FAMILY, expand_sources, file_jobs, known_families,
+                                   parse_seeds, synth_jobs)
+from scipctl.campaign.options import CampaignOptions, job_key
+from scipctl.campaign.results import DownlinkResult
+from scipctl.campaign.store import CampaignStore
+from scipctl.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[2]
+SOLS = ROOT / "sample_sols"
+
+
+def test_folders_globs_and_files_expand_to_each_downlink_once(tmp_path):
+    mcaps = sorted((SOLS / "mcap").glob("*.mcap"))
+    dirs = sorted(p for p in (SOLS / "dir").iterdir() if p.is_dir())
+    # a folder of downlinks: its .mcap files and downlink folders, at any depth, hidden folders skipped
+    nest = tmp_path / "a" / "b"
+    nest.mkdir(parents=True)
+    shutil.copy(mcaps[0], nest / "x.mcap")
+    (tmp_path / ".hidden").mkdir()
+    shutil.copy(mcaps[1], tmp_path / ".hidden" / "y.mcap")
+    assert expand_sources([tmp_path]) == [nest / "x.mcap"]
+    assert expand_sources([SOLS / "dir"]) == dirs  # downlink folders, not the images inside them
+    assert expand_sources([dirs[0]]) == [dirs[0]]  # a downlink folder is one downlink
+    got = expand_sources([SOLS / "mcap", str(SOLS / "mcap" / "*.mcap"), mcaps[0]])
+    assert got == mcaps  # the same file through a folder, a glob and by name: once
+    assert expand_sources([str(SOLS / "**" / "*.mcap")]) == mcaps
+
+
+def test_file_jobs_hash_name_and_family(tmp_path):
+    from scipctl.io.provenance import sha256_file
+
+    sol = SOLS / "mcap" / "paper-s1-arc.mcap"
+    plain = Path(shutil.copy(sol, tmp_path / sol.name))  # no simulation record beside it
+    (job,) = file_jobs([sol, plain])  # same name, same bytes: one job (the first)
+    assert job.family == DEFAULT_FAMILY and job.input_sha256 == sha256_file(sol) and job.path == str(sol.resolve())
+    (copy,) = file_jobs([plain])
+    assert copy.family == FILES_FAMILY and copy.job_id == job.job_id
+    renamed = Path(shutil.copy(sol, tmp_path / "other-name.mcap"))
+    assert file_jobs([renamed])[0].job_id != job.job_id  # another name: another job (the records' downlink field)
+    (tmp_path / "paper-s1-arc.sim.json").write_text(json.dumps({"family": "sand-sheet"}))
+    assert file_jobs([plain])[0].family == "sand-sheet"
+
+
+@pytest.mark.parametrize("text,seeds", [("0-3", [0, 1, 2, 3]), ("5", [5]), ("1,3-4,1", [1, 3, 4])])
+def test_parse_seeds(text, seeds):
+    assert parse_seeds(text) == seeds
+
+
+@pytest.mark.parametrize("text", ["3-1", "-1", "a", "", "1-b"])
+def test_bad_seeds(text):
+    with pytest.raises(InputError, match="--seeds"):
+        parse_seeds(text)
+
+
+def test_synth_jobs_name_each_recipe_and_hash_it():
+    jobs = synth_jobs("paper", [0, 1], ["s1-straight", "s2-arc"])
+    assert [j.name for j in jobs] == ["paper-s1-straight-seed0", "paper-s2-arc-seed0", "paper-s1-straight-seed1",
+                                      "paper-s2-arc-seed1"]
+    assert all(j.family == DEFAULT_FAMILY and j.path is None for j in jobs)
+    assert len({j.input_sha256 for j in jobs}) == 4  # every recipe its own identity
+    assert synth_jobs("paper", [0], ["s1-straight"])[0].input_sha256 == jobs[0].input_sha256  # and a stable one
+    assert synth_jobs("paper", [0], ["s1-straight"], no_errors=True)[0].input_sha256 != jobs[0].input_sha256
+    assert len(synth_jobs("paper", [0])) == 6  # every run of the scenario by default
+    assert "default" in known_families()
+
+
+def test_done_means_same_key_and_ok(tmp_path):
+    opts = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),))
+    job = synth_jobs("paper", [0], ["s1-straight"])[0]
+    key = job_key(job.input_sha256, opts.key())
+    store = CampaignStore(tmp_path / "out")
+    assert not store.is_done(job, key)  # nothing yet (and nothing made: the folder waits for a first write)
+    assert not (tmp_path / "out").exists()
+    store.make()
+    store.write(DownlinkResult(job, key))
+    assert store.is_done(job, key)
+    other = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "far"),))
+    assert not store.is_done(job, job_key(job.input_sha256, other.key()))
+    failed = DownlinkResult(job, key)
+    failed.fail("load", InputError("x.mcap", "header", "bad magic"))
+    store.write(failed)
+    assert not store.is_done(job, key)  # a failed downlink runs again
+    assert store.read(job.job_id).error == "load: x.mcap: header: bad magic"
