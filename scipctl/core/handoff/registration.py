@@ -10,6 +10,8 @@ from typing import Optional
 
 import numpy as np
 
+from ..registration import select_rows, squared_distances
+from ..registration_check import CheckedRegistration, RegistrationEvidence, registration_verdict
 from .case import HandoffCase
 from .params import HandoffParams
 from .result import MethodResult, NoAnswer, answer, f, reg_diag
@@ -18,15 +20,139 @@ from .steps import nav_point, project_haz
 
 def mesh_registration(case: HandoffCase, nav_uv, params: HandoffParams, *,
                       near_hint: Optional[MethodResult] = None) -> MethodResult:
-    """ICP between the navcam and hazcam clouds (the case's :meth:`~HandoffCase.whole_registration`, seeded with
-    the mast kinematics for near, the pose estimate for far), then kinematic handoff of the navcam point stereo
-    through the recovered transform."""
+    """ICP between the navcam and hazcam clouds (the case's :meth:`~HandoffCase.whole_registration`: several
+    seeds — the mast kinematics for near, the pose estimate for far, each perturbed by its error model, and a
+    global registration — the best-supported answer kept), then kinematic handoff of the navcam point stereo
+    through the recovered transform.
+
+    ``ok`` is the registration's verdict at the target (:func:`~scipctl.core.registration_check.registration_verdict`);
+    the evidence is in ``diagnostics["registration_check"]`` (a :class:`RegistrationEvidence` as a dict)."""
     ps = nav_point(case, nav_uv)
     reg = case.whole_registration()
     if isinstance(reg, Exception):
         raise NoAnswer(f"registration failed: {reg}")
-    X = reg.T_target_source.apply(ps.xyz)
-    uv = project_haz(case, X)
-    diag = reg_diag(reg)
+    X_nav = np.asarray(ps.xyz, float).reshape(1, 3)
+    X = reg.T_target_source.apply(X_nav)
+    uv = project_haz(case, X[0])
+    diag = reg_diag(reg.chosen)
     diag["registration_seconds"] = f(case.registration_seconds)  # shared by the targets; maybe run meanwhile
-    return answer(uv, diag, ok=bool(np.all(np.isfinite(uv))))
+    if not np.all(np.isfinite(uv)):
+        return answer(uv, diag, ok=False)
+    ev = target_evidence(case, reg, X_nav[0], uv)
+    diag["registration_check"] = ev.to_dict()
+    ok, reason = registration_verdict(ev, case.params.registration_check)
+    res = answer(uv, diag, ok=ok)
+    res.reason = reason
+    return res
+
+
+def target_evidence(case: HandoffCase, reg: CheckedRegistration, X_nav: np.ndarray, uv: np.ndarray
+                    ) -> RegistrationEvidence:
+    """:class:`RegistrationEvidence` for the navcam point ``X_nav`` (3,) (navcam rover frame) answered at the
+    hazcam pixel ``uv`` (2,) by ``reg``."""
+    p = case.params.registration_check
+    haz = case.haz.left_model
+    X = reg.T_target_source.apply(X_nav[None])[0]
+    basins = reg.basins
+    chosen = reg.chosen_basin
+    others = [i for i in range(len(basins)) if i != chosen]
+    fit = reg.chosen.fitness if chosen is None else basins[chosen].fitness
+    margin = fit - max(basins[i].fitness for i in others) if others else 1.0
+    g = reg.global_result
+    g_basin = next((i for i, b in enumerate(basins) if "global" in b.seeds), None)
+
+    def px(T) -> float:
+        q = haz.project(T.apply(X_nav[None]))[0]
+        return float(np.linalg.norm(q - uv)) if np.all(np.isfinite(q)) else float("inf")
+
+    corr_m = float(np.linalg.norm(reg.prior.apply(X_nav[None])[0] - X))
+    spread = max((px(basins[i].T_target_source) for i in others), default=0.0)
+    competing = max((px(basins[i].T_target_source) for i in others
+                     if basins[i].plausible and basins[i].fitness >= fit - p.competing_fitness), default=0.0)
+    ev = RegistrationEvidence(
+        fitness=fit, inlier_rmse_m=reg.chosen.inlier_rmse_m if chosen is None else basins[chosen].inlier_rmse_m,
+        n_seeds=reg.n_seeds, n_basins=len(basins), seeds_agreeing=len(reg.chosen_seeds),
+        chosen_seed=reg.chosen_seeds[0] if reg.chosen_seeds else "", fitness_margin=margin,
+        global_found=g is not None and g.T_target_source is not None,
+        global_inliers=0 if g is None else g.n_inliers, global_inlier_fraction=0.0 if g is None else g.inlier_fraction,
+        global_agrees=g_basin is not None and g_basin == chosen,
+        correction_sigmas=0.0 if chosen is None else basins[chosen].correction_sigmas,
+        refined=any(name != "seed" for name in reg.chosen_seeds),
+        correction_px=px(reg.prior), correction_m=corr_m,
+        target_seed_sigmas=corr_m / float(reg.sigma.displacement_sigma_m(X[None])[0]),
+        spread_px=spread, competing_px=competing,
+        global_px=None if g_basin is None else px(basins[g_basin].T_target_source),
+        case_reason=reg.reason,
+    )
+    _surface_residuals(case, reg, X, uv, ev)
+    return ev
+
+
+def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarray, uv: np.ndarray,
+                       ev: RegistrationEvidence) -> None:
+    """Fill ``ev``'s range and local-window residuals of the registered point ``X`` (3,) (hazcam rover frame)
+    against the hazcam stereo."""
+    p = case.params.registration_check
+    haz = case.haz
+    C = haz.left_model.C
+    Xh = _haz_dense_near(case, uv)
+    r = float(np.linalg.norm(X - C))
+    if np.all(np.isfinite(Xh)):
+        # range noise along the hazcam ray: hazcam dense stereo at r, and the navcam's at its own range (its
+        # error lies along the navcam ray; its component along the hazcam ray is what moves the range)
+        s_h = r * r * p.stereo_disparity_sigma_px / haz.dense.focal_baseline_px_m
+        Cn = reg.T_target_source.apply(case.nav.left_model.C[None])[0]
+        rn = float(np.linalg.norm(X - Cn))
+        s_n = rn * rn * p.stereo_disparity_sigma_px / case.nav.dense.focal_baseline_px_m
+        cos = float(np.dot((X - Cn) / rn, (X - C) / r))
+        res = r - float(np.linalg.norm(Xh - C))
+        ev.range_residual_m = res
+        ev.range_residual_sigmas = abs(res) / float(np.hypot(s_h, s_n * cos))
+    nav_pts, _ = case.nav.cloud()
+    M = reg.T_target_source
+    Xn = M.inverse().apply(X[None])[0]
+    near = select_rows(nav_pts, squared_distances(nav_pts, Xn) < p.local_radius_m ** 2)
+    ev.local_points = int(len(near))
+    surface = _haz_surface(case, X, 2.0 * p.local_radius_m)
+    if len(near) >= p.min_local_points and surface is not None:
+        tree, haz_pts, normals = surface
+        q = M.apply(near)
+        dist, j = tree.query(q, k=1)
+        ok = dist < p.local_radius_m
+        if ok.sum() >= p.min_local_points:
+            signed = ((q[ok] - haz_pts[j[ok]]) * normals[j[ok]]).sum(axis=1)
+            ev.local_residual_m = float(np.median(np.abs(signed)))
+            ev.local_bias_m = float(np.median(signed))
+
+
+def _haz_dense_near(case: HandoffCase, uv: np.ndarray, radius_px: int = 3) -> np.ndarray:
+    """The hazcam dense-stereo point ``(3,)`` at the hazcam-left pixel ``uv`` (2,), or at the nearest pixel of a
+    ``radius_px`` square around it that has one (stereo leaves holes at occluding edges and in shadow); NaN
+    when there is none."""
+    offs = np.array([(du, dv) for dv in range(-radius_px, radius_px + 1) for du in range(-radius_px, radius_px + 1)],
+                    float)
+    offs = offs[np.argsort((offs ** 2).sum(axis=1), kind="stable")]
+    X = case.haz.xyz_at(uv[None] + offs)
+    ok = np.flatnonzero(np.isfinite(X).all(axis=1))
+    return X[ok[0]] if len(ok) else np.full(3, np.nan)
+
+
+def _haz_surface(case: HandoffCase, X: np.ndarray, radius_m: float):
+    """The hazcam dense points within ``radius_m`` of ``X`` (3,) (hazcam rover frame) on a 5 mm grid: a k-d tree
+    of them, the points ``(N, 3)`` and unit normals ``(N, 3)`` towards the hazcam (positive distances: in front
+    of the surface); None with fewer than 20 points."""
+    import open3d as o3d
+    from scipy.spatial import cKDTree
+
+    C = case.haz.left_model.C
+    pts = case.haz_cloud()
+    pts = select_rows(pts, squared_distances(pts, X) < radius_m ** 2)
+    if len(pts) < 20:
+        return None
+    pc = o3d.geometry.PointCloud()
+    pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(pts, dtype=np.float64))
+    pc = pc.voxel_down_sample(0.005)
+    pc.estimate_normals(o3d.geometry.KDTreeSearchParamHybrid(radius=0.03, max_nn=30))
+    pc.orient_normals_towards_camera_location(np.asarray(C, dtype=np.float64))
+    P = np.asarray(pc.points).copy()
+    return cKDTree(P), P, np.asarray(pc.normals).copy()
