@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields
-from typing import Optional
+from typing import Callable, Optional
 
 import numpy as np
 
@@ -171,7 +171,8 @@ class CheckedRegistration:
 
     @property
     def n_seeds(self) -> int:
-        return sum(len(b.seeds) for b in self.basins)
+        """ICP seeds run (the unmoved ``"seed"`` answer not counted)."""
+        return sum(sum(n != "seed" for n in b.seeds) for b in self.basins)
 
     @property
     def chosen_seeds(self) -> list:
@@ -325,7 +326,10 @@ class RegistrationEvidence:
       navcam's range error is projected on the hazcam ray): a registered point off the hazcam surface;
     * ``local_residual_m`` / ``local_bias_m`` / ``local_points``: the registered navcam dense points within
       ``local_radius_m`` of ``X``: median absolute and median signed point-to-plane distance to the hazcam
-      surface (nearest hazcam point and its normal), and how many.
+      surface (nearest hazcam point and its normal), and how many;
+    * ``nav_range_residual_m`` / ``nav_range_residual_sigmas``: the source point's range (point stereo) minus the
+      source's dense stereo range at the same pixel, and over the dense range's sigma (None without dense
+      stereo there): the point the answer carries, against its own camera's other stereo.
     """
 
     fitness: float
@@ -352,6 +356,8 @@ class RegistrationEvidence:
     local_residual_m: Optional[float] = None
     local_bias_m: Optional[float] = None
     local_points: int = 0
+    nav_range_residual_m: Optional[float] = None
+    nav_range_residual_sigmas: Optional[float] = None
     case_reason: str = ""
 
     def to_dict(self) -> dict:
@@ -361,6 +367,75 @@ class RegistrationEvidence:
     def from_dict(d: dict) -> "RegistrationEvidence":
         names = {f.name for f in fields(RegistrationEvidence)}
         return RegistrationEvidence(**{k: v for k, v in d.items() if k in names})
+
+
+def stereo_range_sigma_m(range_m, focal_baseline_px_m: float, disparity_sigma_px: float):
+    """1-sigma range error of stereo at ``range_m`` (m; scalar or array) for a disparity error
+    ``disparity_sigma_px``: ``r = f B / d`` gives ``dr = r^2 dd / (f B)`` to first order."""
+    return np.asarray(range_m, float) ** 2 * disparity_sigma_px / focal_baseline_px_m
+
+
+def range_residual(X_m, X_target_stereo_m, target_sensor_m, source_sensor_m, target_focal_baseline_px_m: float,
+                   source_focal_baseline_px_m: float, disparity_sigma_px: float) -> tuple[float, float]:
+    """``(residual_m, residual_sigmas)`` of the registered point ``X_m`` (3,) against the target stereo's point
+    ``X_target_stereo_m`` (3,) at its pixel (both target frame): the difference of their ranges from
+    ``target_sensor_m``, and that over its 1-sigma, the two stereos' range noise along the target ray:
+    ``sqrt(s_t^2 + (s_s cos a)^2)``, ``s`` from :func:`stereo_range_sigma_m` at each sensor's range, ``a`` the
+    angle between the two rays (the source's range error lies along its own ray)."""
+    X = np.asarray(X_m, float).reshape(3)
+    Ct = np.asarray(target_sensor_m, float).reshape(3)
+    Cs = np.asarray(source_sensor_m, float).reshape(3)
+    r = float(np.linalg.norm(X - Ct))
+    rs = float(np.linalg.norm(X - Cs))
+    s_t = float(stereo_range_sigma_m(r, target_focal_baseline_px_m, disparity_sigma_px))
+    s_s = float(stereo_range_sigma_m(rs, source_focal_baseline_px_m, disparity_sigma_px))
+    cos = float(np.dot((X - Cs) / rs, (X - Ct) / r))
+    res = r - float(np.linalg.norm(np.asarray(X_target_stereo_m, float).reshape(3) - Ct))
+    return res, abs(res) / float(np.hypot(s_t, s_s * cos))
+
+
+def registration_evidence(reg: CheckedRegistration, X_source_m, project: Callable[[np.ndarray], np.ndarray],
+                          params: RegistrationCheckParams) -> RegistrationEvidence:
+    """The registration's :class:`RegistrationEvidence` at the source point ``X_source_m`` (3,): every field
+    but the stereo residuals (``range_residual_*``, ``local_*``), which need the target's stereo.
+
+    ``project``: target-frame points ``(N, 3)`` -> pixels ``(N, 2)`` (NaN where they do not project), the
+    camera the answer is given in."""
+    p = params
+    Xs = np.asarray(X_source_m, float).reshape(1, 3)
+    X = reg.T_target_source.apply(Xs)[0]
+    uv = np.asarray(project(X[None]), float)[0]
+    basins = reg.basins
+    chosen = reg.chosen_basin
+    others = [i for i in range(len(basins)) if i != chosen]
+    fit = reg.chosen.fitness if chosen is None else basins[chosen].fitness
+    margin = fit - max(basins[i].fitness for i in others) if others else 1.0
+    g = reg.global_result
+    g_basin = next((i for i, b in enumerate(basins) if any(n.startswith("global") for n in b.seeds)), None)
+
+    def px(T: RigidTransform) -> float:
+        q = np.asarray(project(T.apply(Xs)), float)[0]
+        return float(np.linalg.norm(q - uv)) if np.all(np.isfinite(q)) and np.all(np.isfinite(uv)) else float("inf")
+
+    corr_m = float(np.linalg.norm(reg.prior.apply(Xs)[0] - X))
+    spread = max((px(basins[i].T_target_source) for i in others), default=0.0)
+    competing = max((px(basins[i].T_target_source) for i in others
+                     if basins[i].plausible and basins[i].fitness >= fit - p.competing_fitness), default=0.0)
+    return RegistrationEvidence(
+        fitness=fit, inlier_rmse_m=reg.chosen.inlier_rmse_m if chosen is None else basins[chosen].inlier_rmse_m,
+        n_seeds=reg.n_seeds, n_basins=len(basins), seeds_agreeing=sum(n != "seed" for n in reg.chosen_seeds),
+        chosen_seed=reg.chosen_seeds[0] if reg.chosen_seeds else "", fitness_margin=margin,
+        global_found=g is not None and g.T_target_source is not None,
+        global_inliers=0 if g is None else g.n_inliers, global_inlier_fraction=0.0 if g is None else g.inlier_fraction,
+        global_agrees=g_basin is not None and g_basin == chosen,
+        correction_sigmas=0.0 if chosen is None else basins[chosen].correction_sigmas,
+        refined=any(n != "seed" for n in reg.chosen_seeds),
+        correction_px=px(reg.prior), correction_m=corr_m,
+        target_seed_sigmas=corr_m / float(reg.sigma.displacement_sigma_m(X[None])[0]),
+        spread_px=spread, competing_px=competing,
+        global_px=None if g_basin is None else px(basins[g_basin].T_target_source),
+        case_reason=reg.reason,
+    )
 
 
 def registration_verdict(ev: RegistrationEvidence, params: RegistrationCheckParams) -> tuple[bool, str]:

@@ -11,7 +11,8 @@ from typing import Optional
 import numpy as np
 
 from ..registration import select_rows, squared_distances
-from ..registration_check import CheckedRegistration, RegistrationEvidence, registration_verdict
+from ..registration_check import (CheckedRegistration, RegistrationEvidence, range_residual, registration_evidence,
+                                  registration_verdict, stereo_range_sigma_m)
 from .case import HandoffCase
 from .params import HandoffParams
 from .result import MethodResult, NoAnswer, answer, f, reg_diag
@@ -39,6 +40,14 @@ def mesh_registration(case: HandoffCase, nav_uv, params: HandoffParams, *,
     if not np.all(np.isfinite(uv)):
         return answer(uv, diag, ok=False)
     ev = target_evidence(case, reg, X_nav[0], uv)
+    # the navcam point the answer carries, against the navcam's dense stereo at the same pixel
+    Xd = case.nav.xyz_at(np.asarray(nav_uv, float)[None])[0]
+    if np.all(np.isfinite(Xd)):
+        Cn = case.nav.left_model.C
+        r_ps, r_d = float(np.linalg.norm(X_nav[0] - Cn)), float(np.linalg.norm(Xd - Cn))
+        ev.nav_range_residual_m = r_ps - r_d
+        ev.nav_range_residual_sigmas = abs(r_ps - r_d) / float(stereo_range_sigma_m(
+            r_d, case.nav.dense.focal_baseline_px_m, case.params.registration_check.stereo_disparity_sigma_px))
     diag["registration_check"] = ev.to_dict()
     ok, reason = registration_verdict(ev, case.params.registration_check)
     res = answer(uv, diag, ok=ok)
@@ -49,42 +58,10 @@ def mesh_registration(case: HandoffCase, nav_uv, params: HandoffParams, *,
 def target_evidence(case: HandoffCase, reg: CheckedRegistration, X_nav: np.ndarray, uv: np.ndarray
                     ) -> RegistrationEvidence:
     """:class:`RegistrationEvidence` for the navcam point ``X_nav`` (3,) (navcam rover frame) answered at the
-    hazcam pixel ``uv`` (2,) by ``reg``."""
-    p = case.params.registration_check
-    haz = case.haz.left_model
-    X = reg.T_target_source.apply(X_nav[None])[0]
-    basins = reg.basins
-    chosen = reg.chosen_basin
-    others = [i for i in range(len(basins)) if i != chosen]
-    fit = reg.chosen.fitness if chosen is None else basins[chosen].fitness
-    margin = fit - max(basins[i].fitness for i in others) if others else 1.0
-    g = reg.global_result
-    g_basin = next((i for i, b in enumerate(basins) if "global" in b.seeds), None)
-
-    def px(T) -> float:
-        q = haz.project(T.apply(X_nav[None]))[0]
-        return float(np.linalg.norm(q - uv)) if np.all(np.isfinite(q)) else float("inf")
-
-    corr_m = float(np.linalg.norm(reg.prior.apply(X_nav[None])[0] - X))
-    spread = max((px(basins[i].T_target_source) for i in others), default=0.0)
-    competing = max((px(basins[i].T_target_source) for i in others
-                     if basins[i].plausible and basins[i].fitness >= fit - p.competing_fitness), default=0.0)
-    ev = RegistrationEvidence(
-        fitness=fit, inlier_rmse_m=reg.chosen.inlier_rmse_m if chosen is None else basins[chosen].inlier_rmse_m,
-        n_seeds=reg.n_seeds, n_basins=len(basins), seeds_agreeing=len(reg.chosen_seeds),
-        chosen_seed=reg.chosen_seeds[0] if reg.chosen_seeds else "", fitness_margin=margin,
-        global_found=g is not None and g.T_target_source is not None,
-        global_inliers=0 if g is None else g.n_inliers, global_inlier_fraction=0.0 if g is None else g.inlier_fraction,
-        global_agrees=g_basin is not None and g_basin == chosen,
-        correction_sigmas=0.0 if chosen is None else basins[chosen].correction_sigmas,
-        refined=any(name != "seed" for name in reg.chosen_seeds),
-        correction_px=px(reg.prior), correction_m=corr_m,
-        target_seed_sigmas=corr_m / float(reg.sigma.displacement_sigma_m(X[None])[0]),
-        spread_px=spread, competing_px=competing,
-        global_px=None if g_basin is None else px(basins[g_basin].T_target_source),
-        case_reason=reg.reason,
-    )
-    _surface_residuals(case, reg, X, uv, ev)
+    hazcam pixel ``uv`` (2,) by ``reg``: the registration's own evidence, then the hazcam stereo's at the
+    answer."""
+    ev = registration_evidence(reg, X_nav, case.haz.left_model.project, case.params.registration_check)
+    _surface_residuals(case, reg, reg.T_target_source.apply(X_nav[None])[0], uv, ev)
     return ev
 
 
@@ -96,18 +73,10 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
     haz = case.haz
     C = haz.left_model.C
     Xh = _haz_dense_near(case, uv)
-    r = float(np.linalg.norm(X - C))
     if np.all(np.isfinite(Xh)):
-        # range noise along the hazcam ray: hazcam dense stereo at r, and the navcam's at its own range (its
-        # error lies along the navcam ray; its component along the hazcam ray is what moves the range)
-        s_h = r * r * p.stereo_disparity_sigma_px / haz.dense.focal_baseline_px_m
-        Cn = reg.T_target_source.apply(case.nav.left_model.C[None])[0]
-        rn = float(np.linalg.norm(X - Cn))
-        s_n = rn * rn * p.stereo_disparity_sigma_px / case.nav.dense.focal_baseline_px_m
-        cos = float(np.dot((X - Cn) / rn, (X - C) / r))
-        res = r - float(np.linalg.norm(Xh - C))
-        ev.range_residual_m = res
-        ev.range_residual_sigmas = abs(res) / float(np.hypot(s_h, s_n * cos))
+        ev.range_residual_m, ev.range_residual_sigmas = range_residual(
+            X, Xh, C, reg.T_target_source.apply(case.nav.left_model.C[None])[0],
+            haz.dense.focal_baseline_px_m, case.nav.dense.focal_baseline_px_m, p.stereo_disparity_sigma_px)
     nav_pts, _ = case.nav.cloud()
     M = reg.T_target_source
     Xn = M.inverse().apply(X[None])[0]
