@@ -95,27 +95,27 @@ def answers(handoff_scene):
     return out
 
 
-# Far mesh registration seeded at the exact pose walked 80-108 px off on this scene with OpenCV 4.14's dense stereo
-# (rectification sampled on a 1/32 px grid) and stayed within its bound on 5.0: ICP accepts a slide that raises its
-# fitness. That is the gross registration failure issue #14 asks to catch or avoid; until then it is a known failure
-# here, not a bound to widen.
-_KNOWN_FAILURES = {("mesh-registration", "far"): "far ICP can walk off an exact seed (issue #14, item 2)"}
+# Methods with a verdict of their own: their answer must be within its bound or flagged (``ok=False``). Far mesh
+# registration seeded at the exact pose walked 80-108 px off on this scene with OpenCV 4.14's dense stereo
+# (rectification sampled on a 1/32 px grid) and stayed within its bound on 5.0: its coarsest ICP scale slid the
+# cloud (issue #14, item 2). The multi-seed registration (core/registration_check.py) keeps the exact seed there
+# (0.3 and 0.0 px on 4.14) and flags the target where an equally fitting answer lands 5 px away; on 5.0 it is
+# within bound and not flagged.
+_WITH_VERDICT = {"mesh-registration"}
 
 
-@pytest.mark.parametrize("method,navcam", [
-    pytest.param(m, nc, id=f"{m}-{nc}",
-                 marks=[pytest.mark.xfail(reason=_KNOWN_FAILURES[(m, nc)], strict=False)] if (m, nc) in _KNOWN_FAILURES
-                 else [])
-    for m in METHODS for nc in ("near", "far")])
+@pytest.mark.parametrize("method,navcam", [pytest.param(m, nc, id=f"{m}-{nc}") for m in METHODS
+                                           for nc in ("near", "far")])
 def test_each_method_is_within_its_error_model(handoff_scene, answers, method, navcam):
     case = handoff_scene.cases[navcam]
     for t in handoff_scene.targets:
         r = answers[(t.id, navcam, method)]
-        assert r.ok and r.uv is not None, (t.id, r.reason)
+        assert r.uv is not None, (t.id, r.reason)
+        assert r.ok or method in _WITH_VERDICT, (t.id, r.reason)
         assert (r.method, r.navcam) == (method, navcam) and r.seconds >= 0
         err = float(np.linalg.norm(np.asarray(r.uv) - t.haz_uv))
         b = bound_px(method, case, t.xyz_site_m)  # the near rover frame is the site frame (identity pose)
-        assert err <= b, (t.id, err, b)
+        assert err <= b or not r.ok, (t.id, err, b, r.reason)
 
 
 def test_registry_names_order_and_enum():
