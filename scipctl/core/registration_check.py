@@ -98,6 +98,7 @@ class RegistrationCheckParams:
     competing_px: float = 4.0  # ... and it disagrees when its answer at the target is this far from the chosen
     stereo_disparity_sigma_px: float = 0.5  # dense stereo's a priori disparity error (hazcam and navcam)
     max_residual_sigmas: float = 4.0  # the target's range residual, in sigmas of the two stereos' range noise
+    residual_window_px: float = 4.0  # ... against the hazcam surface within this many px of the answer
     local_radius_m: float = 0.1  # the window of registered navcam points compared with the hazcam surface
     min_local_points: int = 20
 
@@ -108,7 +109,8 @@ class RegistrationCheckParams:
             if isinstance(v, (int, float)) and not isinstance(v, bool):
                 if not math.isfinite(v) or v < 0:
                     raise ValueError(f"RegistrationCheckParams.{f.name} = {v!r}: must be finite and >= 0")
-        for name in ("fine_below_m", "same_answer_m", "same_final_m", "max_seed_sigmas", "max_residual_sigmas", "local_radius_m",
+        for name in ("fine_below_m", "residual_window_px", "same_answer_m", "same_final_m", "max_seed_sigmas",
+                     "max_residual_sigmas", "local_radius_m",
                      "stereo_disparity_sigma_px", "competing_px", "global_prior_sigmas"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"RegistrationCheckParams.{name} = {getattr(self, name)!r}: must be > 0")
@@ -320,8 +322,10 @@ class RegistrationEvidence:
       ``competing_px``: the same over the plausible basins that fit within ``competing_fitness`` of the chosen
       (answers the clouds cannot tell apart); ``global_px``: the global-seeded basin's answer against the
       chosen (None when there is none);
+    * ``answer_in_image``: the answer lies inside the hazcam image;
     * ``range_residual_m`` / ``range_residual_sigmas``: ``X``'s range from the hazcam minus the hazcam dense
-      stereo's range at ``X``'s pixel, and over its sigma ``sqrt(s_h^2 + s_n^2)``, the two stereos' range
+      stereo's range nearest to it within ``residual_window_px`` of ``X``'s pixel (the success radius: at an
+      occluding edge the answer's own pixel may see the other side), and over its sigma ``sqrt(s_h^2 + s_n^2)``, the two stereos' range
       noise along the hazcam ray (``s = r^2 sigma_d / (f B)``, ``sigma_d`` = ``stereo_disparity_sigma_px``; the
       navcam's range error is projected on the hazcam ray): a registered point off the hazcam surface;
     * ``local_residual_m`` / ``local_bias_m`` / ``local_points``: the registered navcam dense points within
@@ -356,6 +360,7 @@ class RegistrationEvidence:
     local_residual_m: Optional[float] = None
     local_bias_m: Optional[float] = None
     local_points: int = 0
+    answer_in_image: bool = True
     nav_range_residual_m: Optional[float] = None
     nav_range_residual_sigmas: Optional[float] = None
     case_reason: str = ""
@@ -442,6 +447,7 @@ def registration_verdict(ev: RegistrationEvidence, params: RegistrationCheckPara
     """``(ok, reason)`` for one target's registration-based answer. Not ok when:
 
     * the case had no plausible registration (``case_reason``);
+    * the answer is outside the hazcam image (``answer_in_image`` False);
     * a basin the error model rules out fits the clouds better than the chosen one by more than
       ``competing_fitness`` (``fitness_margin`` below ``-competing_fitness``): the clouds and the pose disagree;
     * the answer at the target is implausible under the seed's error model (``target_seed_sigmas`` above
@@ -454,6 +460,8 @@ def registration_verdict(ev: RegistrationEvidence, params: RegistrationCheckPara
     p = params
     if ev.case_reason:
         return False, ev.case_reason
+    if not ev.answer_in_image:
+        return False, "the answer is outside the hazcam image"
     if ev.fitness_margin < -p.competing_fitness:
         return False, (f"a registration that fits the clouds better (by {-ev.fitness_margin:.3f}) is implausible "
                        f"under the pose and mast error model: the clouds and the pose disagree")

@@ -72,8 +72,12 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
     p = case.params.registration_check
     haz = case.haz
     C = haz.left_model.C
-    Xh = _haz_dense_near(case, uv)
-    if np.all(np.isfinite(Xh)):
+    ev.answer_in_image = bool(-0.5 <= uv[0] <= haz.width - 0.5 and -0.5 <= uv[1] <= haz.height - 0.5)
+    # the hazcam surface within residual_window_px of the answer: the point whose range is nearest X's (at an
+    # occluding edge the answer's own pixel may see the other side of the edge)
+    Xh = _haz_dense_window(case, uv, p.residual_window_px)
+    if len(Xh):
+        Xh = Xh[int(np.argmin(np.abs(np.linalg.norm(Xh - C, axis=1) - np.linalg.norm(X - C))))]
         ev.range_residual_m, ev.range_residual_sigmas = range_residual(
             X, Xh, C, reg.T_target_source.apply(case.nav.left_model.C[None])[0],
             haz.dense.focal_baseline_px_m, case.nav.dense.focal_baseline_px_m, p.stereo_disparity_sigma_px)
@@ -94,16 +98,14 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
             ev.local_bias_m = float(np.median(signed))
 
 
-def _haz_dense_near(case: HandoffCase, uv: np.ndarray, radius_px: int = 3) -> np.ndarray:
-    """The hazcam dense-stereo point ``(3,)`` at the hazcam-left pixel ``uv`` (2,), or at the nearest pixel of a
-    ``radius_px`` square around it that has one (stereo leaves holes at occluding edges and in shadow); NaN
-    when there is none."""
-    offs = np.array([(du, dv) for dv in range(-radius_px, radius_px + 1) for du in range(-radius_px, radius_px + 1)],
+def _haz_dense_window(case: HandoffCase, uv: np.ndarray, radius_px: float) -> np.ndarray:
+    """The hazcam dense-stereo points ``(N, 3)`` at the whole pixels within ``radius_px`` of the hazcam-left pixel
+    ``uv`` (2,) that have one (stereo leaves holes at occluding edges and in shadow)."""
+    k = int(np.floor(radius_px))
+    offs = np.array([(du, dv) for dv in range(-k, k + 1) for du in range(-k, k + 1) if du * du + dv * dv <= radius_px ** 2],
                     float)
-    offs = offs[np.argsort((offs ** 2).sum(axis=1), kind="stable")]
-    X = case.haz.xyz_at(uv[None] + offs)
-    ok = np.flatnonzero(np.isfinite(X).all(axis=1))
-    return X[ok[0]] if len(ok) else np.full(3, np.nan)
+    X = case.haz.xyz_at(np.round(uv)[None] + offs)
+    return X[np.isfinite(X).all(axis=1)]
 
 
 def _haz_surface(case: HandoffCase, X: np.ndarray, radius_m: float):
