@@ -157,10 +157,10 @@ def test_seed_sigma_model_is_the_pose_and_mast_error_model():
 
 def test_range_residual_threshold_is_the_stereo_noise_model():
     """``stereo_range_sigma_m`` is the first-order range error of a disparity error; drawn from disparity noise
-    of ``stereo_disparity_sigma_px`` in both stereos, ``range_residual`` exceeds ``max_residual_sigmas`` (4) at
+    of ``dense_disparity_sigma_px`` in both stereos, ``range_residual`` exceeds ``max_residual_sigmas`` (4) at
     the Gaussian rate, 6.3e-5 (+ the first-order approximation's excess)."""
     p = RegistrationCheckParams()
-    fb_t, fb_s, sd = 29.5, 210.0, p.stereo_disparity_sigma_px  # hazcam-like and navcam-like f B, px m
+    fb_t, fb_s, sd = 29.5, 210.0, p.dense_disparity_sigma_px  # hazcam-like and navcam-like f B, px m
     rng = np.random.default_rng(4)
     n = 20_000
     Ct, Cs = np.zeros(3), np.array([-3.0, 0.5, -0.5])
@@ -174,7 +174,7 @@ def test_range_residual_threshold_is_the_stereo_noise_model():
     for k in range(n):
         Xs = Cs + u_s * fb_s / d_s[k]  # the source point, wrong along its ray
         Xt = Ct + u_t * fb_t / d_t[k]  # the target's stereo point at that pixel (first order: along the same ray)
-        z[k] = range_residual(Xs, Xt, Ct, Cs, fb_t, fb_s, sd)[1]
+        z[k] = range_residual(Xs, Xt, Ct, Cs, fb_t, fb_s, sd, sd)[1]
     assert int((z > p.max_residual_sigmas).sum()) <= 10  # 20 000 x 5e-4: a first-order excess of up to 8x
 
 
@@ -190,9 +190,16 @@ def test_evidence_round_trips_through_a_dict_and_the_verdict_names_each_reason()
     assert registration_verdict(ev, p) == (True, "")
     for change, words in (({"case_reason": "no plausible"}, "no plausible"), ({"fitness_margin": -0.05}, "pose"),
                           ({"target_seed_sigmas": 5.0}, "seed sigmas"), ({"competing_px": 9.0}, "as well"),
-                          ({"range_residual_sigmas": 6.0, "range_residual_m": 0.1}, "off the hazcam surface")):
+                          ({"range_residual_sigmas": 6.0, "range_residual_m": 0.1, "dense_residual_sigmas": 5.0,
+                            "dense_residual_m": 0.1}, "off the hazcam dense stereo surface")):
         ok, reason = registration_verdict(replace(ev, **change), p)
         assert not ok and words in reason
+    # hazcam point stereo alone does not flag (it mismatches at some right answers: see registration_verdict), nor
+    # dense stereo when point stereo finds the point on the surface
+    assert registration_verdict(replace(ev, range_residual_sigmas=6.0, range_residual_m=0.1), p) == (True, "")
+    assert registration_verdict(replace(ev, dense_residual_sigmas=6.0, dense_residual_m=0.1), p) == (True, "")
+    assert not registration_verdict(replace(ev, dense_residual_sigmas=6.0, dense_residual_m=0.1,
+                                            range_residual_sigmas=None, range_residual_m=None), p)[0]
 
 
 def test_params_check_names_the_bad_parameter():

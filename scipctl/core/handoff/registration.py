@@ -47,7 +47,7 @@ def mesh_registration(case: HandoffCase, nav_uv, params: HandoffParams, *,
         r_ps, r_d = float(np.linalg.norm(X_nav[0] - Cn)), float(np.linalg.norm(Xd - Cn))
         ev.nav_range_residual_m = r_ps - r_d
         ev.nav_range_residual_sigmas = abs(r_ps - r_d) / float(stereo_range_sigma_m(
-            r_d, case.nav.dense.focal_baseline_px_m, case.params.registration_check.stereo_disparity_sigma_px))
+            r_d, case.nav.dense.focal_baseline_px_m, case.params.registration_check.dense_disparity_sigma_px))
     diag["registration_check"] = ev.to_dict()
     ok, reason = registration_verdict(ev, case.params.registration_check)
     res = answer(uv, diag, ok=ok)
@@ -73,14 +73,22 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
     haz = case.haz
     C = haz.left_model.C
     ev.answer_in_image = bool(-0.5 <= uv[0] <= haz.width - 0.5 and -0.5 <= uv[1] <= haz.height - 0.5)
-    # the hazcam surface within residual_window_px of the answer: the point whose range is nearest X's (at an
-    # occluding edge the answer's own pixel may see the other side of the edge)
-    Xh = _haz_dense_window(case, uv, p.residual_window_px)
-    if len(Xh):
-        Xh = Xh[int(np.argmin(np.abs(np.linalg.norm(Xh - C, axis=1) - np.linalg.norm(X - C))))]
-        ev.range_residual_m, ev.range_residual_sigmas = range_residual(
-            X, Xh, C, reg.T_target_source.apply(case.nav.left_model.C[None])[0],
-            haz.dense.focal_baseline_px_m, case.nav.dense.focal_baseline_px_m, p.stereo_disparity_sigma_px)
+    if ev.answer_in_image:
+        # two measures of the hazcam surface at the answer: hazcam point stereo there, over the whole range (its
+        # small affine window keeps the foreground at an occluding edge, where dense stereo leaves a hole or the
+        # background; but over the whole range it can match the wrong place), and the dense stereo point whose
+        # range is nearest X's within residual_window_px, only where every pixel there has one
+        Cn = reg.T_target_source.apply(case.nav.left_model.C[None])[0]
+        fb_h, fb_n = haz.dense.focal_baseline_px_m, case.nav.dense.focal_baseline_px_m
+        Xp = case.haz_point(uv)
+        if Xp is not None:
+            ev.range_residual_m, ev.range_residual_sigmas = range_residual(
+                X, Xp, C, Cn, fb_h, fb_n, p.point_disparity_sigma_px, p.point_disparity_sigma_px)
+        Xw, ev.dense_coverage = _haz_dense_window(case, uv, p.residual_window_px)
+        if ev.dense_coverage == 1.0:
+            Xd = Xw[int(np.argmin(np.abs(np.linalg.norm(Xw - C, axis=1) - np.linalg.norm(X - C))))]
+            ev.dense_residual_m, ev.dense_residual_sigmas = range_residual(
+                X, Xd, C, Cn, fb_h, fb_n, p.dense_disparity_sigma_px, p.point_disparity_sigma_px)
     nav_pts, _ = case.nav.cloud()
     M = reg.T_target_source
     Xn = M.inverse().apply(X[None])[0]
@@ -98,14 +106,16 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
             ev.local_bias_m = float(np.median(signed))
 
 
-def _haz_dense_window(case: HandoffCase, uv: np.ndarray, radius_px: float) -> np.ndarray:
+def _haz_dense_window(case: HandoffCase, uv: np.ndarray, radius_px: float) -> tuple[np.ndarray, float]:
     """The hazcam dense-stereo points ``(N, 3)`` at the whole pixels within ``radius_px`` of the hazcam-left pixel
-    ``uv`` (2,) that have one (stereo leaves holes at occluding edges and in shadow)."""
+    ``uv`` (2,) that have one, and the fraction of those pixels that do (stereo leaves holes at occluding edges
+    and in shadow)."""
     k = int(np.floor(radius_px))
     offs = np.array([(du, dv) for dv in range(-k, k + 1) for du in range(-k, k + 1) if du * du + dv * dv <= radius_px ** 2],
                     float)
     X = case.haz.xyz_at(np.round(uv)[None] + offs)
-    return X[np.isfinite(X).all(axis=1)]
+    ok = np.isfinite(X).all(axis=1)
+    return X[ok], float(ok.mean())
 
 
 def _haz_surface(case: HandoffCase, X: np.ndarray, radius_m: float):
