@@ -65,49 +65,65 @@ def _in_box(p: np.ndarray, box: tuple) -> np.ndarray:
     return ok
 
 
-def register_clouds(
+@dataclass
+class PreparedClouds:
+    """The two clouds of :func:`register_clouds`, cropped and voxel-gridded once, so that ICP can be run from
+    several seeds on the same points (:func:`icp_from`).
+
+    ``grids[voxel] = (source, target)`` Open3D clouds: the source already moved by ``T_target_source_init``
+    (the *seeded* frame: a transform ``M`` found on these grids maps the seeded source onto the target, i.e.
+    ``T_target_source = M @ T_target_source_init``); ``target_m`` ``(M, 3)`` the cropped target points.
+    """
+
+    grids: dict
+    T_target_source_init: RigidTransform
+    target_m: np.ndarray
+    scales_m: tuple
+    max_corr_voxels: float
+    crop_center_m: Optional[np.ndarray]
+    noise_origin: Optional[np.ndarray]
+    noise_k: Optional[float]
+
+    @property
+    def centre_m(self) -> np.ndarray:
+        """``(3,)`` target frame: the crop centre, or the cropped target's mean."""
+        return self.crop_center_m if self.crop_center_m is not None else self.target_m.mean(axis=0)
+
+    def scale_clouds(self, voxel: float, M_target_seeded: np.ndarray):
+        """The clouds ICP uses at the scale ``voxel`` after the alignment ``M_target_seeded`` ``(4, 4)``:
+        ``(source, target, correspondence radius)`` (see :func:`register_clouds` for the two selections)."""
+        s, t = self.grids[voxel]
+        radius = voxel * self.max_corr_voxels
+        if self.noise_k is not None:  # the target points precise enough for this scale's correspondences
+            t_pts = np.asarray(t.points)
+            near = np.flatnonzero(squared_distances(t_pts, self.noise_origin) <= radius / self.noise_k)
+            if len(near) < len(t_pts):
+                t = t.select_by_index(near)
+        # source points that, moved by the alignment so far, lie beyond the target's box widened by twice this
+        # scale's correspondence distance cannot pair up at this scale: leave them out (far navcam clouds reach
+        # well beyond the hazcam's; the finest scale has most points)
+        s_pts = np.asarray(s.points)
+        keep = np.flatnonzero(_in_box(s_pts @ M_target_seeded[:3, :3].T + M_target_seeded[:3, 3],
+                                      _box(np.asarray(t.points), 2.0 * radius)))
+        if len(keep) < len(s_pts):
+            s = s.select_by_index(keep)
+        return s, t, radius
+
+
+def prepare_clouds(
     source_m: np.ndarray,
     target_m: np.ndarray,
     T_target_source_init: RigidTransform,
-    method: str = "point-to-plane",
     scales_m: tuple = (0.04, 0.02, 0.01),
     crop_center_m: Optional[np.ndarray] = None,
     crop_radius_m: Optional[float] = None,
-    max_iterations: int = 25,
     max_corr_voxels: float = 1.5,
-    min_fitness_gain: float = 0.01,
-    min_rmse_gain: float = 0.05,
     target_noise: Optional[tuple] = None,
-) -> RegistrationResult:
-    """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_target_source_init`` (a first
-    estimate of ``T_target_source``).
+) -> PreparedClouds:
+    """Crop and grid the clouds as :func:`register_clouds` does (its arguments of the same names)."""
+    import open3d as o3d  # noqa: F401  (the grids are Open3D clouds)
 
-    Coarse-to-fine ICP over voxel sizes ``scales_m``; the correspondence
-    distance at each scale is ``max_corr_voxels`` voxels (1.5: wider lets
-    differently-sampled stereo surfaces pull the alignment off, measured on
-    simulated sols in docs/handoff.md). ``method`` is ``point-to-plane`` or
-    ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
-    frame) only points near the centre are used (both clouds, the source after
-    applying ``T_target_source_init``). Points that cannot pair up are left out: each cloud
-    outside the other's box widened by twice the coarsest correspondence
-    distance, and at each scale the source points that, moved by the alignment
-    so far, lie outside the target's box widened by twice that scale's
-    distance (``fitness`` counts only the source points kept at the finest
-    scale). The result replaces the seed only if, at the finest
-    scale, it raises the fitness by ``min_fitness_gain`` or lowers the inlier
-    RMS by the fraction ``min_rmse_gain`` (``kept_seed`` says which).
-
-    ``target_noise`` ``(origin_m (3,), k_per_m)``: the target cloud's points
-    are uncertain along their range by ``k r^2``, ``r`` their distance from
-    ``origin_m`` (stereo: ``k = sigma_disparity / (f B)``). At each scale only
-    the target points whose uncertainty is within that scale's correspondence
-    distance ``d`` are used, ``r <= sqrt(d / k)``: a point farther from its
-    surface than the correspondences reach pairs up with the wrong surface or
-    not at all, adding error and time, not information. Coarse scales use the
-    far points (their reach is long), the finest ones the near points.
-    """
-    import open3d as o3d
-
+    noise_origin = noise_k = None
     if target_noise is not None:
         noise_origin = np.asarray(target_noise[0], dtype=float).reshape(3)
         noise_k = float(target_noise[1])
@@ -140,25 +156,37 @@ def register_clouds(
     for voxel in sorted(scales_m):
         ps, pt = ps.voxel_down_sample(voxel), pt.voxel_down_sample(voxel)
         grids[voxel] = (ps, pt)
-    M_target_seeded = np.eye(4)
-    reg = None
+    return PreparedClouds(grids, T_target_source_init, tgt, tuple(scales_m), float(max_corr_voxels),
+                          None if crop_center_m is None else np.asarray(crop_center_m, float), noise_origin, noise_k)
+
+
+@dataclass
+class IcpRun:
+    """ICP over some scales of a :class:`PreparedClouds`: ``M_target_seeded`` ``(4, 4)`` (seeded frame),
+    Open3D's result at the last scale run (``reg``), and that scale's clouds and radius (None/0 when no scale had
+    enough points)."""
+
+    M_target_seeded: np.ndarray
+    reg: object
+    source: object
+    target: object
+    radius_m: float
+    n_source: int
+    n_target: int
+
+
+def icp_from(prep: PreparedClouds, M_target_seeded_init: np.ndarray, scales_m: Optional[tuple] = None,
+             method: str = "point-to-plane", max_iterations: int = 25) -> IcpRun:
+    """Coarse-to-fine ICP on ``prep``'s grids from the alignment ``M_target_seeded_init`` ``(4, 4)`` (identity:
+    the seed itself), over ``scales_m`` (default: all of ``prep``'s, in its order)."""
+    import open3d as o3d
+
+    M_target_seeded = np.array(M_target_seeded_init, dtype=float)
+    reg = s = t = None
+    radius = 0.0
     n_s = n_t = 0
-    for voxel in scales_m:
-        s, t = grids[voxel]
-        radius = voxel * max_corr_voxels
-        if target_noise is not None:  # the target points precise enough for this scale's correspondences
-            t_pts = np.asarray(t.points)
-            near = np.flatnonzero(squared_distances(t_pts, noise_origin) <= radius / noise_k)
-            if len(near) < len(t_pts):
-                t = t.select_by_index(near)
-        # source points that, moved by the alignment so far, lie beyond the target's box widened by twice this
-        # scale's correspondence distance cannot pair up at this scale: leave them out (far navcam clouds reach
-        # well beyond the hazcam's; the finest scale has most points)
-        s_pts = np.asarray(s.points)
-        keep = np.flatnonzero(_in_box(s_pts @ M_target_seeded[:3, :3].T + M_target_seeded[:3, 3],
-                                      _box(np.asarray(t.points), 2.0 * radius)))
-        if len(keep) < len(s_pts):
-            s = s.select_by_index(keep)
+    for voxel in prep.scales_m if scales_m is None else scales_m:
+        s, t, radius = prep.scale_clouds(voxel, M_target_seeded)
         n_s, n_t = len(s.points), len(t.points)
         if n_s < 20 or n_t < 20:
             continue
@@ -175,8 +203,64 @@ def register_clouds(
         else:
             raise ValueError(f"unknown registration method {method!r}")
         M_target_seeded = np.asarray(reg.transformation)
-    if reg is None:
+    return IcpRun(M_target_seeded, reg, s, t, radius, n_s, n_t)
+
+
+def register_clouds(
+    source_m: np.ndarray,
+    target_m: np.ndarray,
+    T_target_source_init: RigidTransform,
+    method: str = "point-to-plane",
+    scales_m: tuple = (0.04, 0.02, 0.01),
+    crop_center_m: Optional[np.ndarray] = None,
+    crop_radius_m: Optional[float] = None,
+    max_iterations: int = 25,
+    max_corr_voxels: float = 1.5,
+    min_fitness_gain: float = 0.01,
+    min_rmse_gain: float = 0.05,
+    target_noise: Optional[tuple] = None,
+    prepared: Optional[PreparedClouds] = None,
+) -> RegistrationResult:
+    """Align ``source_m`` ``(N, 3)`` to ``target_m`` ``(M, 3)`` starting from ``T_target_source_init`` (a first
+    estimate of ``T_target_source``).
+
+    Coarse-to-fine ICP over voxel sizes ``scales_m``; the correspondence
+    distance at each scale is ``max_corr_voxels`` voxels (1.5: wider lets
+    differently-sampled stereo surfaces pull the alignment off, measured on
+    simulated sols in docs/handoff.md). ``method`` is ``point-to-plane`` or
+    ``generalized`` (GICP). With ``crop_center_m``/``crop_radius_m`` (target
+    frame) only points near the centre are used (both clouds, the source after
+    applying ``T_target_source_init``). Points that cannot pair up are left out: each cloud
+    outside the other's box widened by twice the coarsest correspondence
+    distance, and at each scale the source points that, moved by the alignment
+    so far, lie outside the target's box widened by twice that scale's
+    distance (``fitness`` counts only the source points kept at the finest
+    scale). The result replaces the seed only if, at the finest
+    scale, it raises the fitness by ``min_fitness_gain`` or lowers the inlier
+    RMS by the fraction ``min_rmse_gain`` (``kept_seed`` says which).
+
+    ``target_noise`` ``(origin_m (3,), k_per_m)``: the target cloud's points
+    are uncertain along their range by ``k r^2``, ``r`` their distance from
+    ``origin_m`` (stereo: ``k = sigma_disparity / (f B)``). At each scale only
+    the target points whose uncertainty is within that scale's correspondence
+    distance ``d`` are used, ``r <= sqrt(d / k)``: a point farther from its
+    surface than the correspondences reach pairs up with the wrong surface or
+    not at all, adding error and time, not information. Coarse scales use the
+    far points (their reach is long), the finest ones the near points.
+
+    ``prepared``: the clouds already cropped and gridded by :func:`prepare_clouds` with these arguments and
+    ``T_target_source_init`` (the clouds and crop arguments are then not used again).
+    """
+    import open3d as o3d
+
+    if prepared is None:
+        prepared = prepare_clouds(source_m, target_m, T_target_source_init, scales_m, crop_center_m, crop_radius_m,
+                                  max_corr_voxels, target_noise)
+    run = icp_from(prepared, np.eye(4), method=method, max_iterations=max_iterations)
+    if run.reg is None:
         raise ValueError("registration had too few points at every scale")
+    reg, s, t, radius = run.reg, run.source, run.target, run.radius_m
+    M_target_seeded = run.M_target_seeded
     # keep the seed unless ICP fits the clouds measurably better at the finest scale: on noisy stereo clouds
     # ICP otherwise drifts along weakly constrained directions from an already good seed
     seed_eval = o3d.pipelines.registration.evaluate_registration(s, t, radius, np.eye(4))
@@ -185,13 +269,13 @@ def register_clouds(
     if kept_seed:
         M_target_seeded, reg = np.eye(4), seed_eval
     T_target_seeded = RigidTransform.from_matrix(M_target_seeded)  # seeded: the source moved by T_target_source_init
-    centre = np.asarray(crop_center_m, float) if crop_center_m is not None else tgt.mean(axis=0)
+    centre = prepared.centre_m
     return RegistrationResult(
-        T_target_source=T_target_seeded @ T_target_source_init,
+        T_target_source=T_target_seeded @ prepared.T_target_source_init,
         fitness=float(reg.fitness),
         inlier_rmse_m=float(reg.inlier_rmse),
-        n_source=n_s,
-        n_target=n_t,
+        n_source=run.n_source,
+        n_target=run.n_target,
         correction_rad=T_target_seeded.rotation_angle_rad(),
         correction_m=float(np.linalg.norm(T_target_seeded.apply(centre) - centre)),
         kept_seed=kept_seed,

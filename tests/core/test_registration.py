@@ -3,17 +3,7 @@ import pytest
 
 from scipctl.core.registration import register_clouds
 from scipctl.core.transforms import RigidTransform, rotvec_to_matrix
-
-
-def _terrain(seed=0, n=60000):
-    """Rolling ground with a few rocks: structure in all three axes, so registration is well posed."""
-    rng = np.random.default_rng(seed)
-    xy = rng.uniform([0.5, -1.5], [3.5, 1.5], size=(n, 2))
-    z = 0.05 * np.sin(2.1 * xy[:, 0]) * np.cos(1.7 * xy[:, 1]) + 0.02 * np.sin(7 * xy[:, 0] + 3 * xy[:, 1])
-    for cx, cy, r in ((1.5, 0.3, 0.25), (2.4, -0.6, 0.35), (1.1, -0.9, 0.2), (3.0, 0.8, 0.3)):
-        d2 = (xy[:, 0] - cx) ** 2 + (xy[:, 1] - cy) ** 2
-        z = z - np.where(d2 < r * r, np.sqrt(np.maximum(r * r - d2, 0)) * 0.8, 0)
-    return np.column_stack([xy, z])
+from tests.core.clouds import terrain as _terrain
 
 
 @pytest.mark.parametrize("method", ["point-to-plane", "generalized"])

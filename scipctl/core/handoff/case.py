@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Optional
 
 import numpy as np
@@ -131,8 +131,10 @@ class HandoffCase:
 
     # ----------------------------------------------------------- registration
     def whole_registration(self):
-        """ICP of the whole navcam cloud onto the hazcam cloud, seeded with ``T_haz_nav`` (cached): a
-        :class:`~scipctl.core.registration.RegistrationResult`, or the ``ValueError`` saying why there is none.
+        """ICP of the whole navcam cloud onto the hazcam cloud from several seeds (``T_haz_nav``, perturbed by its
+        error model, and a global registration; cached): a
+        :class:`~scipctl.core.registration_check.CheckedRegistration`, or the ``ValueError`` saying why there is
+        none.
         Waits for the computation :meth:`start_registration` started, if any."""
         if "whole_reg" not in self._cache:
             fut = self._cache.pop("whole_reg_future", None)
@@ -155,7 +157,9 @@ class HandoffCase:
         self._cache["whole_reg_future"] = executor.submit(self._compute_registration)
 
     def _compute_registration(self):
-        from ..registration import register_clouds
+        from ..global_registration import global_registration
+        from ..registration import prepare_clouds
+        from ..registration_check import checked_registration
 
         t0 = time.perf_counter()
         nav_pts, _ = self.nav.cloud()
@@ -166,13 +170,26 @@ class HandoffCase:
         # the navcam cloud where it can overlap the hazcam's, i.e. within r + 1 m of the hazcam seeded into the
         # navcam frame (distances are the same in both frames: no need to move the whole cloud)
         nav_pts = select_rows(nav_pts, squared_distances(nav_pts, self.T_haz_nav.inverse().apply(C)) < (r + 1.0) ** 2)
+        check = self.params.registration_check
+        sigma = check.seed_sigma(self.T_haz_nav, self.nav.left_model.C, moved=self.label == "far")
         try:
-            reg = register_clouds(
+            prepared = prepare_clouds(
                 nav_pts, haz_pts, self.T_haz_nav,
                 # far seeds carry the pose-estimate error (decimetres): start coarser
                 scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02),
                 # hazcam stereo's range uncertainty grows as r^2 (0.25 px: 3 cm at 1.9 m, 21 cm at 5 m)
                 target_noise=(C, self.params.registration_disparity_sigma_px / self.haz.dense.focal_baseline_px_m))
+            glob = None
+            if check.run_global:
+                # FPFH + RANSAC on the finest grids (the source seeded: identity prior), matches kept within
+                # global_prior_sigmas seed sigmas of the seed at the overlap's far end
+                src_seeded, tgt = (np.asarray(pc.points) for pc in prepared.grids[min(prepared.scales_m)])
+                radius = check.global_prior_sigmas * float(sigma.displacement_sigma_m(tgt).max())
+                g = global_registration(src_seeded, sigma.pivot_m, tgt, C, check.global_params,
+                                        prior=(RigidTransform.identity(), radius))
+                glob = g if g.T_target_source is None else replace(
+                    g, T_target_source=g.T_target_source @ self.T_haz_nav)
+            reg = checked_registration(prepared, sigma, check, glob)
         except ValueError as e:
             return e
         self.registration_seconds = time.perf_counter() - t0

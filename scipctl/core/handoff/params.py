@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+
+from ..registration_check import RegistrationCheckParams
 
 FAR_WINDOW_WARPS = ("plane", "scale")
 
@@ -37,6 +39,8 @@ class HandoffParams:
     far_window_warp: str = "plane"  # refined-kinematic far: "plane" (local plane warp) or "scale" (the paper's)
     drape_antialias: bool = True  # draped windows: navcam blurred to the hazcam pixel footprint
     far_plane_radius_m: float = 0.05  # its plane fit: navcam dense points within this distance of the target
+    # mesh registration's seeds, global registration and per-target verdict (core/registration_check.py)
+    registration_check: RegistrationCheckParams = field(default_factory=RegistrationCheckParams)
 
     def check(self) -> "HandoffParams":
         """Raise ``ValueError`` naming the first parameter out of its range; return ``self``."""
@@ -64,6 +68,10 @@ class HandoffParams:
             bad("refined_min_score", "is an NCC score: must be in [-1, 1]")
         if not -1 <= self.consensus_min_score <= 1:
             bad("consensus_min_score", "is an NCC score: must be in [-1, 1]")
+        try:
+            self.registration_check.check()
+        except ValueError as e:
+            raise ValueError(f"HandoffParams.registration_check: {e}") from None
         if self.far_window_warp not in FAR_WINDOW_WARPS:
             bad("far_window_warp", f"must be one of {', '.join(FAR_WINDOW_WARPS)}")
         return self
