@@ -84,7 +84,7 @@ def load_family(name: Optional[str], scenario: str, seed: int, runs: list, rover
     ``--family``) and the rover / texture it needs, loaded now (from ``--rover-dir`` / ``--texture-from`` if given,
     else ``shared/real``), so that bad input stops before anything is written. A randomised family's needs are
     loaded for each run's scene. InputError for an unknown name or options the family does not use."""
-    from ..sim.families import FAMILIES, family_rover, family_texture
+    from ..sim.families import FAMILIES, family_of_run, family_rover, family_texture
 
     if name is None:
         return None, None, None
@@ -99,7 +99,7 @@ def load_family(name: Optional[str], scenario: str, seed: int, runs: list, rover
         raise InputError("synth", "--texture-from", f"family {name} does not use a fixed real texture")
     if fam.randomised:  # load what each run's scene draws (cached), and check it exists
         for r in runs:
-            real = fam.realise(seed, scenario, int(r.split("-")[0][1:]))
+            real = family_of_run(fam, scenario, r, seed)
             family_rover(real)
             family_texture(real)
         return fam, None, None
@@ -171,9 +171,9 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
         fam, sim_rover, texture = load_family(family, scenario, seed, selected, rover, rover_dir, texture_from)
         rovers = [sim_rover]
         if fam.randomised:
-            from ..sim.families import family_rover
+            from ..sim.families import family_of_run, family_rover
 
-            rovers = [family_rover(fam.realise(seed, scenario, int(r.split("-")[0][1:]))) for r in selected]
+            rovers = [family_rover(family_of_run(fam, scenario, r, seed)) for r in selected]
         for rv in rovers:
             _check_scale(image_scale, rv)
         extra = [f"--family {family}"]

@@ -16,7 +16,7 @@ from ..core.kinematics import RoverPose
 from ..model import Downlink, ImageProduct, ImageTruth, MastAngles, TargetTruth
 from . import rover as rover_mod
 from .errors import ErrorSettings
-from .families import FAMILIES, SceneFamily, family_rover, family_texture, resolve_family
+from .families import FAMILIES, SceneFamily, family_of_run, family_rover, family_texture
 from .marks import compute_marks
 from .products import estimated_pose, plan_products
 from .scenarios import RunPlan, _rng, default_errors, list_runs, plan_run
@@ -104,11 +104,8 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     from ..io.images import encode_png
     from .render import Sensor, auto_exposure, expose, render_radiance
 
-    fam = resolve_family(family)
+    fam = None if family is None else family_of_run(family, scenario, run, seed)
     if fam is not None:
-        if run not in list_runs(scenario):
-            raise ValueError(f"run: unknown {run!r} for scenario {scenario} (want one of {', '.join(list_runs(scenario))})")
-        fam = fam.realise(seed, scenario, int(run.split("-")[0][1:]))
         if rover is None:
             rover = family_rover(fam)
         elif rover.key != fam.rover:

@@ -131,7 +131,8 @@ FAMILIES: dict[str, SceneFamily] = _families(
     SceneFamily("pebble-field", terrain="pebble-field",
                 description="ground paved with pebbles (3x today's count, up to 1.5x larger), no drift sand"),
     SceneFamily("rock-strewn", terrain="rock-strewn",
-                description="~16 rocks within 4 m of the target rock and ~100 further out"),
+                description="30 rocks within 0.6-4 m of the target rock (cobbles up to 18 cm also in the approach corridors) "
+                            "and 150 out to 25 m; default: 5 and 40"),
     SceneFamily("angular-rocks", rocks="angular", description="jointed blocks: few large planar faces, straight edges"),
     SceneFamily("slab-rocks", rocks="slab", description="tabular slabs with flat tops, ~0.4x as high"),
     SceneFamily("rounded-boulders", rocks="rounded", description="weathered rounded boulders, no sharp corners"),
@@ -159,6 +160,17 @@ def resolve_family(family: Union[SceneFamily, str, None]) -> Optional[SceneFamil
     if family not in FAMILIES:
         raise ValueError(f"unknown scene family {family!r} (want one of: {', '.join(FAMILIES)})")
     return FAMILIES[family]
+
+
+def family_of_run(family: Union[SceneFamily, str], scenario: str, run: str, seed: int) -> SceneFamily:
+    """The realised family of one run (its scene's draw for ``mixed``); ValueError for an unknown family or run."""
+    from .scenarios import list_runs
+
+    fam = resolve_family(family)
+    runs = list_runs(scenario)
+    if run not in runs:
+        raise ValueError(f"run: unknown {run!r} for scenario {scenario} (want one of {', '.join(runs)})")
+    return fam.realise(seed, scenario, int(run.split("-")[0][1:]))
 
 
 # ----------------------------------------------------------------------------- run-time inputs (through io)
