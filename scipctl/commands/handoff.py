@@ -15,9 +15,11 @@ def _parse_methods(methods):
     """
     from ..core.handoff import ALL_METHODS
 
-    if not methods:
-        pairs = {(m, n) for m in ALL_METHODS for n in ("near", "far")}
-        return list(ALL_METHODS), ["near", "far"], pairs
+    if not methods or methods.strip() == "scip":  # the default: the recommended handoff alone
+        return ["scip"], ["near", "far"], {("scip", n) for n in ("near", "far")}
+    if methods.strip() == "all":  # scip first, then every other method
+        names = ["scip"] + [m for m in ALL_METHODS if m != "scip"]
+        return names, ["near", "far"], {(m, n) for m in names for n in ("near", "far")}
     names, pairs = [], set()
     for item in methods.split(","):
         item = item.strip()
@@ -55,7 +57,9 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..core.handoff import HandoffParams
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
 
-    params = HandoffParams(dense_downsample=2 if fast else 1)
+    from ..core.handoff.scip_params import ScipParams
+
+    params = HandoffParams(dense_downsample=2 if fast else 1, scip=ScipParams(success_px=success_px))
 
     if not (math.isfinite(success_px) and success_px > 0):
         raise InputError("--success-px", "success_px", f"must be a positive finite number, got {success_px}")
@@ -126,11 +130,18 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     }
     if chain:
         doc["chains"] = chains
-    if json_out:
+    # scip's NO-GO answers: the command's answer is "no" (exit 1)
+    nogo = [f"{r.downlink}:{r.target}" for r in records if r.method == "scip" and not r.go]
+    if json_out and not nogo:
         emit_json(doc)
     _print_table(con, rows, records)
     if chain:
         _print_chains(con, chains)
+    if nogo:
+        from ..errors import CommandFailed
+
+        raise CommandFailed(f"scip: NO-GO for {len(nogo)} of {sum(r.method == 'scip' for r in records)} targets "
+                            f"({', '.join(nogo[:6])}{', ...' if len(nogo) > 6 else ''})", payload=doc)
 
 
 def _chains(dl, name, only):

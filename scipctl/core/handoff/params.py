@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
+
+from .scip_params import ScipParams
 
 FAR_WINDOW_WARPS = ("plane", "scale")
 
@@ -37,6 +39,7 @@ class HandoffParams:
     far_window_warp: str = "plane"  # refined-kinematic far: "plane" (local plane warp) or "scale" (the paper's)
     drape_antialias: bool = True  # draped windows: navcam blurred to the hazcam pixel footprint
     far_plane_radius_m: float = 0.05  # its plane fit: navcam dense points within this distance of the target
+    scip: ScipParams = field(default_factory=ScipParams)  # the recommended handoff's evidence, model and GO rule
 
     def check(self) -> "HandoffParams":
         """Raise ``ValueError`` naming the first parameter out of its range; return ``self``."""
@@ -66,4 +69,5 @@ class HandoffParams:
             bad("consensus_min_score", "is an NCC score: must be in [-1, 1]")
         if self.far_window_warp not in FAR_WINDOW_WARPS:
             bad("far_window_warp", f"must be one of {', '.join(FAR_WINDOW_WARPS)}")
+        self.scip.check()
         return self
