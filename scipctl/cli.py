@@ -142,6 +142,7 @@ def simulate_handoff(
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
     chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
+    trust_model: Optional[Path] = typer.Option(None, "--trust-model", help="scip's trust model (scipctl fit-trust; default: the packaged one)."),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
@@ -151,7 +152,7 @@ def simulate_handoff(
     from .commands import handoff as command
 
     command.simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
-        products_root=products_dir)
+        products_root=products_dir, trust_model=trust_model)
 
 
 @app.command("trust-evidence")

@@ -46,7 +46,7 @@ def _fmt_stats(s):
 
 
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
-                     fast=False, products_root=None):
+                     fast=False, products_root=None, trust_model=None):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
     (and the chains with ``chain``); one JSON document on stdout with ``json_out``."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -59,7 +59,12 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
 
     from ..core.handoff.scip_params import ScipParams
 
-    params = HandoffParams(dense_downsample=2 if fast else 1, scip=ScipParams(success_px=success_px))
+    model = None
+    if trust_model is not None:  # else the packaged one (pipeline.handoff.build_setup)
+        from ..io.trust_model import load_trust_model
+
+        model = load_trust_model(trust_model)
+    params = HandoffParams(dense_downsample=2 if fast else 1, scip=ScipParams(model=model, success_px=success_px))
 
     if not (math.isfinite(success_px) and success_px > 0):
         raise InputError("--success-px", "success_px", f"must be a positive finite number, got {success_px}")
