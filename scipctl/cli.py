@@ -144,21 +144,54 @@ def simulate_handoff(
     target: Optional[str] = typer.Option(None, "--target", help="Only this target id."),
     from_product: Optional[str] = typer.Option(None, "--from", help="Source navcam/pancam product id (with --pixel)."),
     pixel: Optional[str] = typer.Option(None, "--pixel", help="U,V in the --from product."),
-    methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated method names (default: all)."),
-    success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated method names, NAME-near/NAME-far, or 'all' (default: scip, the recommended handoff)."),
+    success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels (scip's p_success is for it)."),
     near: Optional[str] = typer.Option(None, "--near", help="Left near-navcam product id."),
     far: Optional[str] = typer.Option(None, "--far", help="Left far-navcam product id."),
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
     chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
+    trust_model: Optional[Path] = typer.Option(None, "--trust-model", help="scip's trust model (scipctl fit-trust; default: the packaged one)."),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
-    """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline."""
+    """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline.
+
+    Exit code 1 when scip's answer for any requested target is NO-GO (p_success under its GO threshold)."""
     from .commands import handoff as command
 
     command.simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
-        products_root=products_dir)
+        products_root=products_dir, trust_model=trust_model)
+
+
+@app.command("trust-evidence")
+@guarded
+def trust_evidence(
+    srcs: List[Path] = typer.Argument(..., help="Downlinks or workspaces with marks in the hazcam."),
+    out: Path = typer.Option(..., "-o", "--out", help="Evidence table to write (JSON lines)."),
+    family: Optional[str] = typer.Option(None, "--family", help="Scene family name (default: the .sim.json's)."),
+    products_dir: Optional[Path] = _products_dir_option(),
+    json_out: bool = typer.Option(False, "--json", help="A summary on stdout."),
+):
+    """Evidence of every scip candidate answer of every marked target, with its true error (trust-model data)."""
+    from .commands import trust as command
+
+    command.trust_evidence(srcs, out, family, json_out, products_root=products_dir)
+
+
+@app.command("fit-trust")
+@guarded
+def fit_trust(
+    tables: List[Path] = typer.Argument(..., help="Evidence tables (scipctl trust-evidence)."),
+    out: Path = typer.Option(..., "-o", "--out", help="Trust model to write (e.g. scipctl/data/trust_model.json)."),
+    report: Optional[Path] = typer.Option(None, "--report", help="Also write the leave-one-family-out evaluation (JSON)."),
+    success_px: float = typer.Option(4.0, "--success-px", help="Success radius of the evaluation, hazcam px."),
+    json_out: bool = typer.Option(False, "--json", help="A summary on stdout."),
+):
+    """Fit scip's trust model (logistic regression per success radius, 1/2/4/8 px) on evidence tables."""
+    from .commands import trust as command
+
+    command.fit_trust(tables, out, report, success_px, json_out)
 
 
 @app.command()

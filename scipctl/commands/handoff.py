@@ -14,9 +14,11 @@ def _parse_methods(methods):
     """
     from ..core.handoff import ALL_METHODS
 
-    if not methods:
-        pairs = {(m, n) for m in ALL_METHODS for n in ("near", "far")}
-        return list(ALL_METHODS), ["near", "far"], pairs
+    if not methods or methods.strip() == "scip":  # the default: the recommended handoff alone
+        return ["scip"], ["near", "far"], {("scip", n) for n in ("near", "far")}
+    if methods.strip() == "all":  # scip first, then every other method
+        names = ["scip"] + [m for m in ALL_METHODS if m != "scip"]
+        return names, ["near", "far"], {(m, n) for m in names for n in ("near", "far")}
     names, pairs = [], set()
     for item in methods.split(","):
         item = item.strip()
@@ -43,7 +45,7 @@ def _fmt_stats(s):
 
 
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
-                     fast=False, products_root=None):
+                     fast=False, products_root=None, trust_model=None):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
     (and the chains with ``chain``); one JSON document on stdout with ``json_out``."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -55,8 +57,8 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
 
-    params = handoff_params(fast)
     success_px = success_threshold(success_px)
+    params = handoff_params(fast, success_px, trust_model)
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
     names, navcams, pairs = _parse_methods(methods)
@@ -124,11 +126,18 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     }
     if chain:
         doc["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in chains]
-    if json_out:
+    # scip's NO-GO answers: the command's answer is "no" (exit 1)
+    nogo = [f"{r.downlink}:{r.target}" for r in records if r.method == "scip" and not r.go]
+    if json_out and not nogo:
         emit_json(doc)
     _print_table(con, rows, records)
     if chain:
         _print_chains(con, chains)
+    if nogo:
+        from ..errors import CommandFailed
+
+        raise CommandFailed(f"scip: NO-GO for {len(nogo)} of {sum(r.method == 'scip' for r in records)} targets "
+                            f"({', '.join(nogo[:6])}{', ...' if len(nogo) > 6 else ''})", payload=doc)
 
 
 def _print_table(con, rows, records):

@@ -30,12 +30,20 @@ def designation_params(band_px: Optional[float] = None):
     return PointStereoParams.with_band(band_px)
 
 
-def handoff_params(fast: bool = False):
+def handoff_params(fast: bool = False, success_px: float = 4.0, trust_model=None):
     """``scipctl simulate-handoff``: :class:`~scipctl.core.handoff.HandoffParams` (``--fast``: half-resolution
-    shared dense stereo)."""
+    shared dense stereo; ``--success-px``: the radius scip's P(success) is for; ``--trust-model FILE``: scip's
+    fitted model, None for the packaged one, read by :func:`scipctl.io.trust_model.load_trust_model`)."""
     from ..core.handoff import HandoffParams
+    from ..core.handoff.scip_params import ScipParams
 
-    return HandoffParams(dense_downsample=2 if fast else 1).check()
+    model = None
+    if trust_model is not None:  # else the packaged one (pipeline.handoff.build_setup)
+        from ..io.trust_model import load_trust_model
+
+        model = load_trust_model(trust_model)
+    return HandoffParams(dense_downsample=2 if fast else 1,
+                         scip=ScipParams(model=model, success_px=float(success_px))).check()
 
 
 def success_threshold(success_px: float) -> float:

@@ -15,6 +15,8 @@ from typing import Callable, Optional
 import numpy as np
 
 from ..core.handoff import ALL_METHODS, PAPER_METHODS, HandoffCase, HandoffParams, Method, StereoView, run_method
+from ..core.handoff.evidence import CANDIDATE_METHODS
+from ..core.handoff.scip import SCIP, scip_from_results
 from ..core.kinematics import T_roverB_roverA
 from ..core.transforms import RigidTransform
 from ..model import Downlink, ImageProduct, InputError
@@ -73,7 +75,14 @@ def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str
 
 
 def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=None, near=None, far=None) -> HandoffSetup:
+    """The handoff cases of ``dl``; ``params`` without a trust model for ``scip`` get the packaged one."""
     params = params or HandoffParams()
+    if params.scip.model is None:
+        from dataclasses import replace
+
+        from ..io.trust_model import load_packaged_trust_model
+
+        params = replace(params, scip=replace(params.scip, model=load_packaged_trust_model()))
     haz, nr, fr = find_products(dl, hazcam, near, far)
     ds = params.dense_downsample
     haz_view = _view(dl, haz, 0.3, 6.0, ds)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m
@@ -110,6 +119,8 @@ class HandoffRecord:
     reason: str
     diagnostics: dict
     seconds: float
+    p_success: Optional[float] = None  # scip's trust model's P(error <= success_px) for this answer (None: not scored)
+    go: Optional[bool] = None  # p_success >= the GO threshold (None: not scored)
 
     def to_dict(self) -> dict:
         return dict(self.__dict__)
@@ -157,10 +168,15 @@ def run_targets(
     progress: Optional[Callable[[str], None]] = None,
     downlink_name: str = "",
     only: Optional[set] = None,
+    scip_outcomes: Optional[dict] = None,
 ) -> list:
     """Run ``methods`` x ``navcams`` (restricted to the (method, navcam) pairs in ``only``, if given) on ``targets``.
 
-    Records come in the order target, navcam, method. When mesh registration is
+    Records come in the order target, navcam, method; ``scip`` (one record per target, ``navcam`` the view its
+    answer came from: ``near``, ``far`` or ``both``) after the target's others. With ``scip`` the candidate
+    methods run on every navcam in ``navcams`` (reported only when asked for), every record of a candidate
+    method gets its ``p_success`` and ``go``, and ``scip_outcomes`` (if given) receives target id ->
+    :class:`~scipctl.core.handoff.scip.ScipOutcome`. When mesh registration is
     asked for, the registrations are started first in a worker thread (ICP
     runs outside Python's lock; the far one first, the longest) and the
     mesh-registration records are computed after every other method, so that
@@ -171,10 +187,16 @@ def run_targets(
     def wanted(m, nc):
         return only is None or (m, nc) in only
 
+    with_scip = SCIP in methods
+    run_names = [m for m in methods if m != SCIP] + [m for m in CANDIDATE_METHODS if with_scip and m not in methods]
+
+    def needed(m, nc):
+        return (with_scip and m in CANDIDATE_METHODS) or wanted(m, nc)
+
     mesh = "mesh-registration"
     cases = {nc: setup.cases[nc] for nc in navcams if nc in setup.cases}
     reg_cases = [c for nc, c in cases.items()
-                 if mesh in methods and wanted(mesh, nc) and any(src.get(nc) is not None for _, src, _ in targets)]
+                 if mesh in run_names and needed(mesh, nc) and any(src.get(nc) is not None for _, src, _ in targets)]
     results = {}
     with ThreadPoolExecutor(max_workers=1) as pool:
         # the far registration first: it is the longest job (a coarser start, a bigger overlap), so the near
@@ -185,25 +207,37 @@ def run_targets(
             for target_id, src, truth in targets:
                 near_pk = None
                 near_case = setup.cases.get("near")
-                if (phase == "others" and "far" in navcams and "refined-kinematic" in methods and near_case is not None
+                if (phase == "others" and "far" in navcams and "refined-kinematic" in run_names and near_case is not None
                         and src.get("near") is not None):
                     # the far refined search centre (the paper's), passed to every method of the target
                     near_pk = run_method(near_case, Method.PURE_KINEMATIC, src["near"])
                 for nc, case in cases.items():
                     nav_uv = src.get(nc)
-                    for m in methods:
-                        if not wanted(m, nc) or (m == mesh) != (phase == mesh) or nav_uv is None:
+                    for m in run_names:
+                        if not needed(m, nc) or (m == mesh) != (phase == mesh) or nav_uv is None:
                             continue
                         if progress:
                             progress(f"{downlink_name} {target_id} {m} {nc}")
                         results[(target_id, nc, m)] = run_method(case, m, nav_uv, near_hint=near_pk)
+    outcomes = {}
+    if with_scip and cases:
+        from dataclasses import replace
+
+        p0 = next(iter(cases.values())).params
+        sparams = replace(p0, scip=replace(p0.scip, success_px=success_px))
+        for target_id, src, _ in targets:
+            got = [results[k] for k in results if k[0] == target_id and k[2] in CANDIDATE_METHODS]
+            outcomes[target_id] = scip_from_results(cases, {nc: src.get(nc) for nc in cases}, got, sparams)
+        if scip_outcomes is not None:
+            scip_outcomes.update(outcomes)
     records = []
     for target_id, src, truth in targets:
+        out = outcomes.get(target_id)
         for nc, case in cases.items():
             nav_uv = src.get(nc)
             product = setup.near if nc == "near" else setup.far
             for m in methods:
-                if not wanted(m, nc):
+                if m == SCIP or not wanted(m, nc):
                     continue
                 if nav_uv is None:
                     records.append(HandoffRecord(downlink_name, target_id, m, nc, product.product_id, None, None,
@@ -220,11 +254,34 @@ def run_targets(
                         succ = err <= success_px
                     else:
                         succ = False
+                p_m = out.p_of(m, nc) if out is not None and pred is not None else None
+                go_min = None if out is None else out.result.diagnostics.get("go_min_p")
                 records.append(HandoffRecord(downlink_name, target_id, m, nc, product.product_id,
                                              [float(x) for x in nav_uv], pred, truth, err, succ,
                                              bool(res.ok and pred is not None), res.reason, res.diagnostics,
-                                             res.seconds))
+                                             res.seconds, p_m,
+                                             None if p_m is None or go_min is None else bool(p_m >= go_min)))
+        if out is not None:
+            records.append(_scip_record(downlink_name, target_id, src, setup, out, truth, success_px))
     return records
+
+
+def _scip_record(downlink_name, target_id, src, setup, out, truth, success_px) -> HandoffRecord:
+    """The ``scip`` record of one target: ``navcam`` and ``source_product`` of the view its answer used (both
+    navcams: ``source_product`` the near one's)."""
+    res = out.result
+    nc = res.navcam if res.navcam in ("near", "far") else ("near" if src.get("near") is not None else "far")
+    product = setup.near if nc == "near" else setup.far
+    pred = None if res.uv is None else [float(x) for x in res.uv]
+    err = succ = None
+    if truth is not None:
+        err = None if pred is None else float(math.hypot(pred[0] - truth[0], pred[1] - truth[1]))
+        succ = err is not None and err <= success_px
+    nav_uv = src.get(nc)
+    return HandoffRecord(downlink_name, target_id, SCIP, res.navcam, product.product_id if product else "",
+                         None if nav_uv is None else [float(x) for x in nav_uv], pred, truth, err, succ,
+                         bool(res.ok and pred is not None), res.reason, res.diagnostics, res.seconds,
+                         out.p_success, bool(out.go))
 
 
 def marked_targets(dl: Downlink, setup: HandoffSetup, only: Optional[str] = None) -> list:
@@ -255,9 +312,12 @@ def table1(records: list) -> list:
     """Rows like the paper's Table 1: per method and navcam, success rate and error statistics."""
     rows = []
     order = [m for m in ALL_METHODS]
-    keys = sorted({(r.method, r.navcam) for r in records}, key=lambda k: (order.index(k[0]) if k[0] in order else 99, k[1] != "near"))
+    def view(r):  # scip's answers form one row whatever view each used
+        return "any" if r.method == SCIP else r.navcam
+
+    keys = sorted({(r.method, view(r)) for r in records}, key=lambda k: (order.index(k[0]) if k[0] in order else 99, k[1] != "near"))
     for m, nc in keys:
-        rs = [r for r in records if r.method == m and r.navcam == nc and r.truth_uv is not None]
+        rs = [r for r in records if r.method == m and view(r) == nc and r.truth_uv is not None]
         if not rs:
             continue
         answered = [r for r in rs if r.error_px is not None]

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from scipctl.core.handoff import PAPER_METHODS
+from scipctl.core.handoff import ALL_METHODS, PAPER_METHODS
 from scipctl.io.downlink import read_downlink
 from scipctl.pipeline.handoff import build_setup, marked_targets, run_targets
 
@@ -35,4 +35,5 @@ def test_bench_handoff_one_downlink(benchmark, methods, fast):
         return run_targets(dl, setup, marked_targets(dl, setup), **kw)
 
     recs = benchmark.pedantic(run, rounds=3, iterations=1)
-    assert len(recs) == (len(PAPER_METHODS) if names else 8) * 2 * 3
+    # all methods: each from near and far, scip once per target
+    assert len(recs) == (len(PAPER_METHODS) * 2 * 3 if names else (len(ALL_METHODS) - 1) * 2 * 3 + 3)

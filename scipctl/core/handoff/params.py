@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field, fields
 
 from ..registration_check import RegistrationCheckParams
+from .scip_params import ScipParams
 
 FAR_WINDOW_WARPS = ("plane", "scale")
 
@@ -41,6 +42,7 @@ class HandoffParams:
     far_plane_radius_m: float = 0.05  # its plane fit: navcam dense points within this distance of the target
     # mesh registration's seeds, global registration and per-target verdict (core/registration_check.py)
     registration_check: RegistrationCheckParams = field(default_factory=RegistrationCheckParams)
+    scip: ScipParams = field(default_factory=ScipParams)  # the recommended handoff's evidence, model and GO rule
 
     def check(self) -> "HandoffParams":
         """Raise ``ValueError`` naming the first parameter out of its range; return ``self``."""
@@ -74,4 +76,5 @@ class HandoffParams:
             raise ValueError(f"HandoffParams.registration_check: {e}") from None
         if self.far_window_warp not in FAR_WINDOW_WARPS:
             bad("far_window_warp", f"must be one of {', '.join(FAR_WINDOW_WARPS)}")
+        self.scip.check()
         return self

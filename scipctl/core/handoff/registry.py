@@ -10,7 +10,7 @@ from __future__ import annotations
 from enum import StrEnum
 from typing import Mapping, Optional
 
-from . import combined, geometric, kinematic, registration
+from . import combined, geometric, kinematic, registration, scip
 from .case import HandoffCase
 from .params import HandoffParams
 from .result import MethodResult
@@ -26,6 +26,7 @@ _REGISTRY: dict[str, tuple[MethodFn, bool]] = {
     "mesh-registration": (registration.mesh_registration, True),
     "coarse-fine-geometric": (geometric.coarse_fine_geometric, False),
     "consensus": (combined.consensus, False),
+    "scip": (scip.scip, False),
 }
 
 Method = StrEnum("Method", [(name.upper().replace("-", "_"), name) for name in _REGISTRY])

@@ -77,4 +77,5 @@ def bound_px(method: str, case: HandoffCase, X_haz) -> float:
     }
     bounds[Method.CONSENSUS] = max(bounds[Method.COARSE_FINE_GEOMETRIC], bounds[Method.REFINED_GEOMETRIC],
                                    bounds[Method.REFINED_KINEMATIC], bounds[Method.PURE_GEOMETRIC])
+    bounds[Method.SCIP] = max(bounds.values())  # scip answers one of the candidate methods' answers
     return bounds[Method(method)]

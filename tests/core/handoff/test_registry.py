@@ -54,7 +54,7 @@ def test_registry_names_order_and_enum():
     assert ALL_METHODS == PAPER_METHODS + EXTRA_METHODS
     assert PAPER_METHODS == ("pure-kinematic", "alt-pure-kinematic", "refined-kinematic", "pure-geometric",
                              "refined-geometric", "mesh-registration")
-    assert EXTRA_METHODS == ("coarse-fine-geometric", "consensus")
+    assert EXTRA_METHODS == ("coarse-fine-geometric", "consensus", "scip")
     assert Method.PURE_KINEMATIC == "pure-kinematic" and Method("mesh-registration") is Method.MESH_REGISTRATION
     assert all(isinstance(m, str) and type(m) is str for m in ALL_METHODS)  # plain names in records and JSON
 

@@ -1,0 +1,94 @@
+"""``scipctl trust-evidence`` and ``scipctl fit-trust``: the evidence table of ``scip``'s trust model from
+downlinks with marks, and the model fitted on such tables (docs/handoff.md, "Trust: scip")."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Optional
+
+from ..errors import InputError
+from .output import emit_json, note, stderr_console
+
+
+def _sim_record(src: Path) -> dict:
+    """The simulator's ``.sim.json`` beside a downlink (``X.mcap`` -> ``X.sim.json``), or {}."""
+    p = src.with_name(src.name[: -len(src.suffix)] + ".sim.json") if src.suffix else src.with_name(src.name + ".sim.json")
+    if not p.is_file():
+        return {}
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except ValueError:
+        raise InputError(str(p), "sim record", "not JSON") from None
+
+
+def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool, products_root=None) -> None:
+    """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically)."""
+    from ..io.atomic import atomic_write_text
+    from ..io.workspace import open_source
+    from ..pipeline.trust_data import evidence_rows
+
+    sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
+    rows = []
+    con = stderr_console()
+    for src, source in zip(srcs, sources):
+        rec = _sim_record(Path(src))
+        fam = family or rec.get("family") or rec.get("scenario") or "unknown"
+        meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
+        meta["downlink_sha256"] = source.downlink.source_sha256
+        got = evidence_rows(source.downlink, Path(src).name, str(fam), meta)
+        note(f"{Path(src).name}: {len(got)} candidate rows, family {fam}")
+        rows += got
+    atomic_write_text(out, "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))
+    if json_out:
+        emit_json({"out": str(out), "rows": len(rows), "targets": len({(r.group, r.target) for r in rows})})
+    del con
+
+
+def read_rows(paths: list) -> list:
+    from ..pipeline.trust_data import EvidenceRow
+
+    rows = []
+    for p in paths:
+        p = Path(p)
+        if not p.is_file():
+            raise InputError(str(p), "evidence table", "no such file")
+        for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1):
+            if not line.strip():
+                continue
+            try:
+                rows.append(EvidenceRow.from_dict(json.loads(line)))
+            except (ValueError, KeyError, TypeError) as e:
+                raise InputError(f"{p}:{i}", "evidence row", str(e)) from None
+    if not rows:
+        raise InputError(", ".join(str(p) for p in paths), "evidence table", "no rows")
+    return rows
+
+
+def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float, json_out: bool) -> None:
+    """Fit the trust model on ``tables`` and write it to ``out``; with ``report``, the leave-one-family-out
+    evaluation at ``success_px`` too."""
+    from ..io.atomic import atomic_write_text
+    from ..io.provenance import provenance
+    from ..io.trust_model import trust_model_json
+    from ..pipeline.trust_fit import evaluate, fit_trust_model
+
+    rows = read_rows(tables)
+    prov = provenance({f"table{i}": str(t) for i, t in enumerate(tables)}, deterministic=True)
+    import sklearn
+
+    prov["scikit_learn"] = sklearn.__version__
+    model = fit_trust_model(rows, provenance=prov)
+    atomic_write_text(out, trust_model_json(model))
+    doc = {"out": str(out), "n_rows": model.provenance["n_rows"], "n_targets": model.provenance["n_targets"],
+           "families": model.provenance["training_families"],
+           "go_min_p": {f"{f.success_px:g}": f.go_min_p for f in model.fits}}
+    if report is not None:
+        rep = evaluate(rows, success_px, model)
+        rep["provenance"] = provenance({f"table{i}": str(t) for i, t in enumerate(tables)})
+        atomic_write_text(report, json.dumps(rep, indent=1, sort_keys=True, default=float) + "\n")
+        doc["report"] = str(report)
+    if json_out:
+        emit_json(doc)
+    else:
+        note(f"{out}: {doc['n_targets']} targets, {doc['n_rows']} candidates, families {', '.join(doc['families'])}")

@@ -1,0 +1,1 @@
+"""Package data: the fitted trust model of ``scip`` (``trust_model.json``)."""

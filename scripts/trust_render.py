@@ -1,0 +1,135 @@
+"""Render simulated downlinks for the trust model of ``scip`` (docs/handoff.md, "Trust: scip").
+
+    python scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N]
+
+One run of the ``paper`` scenario, of one scene family, written as ``OUT_DIR/<family>-<seed>-<run>.mcap``
+with ``N`` extra targets (random true surface points near the rock, seen by the near hazcam pair and the near
+navcam pair, exact marks: ``scipctl.sim.extra_targets``) besides the run's three. Only the images the handoff
+uses (the ``near`` and ``far`` stops) are rendered, as ``scipctl synth`` renders them (same exposure, noise
+and seeds); the pancam and mid-stop images are left black, to halve the rendering time.
+
+Families (scene draw = seed; error settings; rover; texture):
+
+* ``paper``: the scenario's default errors;
+* ``noerr``: ``ErrorSettings.none()``;
+* ``err05`` / ``err2``: every geometric error (mast calibration, odometry, tilt sensor, vibration, pointing)
+  scaled by 0.5 / 2, radiometry as the default;
+* ``m2020``: default errors, the Mars 2020 rover (``$SCIPCTL_SHARED_REAL/12_*``);
+* ``mars-tex``: default errors, the terrain textured from real Mars navcam pictures
+  (``$SCIPCTL_SHARED_REAL/05_dora_msl_navcam_left``).
+
+A ``.sim.json`` record beside it says the family, settings and the extra targets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+SCALED_FIELDS = ("mast_tilt_offset_rad", "mast_pan_offset_rad", "mast_tilt_axis_error_rad", "odometry_scale_sigma",
+                 "odometry_scale_leg_sigma", "heading_drift_sigma_rad_per_m", "heading_noise_sigma_rad",
+                 "turn_scale_sigma", "tilt_sensor_sigma_rad", "vibration_max_rad", "pointing_noise_frac")
+FAMILIES = ("paper", "noerr", "err05", "err2", "m2020", "mars-tex")
+SCENARIO = "paper"
+
+
+def scaled_errors(base, s: float):
+    kw = {f: getattr(base, f) * s for f in SCALED_FIELDS}
+    kw["mast_head_offset_m"] = tuple(x * s for x in base.mast_head_offset_m)
+    return replace(base, **kw)
+
+
+def family_settings(family: str):
+    """(errors, rover, texture) of a family."""
+    from scipctl.sim.errors import ErrorSettings
+    from scipctl.sim.scenarios import default_errors
+
+    real = Path(os.environ.get("SCIPCTL_SHARED_REAL", "/work/shared/real"))
+    errors, rover, texture = default_errors(SCENARIO), None, None
+    if family == "noerr":
+        errors = ErrorSettings.none()
+    elif family == "err05":
+        errors = scaled_errors(errors, 0.5)
+    elif family == "err2":
+        errors = scaled_errors(errors, 2.0)
+    elif family == "m2020":
+        from scipctl.commands.synth import m2020_sim_rover
+
+        rover = m2020_sim_rover(sorted(real.glob("12_*"))[0])
+    elif family == "mars-tex":
+        from scipctl.commands.synth import read_texture_sources
+
+        texture = read_texture_sources(real / "05_dora_msl_navcam_left")
+    elif family != "paper":
+        raise SystemExit(f"unknown family {family!r} (known: {', '.join(FAMILIES)})")
+    return errors, rover, texture
+
+
+def render_some(sim, errors, seed: int, run: str, stops: set, supersample: int = 2):
+    """Render the products of ``sim`` (built with ``render=False``) at ``stops``, as ``build_run`` does."""
+    from scipctl.io.images import encode_png
+    from scipctl.sim.build import DEFAULT_BITS
+    from scipctl.sim.render import Sensor, auto_exposure, expose, render_radiance
+    from scipctl.sim.scenarios import _rng
+
+    by_id = {im.product_id: im for im in sim.downlink.images}
+    exposure_of = {}
+    for p in sim.products:
+        if p.stop not in stops:
+            continue
+        sensor = Sensor(bits=DEFAULT_BITS.get(p.camera, 8))
+        washed = errors.is_washed_out(run, p.stop, p.camera)
+        resp = errors.responsivity_of(p.camera, p.eye)
+        rad = render_radiance(sim.scene, p.model_true_site, p.width, p.height, supersample)
+        key = (p.stop, p.camera)
+        if p.eye == "left" or key not in exposure_of:
+            exposure_of[key] = auto_exposure(rad, sensor) * (errors.washed_out_factor if washed else 1.0)
+        rng = _rng(seed, SCENARIO, run, "sensor", p.product_id) if errors.sensor_noise else None
+        px = expose(rad, exposure_of[key], resp, sensor, rng)
+        by_id[p.product_id].png = encode_png(px)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("family", choices=FAMILIES)
+    ap.add_argument("seed", type=int)
+    ap.add_argument("run")
+    ap.add_argument("out", type=Path)
+    ap.add_argument("--extra", type=int, default=12)
+    a = ap.parse_args(argv)
+
+    from scipctl import __version__
+    from scipctl.io.atomic import atomic_write_text
+    from scipctl.io.downlink import write_downlink
+    from scipctl.model import TargetTruth
+    from scipctl.sim.build import build_run
+    from scipctl.sim.extra_targets import choose_extra_targets, extra_marks
+    from scipctl.sim.scenarios import _rng
+
+    errors, rover, texture = family_settings(a.family)
+    sim = build_run(SCENARIO, a.run, a.seed, errors=errors, render=False, rover=rover, texture=texture)
+    pid = {(p.stop, p.camera, p.eye): p.product_id for p in sim.products}
+    haz = pid[("near", "hazcam", "left")]
+    req = [pid[("near", "hazcam", "right")], pid[("near", "navcam", "left")], pid[("near", "navcam", "right")]]
+    extra = choose_extra_targets(sim.scene, sim.products, haz, req, a.extra, _rng(a.seed, SCENARIO, a.run, "extra-targets"))
+    sim.downlink.targets.extend(extra_marks(sim.scene, sim.products, extra))
+    sim.downlink.truth_targets.extend(TargetTruth(t.id, np.asarray(t.xyz_site_m, float)) for t in extra)
+    render_some(sim, errors, a.seed, a.run, {"near", "far"})
+    a.out.mkdir(parents=True, exist_ok=True)
+    name = f"{a.family}-{a.seed}-{a.run}"
+    path = write_downlink(sim.downlink, a.out / f"{name}.mcap", "mcap")
+    rec = dict(sim.record, family=a.family, extra_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist()} for t in extra],
+               rendered_stops=["near", "far"],
+               written_by={"tool": "scipctl", "version": __version__,
+                           "regenerate": f"python scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"})
+    atomic_write_text(a.out / f"{name}.sim.json", json.dumps(rec, indent=1, sort_keys=True, default=str) + "\n")
+    print(path)
+
+
+if __name__ == "__main__":
+    main()

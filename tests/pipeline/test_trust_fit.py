@@ -1,0 +1,86 @@
+"""scipctl/pipeline/trust_fit.py: the trust model's fit reproduces scikit-learn's logistic regression, picks GO
+thresholds from held-out families, and reports per family held out."""
+
+import math
+
+import numpy as np
+import pytest
+
+from scipctl.core.handoff.evidence import Evidence
+from scipctl.core.handoff.trust_model import FEATURES, TrustModel, feature_matrix
+from scipctl.pipeline.trust_fit import C_REG, GO_GRID, RADII_PX, evaluate, fit_trust_model
+from tests.pipeline.trust_table import FAMILIES, small_table
+
+
+@pytest.fixture(scope="module")
+def rows():
+    return small_table()
+
+
+@pytest.fixture(scope="module")
+def model(rows):
+    return fit_trust_model(rows)
+
+
+def test_coefficients_are_sklearns_within_solver_tolerance(rows, model):
+    from sklearn.linear_model import LogisticRegression
+
+    ev = [Evidence.from_dict(r.evidence) for r in rows]
+    X = feature_matrix(ev, model.features)
+    X = np.where(np.isfinite(X), X, np.nanmean(X, axis=0))
+    Z = (X - X.mean(axis=0)) / np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0)
+    err = np.array([r.error_px for r in rows])
+    for fit in model.fits:
+        ref = LogisticRegression(C=C_REG, max_iter=10000, tol=1e-10).fit(Z, err <= fit.success_px)
+        # the model keeps 10 significant digits; lbfgs stops at tol 1e-10 on the gradient
+        np.testing.assert_allclose(fit.coef, ref.coef_[0], rtol=1e-6, atol=1e-7)
+        assert math.isclose(fit.intercept, ref.intercept_[0], rel_tol=1e-6, abs_tol=1e-7)
+
+
+def test_only_features_that_vary_are_kept(model):
+    assert set(model.features) <= set(FEATURES)
+    # the table has near appearance, forward-backward and support, never geometry
+    assert "app_near_log_offset" in model.features and "fb_near_log_error" in model.features
+    assert not any(n.startswith("geo_") for n in model.features)
+
+
+def test_fit_is_deterministic(rows, model):
+    again = fit_trust_model(rows)
+    assert again.to_dict() == model.to_dict()
+
+
+def test_go_thresholds_on_the_grid_and_provenance(model):
+    assert [f.success_px for f in model.fits] == list(RADII_PX)
+    assert all(f.go_min_p in GO_GRID for f in model.fits)
+    prov = model.provenance
+    assert prov["training_families"] == list(FAMILIES) and prov["n_targets"] == 90 and prov["n_rows"] == 360
+
+
+def test_probability_increases_with_the_radius(rows, model):
+    ev = [Evidence.from_dict(r.evidence) for r in rows[:40]]
+    ps = [model.probability(ev, r) for r in (1.0, 1.5, 2.0, 3.0, 4.0, 8.0)]
+    for a, b in zip(ps, ps[1:]):
+        assert np.all(b >= a - 1e-12)
+
+
+def test_evaluation_holds_each_family_out(rows, model):
+    rep = evaluate(rows, 4.0, model)
+    assert sorted(rep["held_out"]) == list(FAMILIES)
+    for fam, s in rep["held_out"].items():
+        assert s["n"] == 30
+        assert s["go"] + (s["n"] - s["go"]) == s["n"]
+        assert s["false_go"] <= s["go"] and s["missed_go"] <= s["n"] - s["go"]
+        assert sum(b["n"] for b in s["reliability"]) == s["n"]
+        assert {"logistic", "gradient_boosting", "logistic_isotonic"} <= set(s["candidate_models"])
+    assert rep["held_out_pooled"]["n"] == 90
+
+
+def test_round_trip_through_json(model):
+    import json
+
+    from scipctl.io.trust_model import trust_model_from_text, trust_model_json
+
+    text = trust_model_json(model)
+    back = trust_model_from_text(text, "test")
+    assert isinstance(back, TrustModel) and back.to_dict() == json.loads(text)
+    assert trust_model_json(back) == text
