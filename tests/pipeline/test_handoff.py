@@ -170,3 +170,14 @@ def test_registration_in_a_worker_thread_changes_nothing(noerr):
         assert a.predicted_uv == b.predicted_uv and a.diagnostics["icp_fitness"] == b.diagnostics["icp_fitness"]
     for case in setup.cases.values():
         assert case.registration_seconds > 0 and "whole_reg_future" not in case._cache
+
+
+def test_scip_is_go_within_1px_with_no_error(noerr):
+    """Issue #14 item 6: a no-error case is GO within 1 px (surface targets; edge targets are checked apart)."""
+    dl, _, recs = noerr
+    kind = {t.id: t.kind for t in dl.targets}
+    scip = [r for r in recs if r.method == "scip" and kind[r.target] in SURFACE]
+    assert scip
+    for r in scip:
+        assert r.go is True and r.p_success is not None, (r.target, r.p_success)
+        assert r.error_px <= 1.0, (r.target, r.error_px)
