@@ -182,7 +182,7 @@ def trust_evidence(
 @app.command("fit-trust")
 @guarded
 def fit_trust(
-    tables: List[Path] = typer.Argument(..., help="Evidence tables (scipctl trust-evidence)."),
+    tables: List[Path] = typer.Argument(..., help="Evidence tables (scipctl trust-evidence; .jsonl or .jsonl.gz)."),
     out: Path = typer.Option(..., "-o", "--out", help="Trust model to write (e.g. scipctl/data/trust_model.json)."),
     report: Optional[Path] = typer.Option(None, "--report", help="Also write the leave-one-family-out evaluation (JSON)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success radius of the evaluation, hazcam px."),

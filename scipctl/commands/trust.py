@@ -53,7 +53,16 @@ def read_rows(paths: list) -> list:
         p = Path(p)
         if not p.is_file():
             raise InputError(str(p), "evidence table", "no such file")
-        for i, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1):
+        if p.suffix == ".gz":
+            import gzip
+
+            try:
+                text = gzip.decompress(p.read_bytes()).decode("utf-8")
+            except (OSError, EOFError, UnicodeDecodeError) as e:
+                raise InputError(str(p), "evidence table", f"not a gzip'd UTF-8 table ({e})") from None
+        else:
+            text = p.read_text(encoding="utf-8")
+        for i, line in enumerate(text.splitlines(), 1):
             if not line.strip():
                 continue
             try:

@@ -173,6 +173,16 @@ class CheckedRegistration:
         return self.chosen.T_target_source
 
     @property
+    def fitness(self) -> float:
+        """The chosen answer's ICP fitness (as :class:`~scipctl.core.registration.RegistrationResult`)."""
+        return self.chosen.fitness
+
+    @property
+    def inlier_rmse_m(self) -> float:
+        """The chosen answer's ICP inlier RMSE, m."""
+        return self.chosen.inlier_rmse_m
+
+    @property
     def n_seeds(self) -> int:
         """ICP seeds run (the unmoved ``"seed"`` answer not counted)."""
         return sum(sum(n != "seed" for n in b.seeds) for b in self.basins)

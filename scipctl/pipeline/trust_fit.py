@@ -20,7 +20,8 @@ from ..core.handoff.trust_model import FEATURES, LogisticFit, TrustModel, featur
 from .trust_data import EvidenceRow
 
 RADII_PX = (1.0, 2.0, 4.0, 8.0)
-C_REG = 1.0  # inverse L2 strength (scikit-learn's C), on standardised features
+C_REG = 0.1  # inverse L2 strength (scikit-learn's C), standardised features: see docs/handoff.md "Trust: scip" (C = 1 gave collinear pairs opposite signs)
+CLIP_Z = 5.0  # standardised features clipped to +-5 in the fit and at run time (TrustModel.clip_z)
 # GO threshold: the smallest p on GO_GRID whose leave-one-family-out GO answers are right at least GO_PRECISION of
 # the time (the target is 97 %: one point of margin). The grid starts at 0.90: a calibrated p under 0.9
 # admits a 1-in-10 miss for that one answer, whatever the pooled precision says
@@ -78,12 +79,13 @@ def _raw_model(rows: list[EvidenceRow], radii=RADII_PX, features: Optional[dict]
     spec = {n: spec[n] for n in names}
     X, _ = _prep(rows, spec)
     fill, mean, scale = _standardise(X)
-    Z = (np.where(np.isfinite(X), X, fill) - mean) / scale
+    Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)  # as TrustModel evaluates
     fits = []
     for r in radii:
         coef, b = _fit_logistic(Z, err <= r)
         fits.append(LogisticFit(float(r), [_round(c) for c in coef], _round(b), 1.0))
-    return TrustModel(spec, [_round(v) for v in fill], [_round(v) for v in mean], [_round(v) for v in scale], fits)
+    return TrustModel(spec, [_round(v) for v in fill], [_round(v) for v in mean], [_round(v) for v in scale], fits,
+                      clip_z=CLIP_Z)
 
 
 def targets_of(rows: list[EvidenceRow]) -> dict:

@@ -80,3 +80,21 @@ def test_fit_trust_bad_table_is_exit_2(tmp_path):
     bad.write_text('{"family": "x"}\n')
     r = runner.invoke(app, ["fit-trust", str(bad), "-o", str(tmp_path / "m.json")])
     assert r.exit_code == 2 and "evidence row" in r.stderr and not (tmp_path / "m.json").exists()
+
+
+def test_packaged_model_is_reproduced_by_its_command(tmp_path, monkeypatch):
+    """Issue #14 item 6: `scipctl fit-trust tests/data/trust/evidence-24dl.jsonl.gz -o scipctl/data/trust_model.json`
+    (the command in the packaged model's provenance) makes the packaged file again: run from the repository root
+    with the same arguments, only the output path differs, and it is not recorded in the fit."""
+    packaged = ROOT / "scipctl/data/trust_model.json"
+    want = json.loads(packaged.read_text())
+    cmd = want["provenance"]["command"].split()
+    assert cmd[:2] == ["scipctl", "fit-trust"] and cmd[-2] == "-o"
+    monkeypatch.chdir(ROOT)
+    out = tmp_path / "trust_model.json"
+    r = runner.invoke(app, cmd[1:-1] + [str(out)])
+    assert r.exit_code == 0, r.stderr
+    got = json.loads(out.read_text())
+    got["provenance"]["command"] = want["provenance"]["command"]  # argv here is pytest's
+    assert got == want
+    assert trust_model_json(TrustModel.from_dict(got)) == packaged.read_text()  # and so the same bytes

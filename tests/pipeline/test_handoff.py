@@ -210,3 +210,14 @@ def test_a_bad_handoff_record_field_is_named(change, field):
     missing = {k: v for k, v in GOOD_RECORD.items() if k != "seconds"}
     with pytest.raises(InputError, match=r"^handoff.json: results\[0\]\.seconds: missing"):
         handoff_records_from_doc({"results": [missing]})
+
+
+def test_scip_is_go_within_1px_with_no_error(noerr):
+    """Issue #14 item 6: a no-error case is GO within 1 px (surface targets; edge targets are checked apart)."""
+    dl, _, recs = noerr
+    kind = {t.id: t.kind for t in dl.targets}
+    scip = [r for r in recs if r.method == "scip" and kind[r.target] in SURFACE]
+    assert scip
+    for r in scip:
+        assert r.go is True and r.p_success is not None, (r.target, r.p_success)
+        assert r.error_px <= 1.0, (r.target, r.error_px)

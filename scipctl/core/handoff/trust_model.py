@@ -4,7 +4,7 @@ A fitted model is a :class:`TrustModel` (JSON <-> dataclass: :meth:`TrustModel.t
 :meth:`TrustModel.from_dict`; the packaged one is ``scipctl/data/trust_model.json``, read by
 ``scipctl.io.trust_model``, refitted by ``scipctl fit-trust``). Evaluating it needs numpy only:
 
-    z = (f(evidence) - mean) / scale      (f: the named transforms of FEATURES; NaN -> the training mean)
+    z = clip((f(evidence) - mean) / scale, +-clip_z)   (f: the named transforms of FEATURES; NaN -> the training mean)
     p = 1 / (1 + exp(-(coef . z + intercept)))
 
 one logistic model per success radius it was fitted for (``success_px`` 1, 2, 4, 8 px by default). For a
@@ -21,19 +21,26 @@ from typing import Optional
 
 import numpy as np
 
-# feature name -> (Evidence field, transform); the default feature set of a fit
+# feature name -> (Evidence field, transform): the default feature set of a fit. Evidence kept out of it (measured
+# leave-one-family-out, docs/handoff.md "Trust: scip"): the NCC peak's ratio and sharpness (sharpness is per px^2,
+# so it moves with the image scale; neither helped held out) and the registration's fitness/RMS (one value per
+# downlink: 24 downlinks are too few to fit it on). OPTIONAL_FEATURES are there to be added when a refit has data
+# for them (the registration checks of issue #14 item 2).
 FEATURES: dict[str, tuple[str, str]] = {}
+OPTIONAL_FEATURES: dict[str, tuple[str, str]] = {}
 for _v in ("near", "far"):
     FEATURES.update({
         f"app_{_v}_score_at": (f"app_{_v}_score_at", "x"),
         f"app_{_v}_peak": (f"app_{_v}_peak", "x"),
         f"app_{_v}_log_offset": (f"app_{_v}_offset_px", "log1p"),
-        f"app_{_v}_log_ratio": (f"app_{_v}_ratio", "log"),
-        f"app_{_v}_log_sharpness": (f"app_{_v}_sharpness", "log1p"),
         f"app_{_v}_known": (f"app_{_v}_score_at", "known"),
         f"fb_{_v}_log_error": (f"fb_{_v}_error_px", "log1p"),
         f"geo_{_v}_log_sigma": (f"geo_{_v}_sigma", "log1p"),
         f"geo_{_v}_log_nav_res": (f"geo_{_v}_nav_res_px", "log1p"),
+    })
+    OPTIONAL_FEATURES.update({
+        f"app_{_v}_log_ratio": (f"app_{_v}_ratio", "log"),
+        f"app_{_v}_log_sharpness": (f"app_{_v}_sharpness", "log1p"),
         f"reg_{_v}_fitness": (f"reg_{_v}_fitness", "x"),
         f"reg_{_v}_rmse_cm": (f"reg_{_v}_rmse_m", "x100"),
         f"reg_{_v}_log_global_agree": (f"reg_{_v}_global_agree_px", "log1p"),
@@ -110,6 +117,7 @@ class TrustModel:
     fits: list
     provenance: dict = field(default_factory=dict)
     kind: str = "logistic"
+    clip_z: float = 5.0  # standardised features are clipped to +-clip_z (no extrapolation far outside the data)
 
     def __post_init__(self):
         F = len(self.features)
@@ -118,6 +126,8 @@ class TrustModel:
         for fit in self.fits:
             if len(fit.coef) != F:
                 raise ValueError(f"TrustModel: the {fit.success_px:g} px fit has {len(fit.coef)} coefficients, want {F}")
+        if not self.clip_z > 0:
+            raise ValueError(f"TrustModel.clip_z = {self.clip_z!r}: must be > 0")
         if self.kind != "logistic":
             raise ValueError(f"TrustModel.kind {self.kind!r}: only 'logistic' is evaluated")
         for _, kind in self.features.values():
@@ -133,7 +143,8 @@ class TrustModel:
         """(N, F) standardised features (unknown values at the training mean, i.e. 0)."""
         X = feature_matrix(evidence, self.features)
         X = np.where(np.isfinite(X), X, np.asarray(self.fill, float))
-        return (X - np.asarray(self.mean, float)) / np.asarray(self.scale, float)
+        Z = (X - np.asarray(self.mean, float)) / np.asarray(self.scale, float)
+        return np.clip(Z, -self.clip_z, self.clip_z)
 
     def _logits(self, Z: np.ndarray) -> np.ndarray:
         """(N, K) logit of every fitted radius, made non-decreasing along the radii."""
@@ -167,7 +178,7 @@ class TrustModel:
     def to_dict(self) -> dict:
         return {"kind": self.kind, "features": {k: list(v) for k, v in self.features.items()},
                 "fill": list(self.fill), "mean": list(self.mean), "scale": list(self.scale),
-                "fits": [f.to_dict() for f in self.fits], "provenance": dict(self.provenance)}
+                "fits": [f.to_dict() for f in self.fits], "provenance": dict(self.provenance), "clip_z": self.clip_z}
 
     @classmethod
     def from_dict(cls, d: dict) -> "TrustModel":
@@ -176,6 +187,7 @@ class TrustModel:
             return cls(features={k: (str(v[0]), str(v[1])) for k, v in d["features"].items()},
                        fill=[float(x) for x in d["fill"]], mean=[float(x) for x in d["mean"]],
                        scale=[float(x) for x in d["scale"]], fits=[LogisticFit.from_dict(f) for f in d["fits"]],
-                       provenance=dict(d.get("provenance", {})), kind=str(d.get("kind", "logistic")))
+                       provenance=dict(d.get("provenance", {})), kind=str(d.get("kind", "logistic")),
+                       clip_z=float(d.get("clip_z", 5.0)))
         except (KeyError, TypeError, IndexError) as e:
             raise ValueError(f"trust model: missing or malformed field ({e})") from None
