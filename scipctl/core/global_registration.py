@@ -134,8 +134,9 @@ def mutual_matches(feat_source: np.ndarray, feat_target: np.ndarray) -> tuple[np
     if len(feat_source) == 0 or len(feat_target) == 0:
         return np.zeros(0, int), np.zeros(0, int)
     _, j = cKDTree(feat_target).query(feat_source, k=1)
-    _, back = cKDTree(feat_source).query(feat_target[j], k=1)
-    si = np.flatnonzero(back == np.arange(len(feat_source)))
+    matched, inv = np.unique(j, return_inverse=True)  # each matched target feature queried back once
+    _, back = cKDTree(feat_source).query(feat_target[matched], k=1)
+    si = np.flatnonzero(back[inv.reshape(-1)] == np.arange(len(feat_source)))
     return si, j[si]
 
 

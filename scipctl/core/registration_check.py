@@ -12,8 +12,9 @@ ICP is run from several seeds and the answers are compared:
   Each pose starts at each of the ``start_scales`` coarsest ICP scales (the coarsest scale's long
   correspondences can pull a whole cloud into a wrong alignment; a start one scale finer does not);
 * every seed is taken through the coarse ICP scales (voxels of at least ``fine_below_m``) on the same gridded
-  clouds (:func:`~scipctl.core.registration.prepare_clouds`); coarse answers within ``same_answer_m`` (RMS
-  displacement over the coarsest target grid) are one *basin*; the prior's basin keeps the plain
+  clouds (:func:`~scipctl.core.registration.prepare_clouds`), one scale at a time; seeds whose alignments
+  coincide within ``same_answer_m`` (RMS displacement over the coarsest target grid) after a scale go on as one,
+  a *basin*; the prior's basin keeps the plain
   :func:`register_clouds` answer (so a registration that was right is unchanged to the bit), every other basin
   is taken through the fine scales, and final answers within ``same_final_m`` are merged;
 * each basin's final answer is scored on one common evaluation (the finest grid's whole source against its
@@ -242,17 +243,22 @@ def checked_registration(prepared: PreparedClouds, sigma: SeedSigma, params: Reg
     seeds = [(name if k == 0 else f"{name}@{coarse[k]:g}m", M0, coarse[k:])
              for k in range(min(p.start_scales, len(coarse))) for name, M0 in poses]
 
-    # every seed through the coarse scales; one basin per distinct coarse answer
-    basin_coarse, basin_seeds = [], []
-    for name, M0, run_scales in seeds:
-        Mc = icp_from(prepared, M0, run_scales, method=method, max_iterations=max_iterations).M_target_seeded
-        for i, Mb in enumerate(basin_coarse):
-            if _rms_displacement(Mc, Mb, probe) < p.same_answer_m:
-                basin_seeds[i].append(name)
-                break
-        else:
-            basin_coarse.append(Mc)
-            basin_seeds.append([name])
+    # every seed through the coarse scales, one scale at a time; after each, seeds whose alignments coincide
+    # (within same_answer_m) go on as one (from one alignment ICP takes one path): one basin per distinct answer
+    groups = []  # [alignment (4, 4), seed names]; the prior's first
+    for voxel in coarse:
+        groups += [[M0, [name]] for name, M0, run_scales in seeds if run_scales[0] == voxel]
+        for g in groups:
+            g[0] = icp_from(prepared, g[0], (voxel,), method=method, max_iterations=max_iterations).M_target_seeded
+        merged = []
+        for g in groups:
+            same = next((h for h in merged if _rms_displacement(g[0], h[0], probe) < p.same_answer_m), None)
+            if same is None:
+                merged.append(g)
+            else:
+                same[1].extend(g[1])
+        groups = merged
+    basin_coarse, basin_seeds = [g[0] for g in groups], [g[1] for g in groups]
 
     # the common evaluation: the finest grid's whole source against its range-gated target
     finest = min(scales)
@@ -335,7 +341,8 @@ class RegistrationEvidence:
       chosen (None when there is none);
     * ``answer_in_image``: the answer lies inside the hazcam image;
     * ``range_residual_m`` / ``range_residual_sigmas``: ``X``'s range from the hazcam minus the range hazcam point
-      stereo finds at the answer (searched over the whole range), and that over its sigma
+      stereo finds at the answer (searched within ``HandoffParams.haz_point_stereo_range_frac`` of ``X``'s range:
+      None when it finds nothing there), and that over its sigma
       ``sqrt(s_h^2 + (s_n cos a)^2)``, the two stereos' range noise along the hazcam ray (``s = r^2 sigma_d /
       (f B)``, ``sigma_d`` = ``point_disparity_sigma_px``; the navcam's range error, from its point stereo, lies
       along its own ray, at angle ``a``); Gaussian noise passes ``max_residual_sigmas`` = 4 with probability 6e-5;
@@ -476,10 +483,10 @@ def registration_verdict(ev: RegistrationEvidence, params: RegistrationCheckPara
       target (``competing_px``): the clouds cannot tell the two apart;
     * the registered target point is off the hazcam's dense stereo surface (``dense_residual_sigmas`` above
       ``max_residual_sigmas``, where dense stereo covers the answer's surroundings) and hazcam point stereo does
-      not find it there either (failed, or also beyond ``max_residual_sigmas``). Point stereo alone is not
-      enough: over the whole range it can match the wrong place (on the tune scenes, paper seeds 2 and 3, it put
-      4 of 72 right answers 24-320 sigmas off, all where dense stereo had holes; the dense residual with full
-      coverage stayed under 2.3 sigmas on all 45 targets it covered).
+      not find it there either (no match near ``X``'s range, or also beyond ``max_residual_sigmas``). Point stereo
+      alone is not enough: searched over the whole range it put 4 of 72 right answers on the tune scenes (paper
+      seeds 2 and 3) 24-320 sigmas off, wrong matches where dense stereo had holes; the dense residual with full
+      coverage stayed under 2.3 sigmas on all 45 targets it covered.
     """
     p = params
     if ev.case_reason:

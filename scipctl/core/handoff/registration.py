@@ -74,13 +74,13 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
     C = haz.left_model.C
     ev.answer_in_image = bool(-0.5 <= uv[0] <= haz.width - 0.5 and -0.5 <= uv[1] <= haz.height - 0.5)
     if ev.answer_in_image:
-        # two measures of the hazcam surface at the answer: hazcam point stereo there, over the whole range (its
-        # small affine window keeps the foreground at an occluding edge, where dense stereo leaves a hole or the
-        # background; but over the whole range it can match the wrong place), and the dense stereo point whose
-        # range is nearest X's within residual_window_px, only where every pixel there has one
+        # two measures of the hazcam surface at the answer: hazcam point stereo there, searched within
+        # haz_point_stereo_range_frac of X's range (does the hazcam see a surface near X? its small affine window
+        # keeps the foreground at an occluding edge, where dense stereo leaves a hole or the background), and the
+        # dense stereo point whose range is nearest X's within residual_window_px, where every pixel there has one
         Cn = reg.T_target_source.apply(case.nav.left_model.C[None])[0]
         fb_h, fb_n = haz.dense.focal_baseline_px_m, case.nav.dense.focal_baseline_px_m
-        Xp = case.haz_point(uv)
+        Xp = case.haz_point(uv, range_hint_m=float(np.linalg.norm(X - C)))
         if Xp is not None:
             ev.range_residual_m, ev.range_residual_sigmas = range_residual(
                 X, Xp, C, Cn, fb_h, fb_n, p.point_disparity_sigma_px, p.point_disparity_sigma_px)
