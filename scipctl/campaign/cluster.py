@@ -80,7 +80,9 @@ def open_client(spec: ClusterSpec, connect_timeout_s: float = 20.0):
     # defaults); the task sets OpenCV's threads (task.limit_threads)
     cluster = LocalCluster(n_workers=spec.n_workers, threads_per_worker=1, processes=True,
                            memory_limit=spec.memory_limit or "auto", host="127.0.0.1",
-                           dashboard_address=None, silence_logs=logging.ERROR)
+                           # no fixed port: the scheduler's HTTP server still starts with the dashboard off, and on
+                           # the default :8787 it warns when another cluster holds that port
+                           dashboard_address="127.0.0.1:0", silence_logs=logging.ERROR)
     try:
         client = Client(cluster)
         try:
