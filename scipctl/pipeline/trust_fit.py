@@ -20,7 +20,7 @@ from ..core.handoff.trust_model import FEATURES, LogisticFit, TrustModel, featur
 from .trust_data import EvidenceRow
 
 RADII_PX = (1.0, 2.0, 4.0, 8.0)
-C_REG = 0.1  # inverse L2 strength (scikit-learn's C), standardised features: see docs/handoff.md "Trust: scip" (C = 1 gave collinear pairs opposite signs)
+C_REG = 0.1  # inverse L2 strength (scikit-learn's C), standardised features: the most regularised of the variants measured (docs/handoff.md "Trust: scip")
 CLIP_Z = 5.0  # standardised features clipped to +-5 in the fit and at run time (TrustModel.clip_z)
 # GO threshold: the smallest p on GO_GRID whose leave-one-family-out GO answers are right at least GO_PRECISION of
 # the time (the target is 97 %: one point of margin). The grid starts at 0.90: a calibrated p under 0.9

@@ -8,7 +8,7 @@ import pytest
 
 from scipctl.core.handoff.evidence import Evidence
 from scipctl.core.handoff.trust_model import FEATURES, TrustModel, feature_matrix
-from scipctl.pipeline.trust_fit import C_REG, GO_GRID, RADII_PX, evaluate, fit_trust_model
+from scipctl.pipeline.trust_fit import C_REG, CLIP_Z, GO_GRID, RADII_PX, evaluate, fit_trust_model
 from tests.pipeline.trust_table import FAMILIES, small_table
 
 
@@ -28,7 +28,7 @@ def test_coefficients_are_sklearns_within_solver_tolerance(rows, model):
     ev = [Evidence.from_dict(r.evidence) for r in rows]
     X = feature_matrix(ev, model.features)
     X = np.where(np.isfinite(X), X, np.nanmean(X, axis=0))
-    Z = (X - X.mean(axis=0)) / np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0)
+    Z = np.clip((X - X.mean(axis=0)) / np.where(X.std(axis=0) > 1e-12, X.std(axis=0), 1.0), -CLIP_Z, CLIP_Z)
     err = np.array([r.error_px for r in rows])
     for fit in model.fits:
         ref = LogisticRegression(C=C_REG, max_iter=10000, tol=1e-10).fit(Z, err <= fit.success_px)
@@ -84,3 +84,7 @@ def test_round_trip_through_json(model):
     back = trust_model_from_text(text, "test")
     assert isinstance(back, TrustModel) and back.to_dict() == json.loads(text)
     assert trust_model_json(back) == text
+    assert list(back.features) == list(model.features)  # the order the coefficients follow
+    ev = [Evidence.from_dict(r.evidence) for r in small_table(4)]
+    for r in RADII_PX:
+        np.testing.assert_array_equal(back.probability(ev, r), model.probability(ev, r))

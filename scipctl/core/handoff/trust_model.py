@@ -176,7 +176,8 @@ class TrustModel:
         return max(lo.go_min_p, hi.go_min_p)
 
     def to_dict(self) -> dict:
-        return {"kind": self.kind, "features": {k: list(v) for k, v in self.features.items()},
+        # features as an ordered list: the coefficients follow their order (a JSON object's keys may be re-sorted)
+        return {"kind": self.kind, "features": [[k, v[0], v[1]] for k, v in self.features.items()],
                 "fill": list(self.fill), "mean": list(self.mean), "scale": list(self.scale),
                 "fits": [f.to_dict() for f in self.fits], "provenance": dict(self.provenance), "clip_z": self.clip_z}
 
@@ -184,7 +185,9 @@ class TrustModel:
     def from_dict(cls, d: dict) -> "TrustModel":
         """From :meth:`to_dict`'s output; ``ValueError`` naming what is wrong."""
         try:
-            return cls(features={k: (str(v[0]), str(v[1])) for k, v in d["features"].items()},
+            if not isinstance(d["features"], list):
+                raise ValueError("trust model: features must be a list of [name, evidence field, transform]")
+            return cls(features={str(f[0]): (str(f[1]), str(f[2])) for f in d["features"]},
                        fill=[float(x) for x in d["fill"]], mean=[float(x) for x in d["mean"]],
                        scale=[float(x) for x in d["scale"]], fits=[LogisticFit.from_dict(f) for f in d["fits"]],
                        provenance=dict(d.get("provenance", {})), kind=str(d.get("kind", "logistic")),
