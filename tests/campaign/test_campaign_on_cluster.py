@@ -3,7 +3,6 @@ and chain records as ``simulate-handoff --chain --json``; a corrupt downlink amo
 while the others finish; a second run into the same folder does no work."""
 
 import json
-import sys
 import shutil
 from pathlib import Path
 
@@ -51,16 +50,8 @@ def reference(sols):
 def first_run(sols, dask_cluster, tmp_path_factory):
     folder, _, _ = sols
     out = tmp_path_factory.mktemp("campaign") / "out"
-    args = ["campaign", str(folder), "-o", str(out), "--scheduler", dask_cluster.address,
-            "--methods", METHODS, "--no-predict", "--json"]
-    # provenance records the process's command line (sys.argv), which CliRunner leaves as pytest's: set it to
-    # what a shell would have given, so that the records can be checked for it whatever pytest was invoked with
-    saved = sys.argv
-    sys.argv = ["scipctl", *args]
-    try:
-        r = runner.invoke(app, args)
-    finally:
-        sys.argv = saved
+    r = runner.invoke(app, ["campaign", str(folder), "-o", str(out), "--scheduler", dask_cluster.address,
+                            "--methods", METHODS, "--no-predict", "--json"])
     return out, r
 
 
