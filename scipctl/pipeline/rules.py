@@ -20,7 +20,7 @@ SPEC = {
                      "rock_keep_out_m": "number", "max_tilt_deg": "number", "min_p_success": "number",
                      "hazcam_fov_margin_px": "number", "min_terrain_known_fraction": "number"},
     "approach": {"stop_fraction": "number", "min_leg_m": "number", "merge_m": "number", "pancam_handoff_m": "number",
-                 "hazcam_handoff_m": "number", "hazcam_stops_m": "numbers", "standoff_m": "number?",
+                 "hazcam_handoff_m": "number", "hazcam_stops_m": "numbers", "standoff_m": "number?", "standoff_step_m": "number",
                  "detour_bearings_deg": "numbers", "path_step_m": "number", "turn_step_deg": "number",
                  "rock_height_m": "number", "rock_cell_m": "number", "ground_window_m": "number"},
     "arm_workspace": {"r_min_m": "number", "r_max_m": "number", "half_width_m": "number"},
@@ -125,7 +125,7 @@ def build(values: dict, label: str, origin: Optional[dict] = None):
         approach = ApproachParams(
             stop_fraction=a["stop_fraction"], min_leg_m=a["min_leg_m"], merge_m=a["merge_m"],
             pancam_handoff_m=a["pancam_handoff_m"], hazcam_handoff_m=a["hazcam_handoff_m"],
-            hazcam_stops_m=tuple(a["hazcam_stops_m"]), standoff_m=a["standoff_m"],
+            hazcam_stops_m=tuple(a["hazcam_stops_m"]), standoff_m=a["standoff_m"], standoff_step_m=a["standoff_step_m"],
             detour_bearings_rad=tuple(math.radians(b) for b in a["detour_bearings_deg"]),
             path_step_m=a["path_step_m"], turn_step_rad=math.radians(a["turn_step_deg"]),
             rock_height_m=a["rock_height_m"], rock_cell_m=a["rock_cell_m"], ground_window_m=a["ground_window_m"],

@@ -124,13 +124,15 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
                          f"final rover-origin-to-target distance {d_fin:.2f} m (minimum {r.min_standoff_m:.2f} m)"))
     mt = plan.clearance.get("min_target_m", float("inf"))
     out.append(RuleCheck("target-keep-out", mt >= r.target_keep_out_m, _fin(mt), r.target_keep_out_m, "m",
-                         f"closest rover footprint approach to the target {mt:.2f} m (keep-out {r.target_keep_out_m:.2f} m)"))
+                         f"closest rover footprint approach to the target {mt:.2f} m (keep-out {r.target_keep_out_m:.2f} m)"
+                         + _searched(plan, "target-keep-out", mt >= r.target_keep_out_m)))
     mr = plan.clearance.get("min_rock_m", float("inf"))
     where = plan.clearance.get("worst_rock_xy")
     out.append(RuleCheck("rock-keep-out", mr >= r.rock_keep_out_m, _fin(mr), r.rock_keep_out_m, "m",
                          (f"closest rover footprint approach to a rock {mr:.2f} m" + (
                              f" at site ({where[0]:.2f}, {where[1]:.2f})" if where else "") if np.isfinite(mr)
-                          else "no rocks in the stereo terrain") + f" (keep-out {r.rock_keep_out_m:.2f} m)"))
+                          else "no rocks in the stereo terrain") + f" (keep-out {r.rock_keep_out_m:.2f} m)"
+                         + _searched(plan, "rock-keep-out", mr >= r.rock_keep_out_m)))
     # hazcams and arm at the final pose
     worst_margin = float("inf")
     for eye in ("left", "right"):
@@ -148,7 +150,8 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
     out.append(RuleCheck("hazcam-fov-final", worst_margin >= r.hazcam_fov_margin_px, _fin(worst_margin),
                          r.hazcam_fov_margin_px, "px",
                          "target inside both hazcam images at the final pose" + (
-                             f" ({worst_margin:.0f} px from the edge)" if np.isfinite(worst_margin) else " (behind the camera)")))
+                             f" ({worst_margin:.0f} px from the edge)" if np.isfinite(worst_margin) else " (behind the camera)")
+                         + _searched(plan, "hazcam-fov-final", worst_margin >= r.hazcam_fov_margin_px)))
     xy = fin.T_site_rover.inverse().apply(X)[:2]
     in_arm = bool(plan.params.arm.contains(xy[None])[0])
     a = plan.params.arm
@@ -168,6 +171,14 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
                          f"{100 * kf:.0f}% of the path is covered by today's stereo (obstacles elsewhere are unchecked)",
                          blocking=False))
     return out
+
+
+def _searched(plan, rule: str, ok: bool) -> str:
+    """For a broken planner constraint: what the planner's (bearing, standoff) search tried and what would satisfy
+    the rule (:meth:`~scipctl.pipeline.predict.approach_search.ApproachSearch.describe`); "" otherwise."""
+    if ok or plan.search is None:
+        return ""
+    return "; " + plan.search.describe(rule)
 
 
 def broken(checks: list) -> list:
@@ -369,7 +380,10 @@ def sequence_document(pred: Prediction, record: Designation, checks: list, comma
                  "stops": [{"index": s.index, "kind": s.kind, "distance_m": s.distance_m,
                             "xy_site_m": s.T_site_rover.t[:2].tolist(), "heading_rad": s.heading_rad,
                             "tilt_rad": s.tilt_rad, "cameras": [c.camera for c in s.cameras]} for s in plan.stops],
-                 "clearance": {k: v for k, v in plan.clearance.items()}},
+                 "standoff_m": plan.params.final_distance_m,
+                 "clearance": {k: v for k, v in plan.clearance.items()},
+                 "search": None if plan.search is None else {"tried": len(plan.search.tried),
+                                                             "found": plan.search.found}},
         "handoff": handoff,
         "prediction": {"confidence": pred.confidence, "sigma_source": pred.sigma_source,
                        "p_arm_workspace": None if pred.mc is None else pred.mc.p_arm_workspace,

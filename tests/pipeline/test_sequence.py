@@ -35,10 +35,51 @@ def test_each_rule_can_be_broken_alone(rc, flat_terrain):
     assert broken_names(short_arm, rc) == ["arm-workspace"]
     close = prediction(rc, flat_terrain, approach=P.ApproachParams(standoff_m=0.5))  # too close: several rules at once
     assert {"min-standoff", "arm-workspace", "target-keep-out"} <= set(broken_names(close, rc))
-    long_nose = prediction(rc, flat_terrain, approach=P.ApproachParams(body=P.RoverBody(front_m=0.7)))
+    # the standoff pinned: the planner may not move it, so the long nose breaks the target keep-out
+    long_nose = prediction(rc, flat_terrain, approach=P.ApproachParams(standoff_m=0.8, body=P.RoverBody(front_m=0.7)))
     assert broken_names(long_nose, rc) == ["target-keep-out"]
     high = prediction(rc, flat_terrain, target=np.array([9.0, 0.0, -1.6]))  # a target 1.6 m up: above the hazcams
     assert "hazcam-fov-final" in broken_names(high, rc)
+
+
+def test_the_planner_moves_the_standoff_to_keep_a_long_nose_off_the_target(rc, flat_terrain):
+    """Free standoff: the search (centre 0.8 m first, then outwards) keeps the first standoff whose footprint
+    (front 0.7 m) stays 0.25 m off the target: 0.95 or 1.0 m, still inside the arm workspace (0.6-1.0 m)."""
+    pred = prediction(rc, flat_terrain, approach=P.ApproachParams(body=P.RoverBody(front_m=0.7)))
+    assert broken_names(pred, rc) == []
+    assert pred.plan.params.final_distance_m >= 0.95 - 1e-9 and pred.plan.detour_rad == 0.0
+    assert pred.plan.search.found and pred.plan.search.tried[0]["bound_by"] == ["target-keep-out"]
+    # a nose so long that no standoff inside the workspace clears it: refused, and the refusal says so
+    longer = prediction(rc, flat_terrain, approach=P.ApproachParams(body=P.RoverBody(front_m=0.8)))
+    chk = next(c for c in Q.check_rules(longer, rc) if c.rule == "target-keep-out")
+    assert not chk.ok and "none clears target-keep-out" in chk.message and "longer standoff" in chk.message
+    assert longer.plan.search.binding() == ["target-keep-out"]
+
+
+def test_a_target_on_a_rock_is_approached_from_a_standoff_that_clears_the_rock(rc):
+    """Issue #15 item 2: the rock the target sits on (0.25 m of it between the target and the rover) breaks the
+    rock keep-out (0.15 m) at the workspace centre (footprint front 0.3 m from the target) but not at 0.95 m."""
+    T = np.array([9.0, 0.0, 0.3])
+    rock = (8.75, -0.25, 9.25, 0.25, 0.3)
+    ter = P.Terrain([heightfield_source(box_fn([rock]))], smooth_sigma_px=0)
+    pred = prediction(rc, ter, target=T)
+    assert broken_names(pred, rc) == []
+    s = pred.plan.search
+    assert s.tried[0]["standoff_m"] == pytest.approx(0.8) and "rock-keep-out" in s.tried[0]["bound_by"]
+    assert pred.plan.clearance["min_rock_m"] >= 0.15 and 0.9 <= pred.plan.params.final_distance_m <= 1.0
+    xy = pred.plan.final.T_site_rover.inverse().apply(T)[:2]
+    assert pred.plan.params.arm.contains(xy[None])[0]
+    # the pinned centre standoff is not moved: the same rock then breaks the rule
+    pinned = prediction(rc, ter, target=T, approach=P.ApproachParams(standoff_m=0.8, detour_bearings_rad=(0.0,)))
+    assert broken_names(pinned, rc) == ["rock-keep-out"]
+    # a rock too wide for any standoff or bearing: refused, naming the rule, the search and what would satisfy it
+    wide = P.Terrain([heightfield_source(box_fn([(8.5, -0.5, 9.5, 0.5, 0.3)]))], smooth_sigma_px=0)
+    blocked = prediction(rc, wide, target=T)
+    chk = next(c for c in Q.check_rules(blocked, rc) if c.rule == "rock-keep-out")
+    assert not chk.ok and blocked.plan.search.binding() == ["rock-keep-out"]
+    n = len(P.ApproachParams().detour_bearings_rad) * len(P.standoff_candidates(P.ApproachParams()))
+    assert f"{n} approaches tried" in chk.message and "none clears rock-keep-out" in chk.message
+    assert "another approach side" in chk.message
 
 
 def test_rock_beside_the_final_pose_breaks_the_rock_keep_out(rc):

@@ -63,8 +63,10 @@ from .planning import (
     camera_model_at,
     clearance_of,
     plan_approach,
+    standoff_candidates,
     stop_distances,
 )
+from .approach_search import ApproachSearch
 from .views import check_views
 from .montecarlo import McResult, McView, monte_carlo, pointing_offset_p90, sample_pose_errors
 from .chain_sim import ChainResult, ChainSample, simulate_chain, success_px
@@ -77,6 +79,7 @@ __all__ = [
     "perturb_pose", "pose_on_plane", "scaled_model", "tilt_of", "yaw_of",
     "RayHits", "RenderedView", "Terrain", "TerrainSource", "grid_mesh", "smooth_grid",
     "ApproachPlan", "CameraShot", "PlannedStop", "camera_model_at", "clearance_of", "plan_approach", "stop_distances",
+    "standoff_candidates", "ApproachSearch",
     "check_views",
     "McResult", "McView", "monte_carlo", "pointing_offset_p90", "sample_pose_errors",
     "ChainResult", "ChainSample", "simulate_chain", "success_px",

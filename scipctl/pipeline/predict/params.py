@@ -107,7 +107,8 @@ class ApproachParams:
     pancam_handoff_m: float = 4.5
     hazcam_handoff_m: float = 2.0
     hazcam_stops_m: tuple = (1.4,)
-    standoff_m: Optional[float] = None  # final distance; None: the arm workspace centre
+    standoff_m: Optional[float] = None  # final distance; None: searched in the arm workspace, its centre first
+    standoff_step_m: float = 0.05  # the standoff search's step (plan_approach), when standoff_m is None
     detour_bearings_rad: tuple = tuple(np.deg2rad([0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0]).tolist())
     path_step_m: float = 0.05
     turn_step_rad: float = math.radians(10.0)
@@ -135,6 +136,7 @@ class ApproachParams:
         for d in self.hazcam_stops_m:
             _check_number(c, "hazcam_stops_m[]", d, 0.0, lo_open=True)
         _check_number(c, "standoff_m", self.standoff_m, 0.0, lo_open=True, none_ok=True)
+        _check_number(c, "standoff_step_m", self.standoff_step_m, 0.0, lo_open=True)
         if not self.detour_bearings_rad or self.detour_bearings_rad[0] != 0.0:
             raise ValueError(f"{c}.detour_bearings_rad: must start with 0.0 (the direct approach), "
                              f"got {self.detour_bearings_rad!r}")

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Optional
 
 import numpy as np
@@ -15,6 +15,7 @@ from ...core.transforms import RigidTransform
 # the planned shots carry the on-board chain's window sizes
 from ..chain import ChainParams
 from .geometry import _wrap, pose_on_plane, tilt_of, yaw_of
+from .approach_search import ApproachSearch
 from .params import ApproachParams, RoverBody
 from .terrain import Terrain
 
@@ -79,8 +80,9 @@ class ApproachPlan:
     path_xy: np.ndarray  # (N, 2) the whole path, site frame
     path_length_m: float
     clearance: dict  # min distances: rocks, target; blocked flag
-    params: ApproachParams
+    params: ApproachParams  # the plan's own: standoff_m is the standoff it was planned to
     designation_camera: str = "pancam"
+    search: Optional[ApproachSearch] = None  # what plan_approach tried before keeping this plan
 
     @property
     def final(self) -> PlannedStop:
@@ -90,6 +92,8 @@ class ApproachPlan:
         return {
             "target_site_m": self.target_site_m.tolist(), "bearing_rad": self.bearing_rad, "detour_rad": self.detour_rad,
             "path_length_m": self.path_length_m, "clearance": self.clearance,
+            "standoff_m": self.params.final_distance_m,
+            "search": None if self.search is None else self.search.to_dict(),
             "stops": [s.to_dict() for s in self.stops],
         }
 
@@ -217,18 +221,42 @@ def clearance_of(poses_xy_yaw: list, rocks_xy: np.ndarray, target_xy: np.ndarray
     return {"min_rock_m": float(min_rock), "min_target_m": float(min_tgt), "worst_rock_xy": worst}
 
 
+def standoff_candidates(p: ApproachParams) -> list:
+    """Final standoffs (m) the planner may use, in order of preference.
+
+    A standoff pinned by the operator (``standoff_m``) is the only one. Otherwise
+    the arm workspace's centre first, then every ``standoff_step_m`` inside
+    ``[r_min_m, r_max_m]`` by distance from the centre (the farther first on a
+    tie: more room between the footprint and the target's rock).
+    """
+    if p.standoff_m is not None:
+        return [float(p.standoff_m)]
+    a, c = p.arm, p.arm.centre_m
+    n = int(math.floor((a.r_max_m - a.r_min_m) / (2 * p.standoff_step_m) + 1e-9))
+    out = [c]
+    for k in range(1, n + 1):
+        out += [c + k * p.standoff_step_m, c - k * p.standoff_step_m]
+    return [round(float(x), 9) for x in out if a.r_min_m - 1e-9 <= x <= a.r_max_m + 1e-9]
+
+
 def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], rover_config: RoverConfig,
                   params: Optional[ApproachParams] = None, designation_camera: str = "pancam",
                   chain_params: Optional[ChainParams] = None) -> ApproachPlan:
     """Plan the stops from ``start`` to the final pose in front of ``target_site_m`` (3,) (site frame).
 
-    Tries the direct approach bearing, then the detour bearings in order, and
-    keeps the first whose swept footprint clears the rocks (``rock_keep_out_m``)
-    and the target (``target_keep_out_m``); if none does, the direct plan is
-    returned with its (failing) clearance figures. Without a ``terrain`` the
-    ground is taken as the start pose's plane and no rocks are known.
-    ``params`` is checked; each planned shot carries the window size and
-    search radius of ``chain_params`` (the on-board chain's, default
+    Searches (approach bearing, final standoff): the bearings in the order of
+    ``detour_bearings_rad`` (the direct one first) and, for each, the standoffs
+    of :func:`standoff_candidates` (inside the arm workspace, so that the
+    target stays reachable), and keeps the first plan whose swept footprint
+    clears the rocks (``rock_keep_out_m``) and the target
+    (``target_keep_out_m``) and whose final pose sees the target in the
+    hazcams. If none does, the plan closest to clearing them (largest worst
+    margin) is returned with its failing clearance figures. ``clearance["search"]``
+    ``plan.search`` records what was tried and, for a blocked plan, which constraint bound
+    (:class:`~.approach_search.ApproachSearch`). Without a ``terrain`` the ground is taken as the
+    start pose's plane and no rocks are known. ``params`` is checked; each
+    planned shot carries the window size and search radius of
+    ``chain_params`` (the on-board chain's, default
     :class:`~scipctl.pipeline.chain.ChainParams`).
     """
     p = (params or ApproachParams()).check()
@@ -239,20 +267,55 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
     direct = math.atan2(X_target_site[1] - S[1], X_target_site[0] - S[0])
     rocks = (terrain.rock_cells(p.rock_cell_m, p.ground_window_m, p.rock_height_m)
              if terrain is not None else np.zeros((0, 2)))
-    candidates = []
+    search = ApproachSearch(rock_keep_out_m=p.rock_keep_out_m, target_keep_out_m=p.target_keep_out_m)
+    best, best_margin = None, -np.inf
+    chosen = None
     for db in p.detour_bearings_rad:
         if d_start <= p.pancam_handoff_m and abs(db) > 1e-9:
             continue  # too close for a detour leg
-        plan = _plan_bearing(start, X_target_site, terrain, rover_config, p, direct + db, db, rocks, designation_camera,
-                             chain_params)
-        candidates.append(plan)
-        if not plan.clearance["blocked"]:
-            return plan
-    return candidates[0]
+        for sd in standoff_candidates(p):
+            pp = p if p.standoff_m is not None else replace(p, standoff_m=sd)
+            plan = _plan_bearing(start, X_target_site, terrain, rover_config, pp, direct + db, db, rocks,
+                                 designation_camera)
+            fov_px = _final_hazcam_margin_px(rover_config, plan)
+            search.add(math.degrees(db), sd, plan.clearance, fov_px, p.fov_margin("hazcam"))
+            margin = min(plan.clearance["min_rock_m"] - p.rock_keep_out_m,
+                         plan.clearance["min_target_m"] - p.target_keep_out_m,
+                         (fov_px - p.fov_margin("hazcam")) / 1000.0)  # px -> a small margin: geometry first
+            if best is None or margin > best_margin:
+                best, best_margin = plan, margin
+            if not search.tried[-1]["bound_by"]:
+                chosen = plan
+                break
+        if chosen is not None:
+            break
+    plan = chosen if chosen is not None else best
+    plan.search = search
+    for st in plan.stops[1:]:
+        st.cameras = [_shot(rover_config, st, c, X_target_site, plan.params, chain_params) for c in _cameras_for(st.kind)]
+    return plan
 
 
-def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detour, rocks, designation_camera,
-                  chain_params: ChainParams) -> ApproachPlan:
+def _final_hazcam_margin_px(rover_config: RoverConfig, plan: "ApproachPlan") -> float:
+    """Smallest distance (px) of the target from the edges of the two hazcam images at the final pose
+    (-inf when it is behind a camera or there is no hazcam)."""
+    if "hazcam" not in rover_config.cameras:
+        return -np.inf
+    out = np.inf
+    for eye in ("left", "right"):
+        spec = rover_config.spec("hazcam", eye)
+        m = camera_model_at(rover_config, "hazcam", eye, None, None, plan.final.T_site_rover)
+        uv = m.project(plan.target_site_m[None])[0]
+        if not np.all(np.isfinite(uv)):
+            return -np.inf
+        out = min(out, float(min(uv[0], uv[1], spec.width - 1 - uv[0], spec.height - 1 - uv[1])))
+    return out
+
+
+def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detour, rocks,
+                  designation_camera) -> ApproachPlan:
+    """The plan along one approach bearing to the final standoff of ``p``: stops, path and clearance (no camera
+    shots yet: :func:`plan_approach` adds them to the plan it keeps)."""
     S = start.T_site_rover.t[:2].copy()
     u = np.array([math.cos(bearing), math.sin(bearing)])
     d_start = float(np.linalg.norm(X_target_site[:2] - S))
@@ -312,11 +375,8 @@ def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detou
     cl["blocked"] = bool(cl["min_rock_m"] < p.rock_keep_out_m or cl["min_target_m"] < p.target_keep_out_m)
     cl["terrain_known_fraction"] = terrain.known_fraction_along(pts) if terrain is not None else 0.0
     cl["rock_cells"] = int(len(rocks))
-    plan = ApproachPlan(X_target_site, start, float(bearing), float(detour), stops, path_xy, _polyline_length(path_xy), cl, p,
+    return ApproachPlan(X_target_site, start, float(bearing), float(detour), stops, path_xy, _polyline_length(path_xy), cl, p,
                         designation_camera)
-    for st in plan.stops[1:]:
-        st.cameras = [_shot(rover_config, st, c, X_target_site, p, chain_params) for c in _cameras_for(st.kind)]
-    return plan
 
 
 def _arc(poly, i):

@@ -1,0 +1,95 @@
+"""The record of the planner's search over (approach bearing, final standoff): what was tried, what each
+candidate broke, and, when nothing cleared, which constraint bound and what would satisfy it."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Optional
+
+# the planner's constraints, by the flight-rule names of pipeline/sequence.py
+ROCK, TARGET, FOV = "rock-keep-out", "target-keep-out", "hazcam-fov-final"
+
+
+def _num(x) -> Optional[float]:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+@dataclass
+class ApproachSearch:
+    """Candidates tried by :func:`~scipctl.pipeline.predict.planning.plan_approach`, in order.
+
+    Each entry of ``tried``: ``detour_deg``, ``standoff_m``, ``min_rock_m``, ``min_target_m``
+    (footprint clearances over the swept path), ``hazcam_margin_px`` (target from the hazcam images' edges at
+    the final pose) and ``bound_by`` (the constraints it breaks; empty for a clear plan).
+    """
+
+    rock_keep_out_m: float
+    target_keep_out_m: float
+    tried: list = field(default_factory=list)
+
+    def add(self, detour_deg: float, standoff_m: float, clearance: dict, hazcam_margin_px: float,
+            fov_margin_px: float) -> None:
+        bound = []
+        if not clearance["min_rock_m"] >= self.rock_keep_out_m:
+            bound.append(ROCK)
+        if not clearance["min_target_m"] >= self.target_keep_out_m:
+            bound.append(TARGET)
+        if not hazcam_margin_px >= fov_margin_px:
+            bound.append(FOV)
+        self.tried.append({"detour_deg": float(detour_deg), "standoff_m": float(standoff_m),
+                           "min_rock_m": _num(clearance["min_rock_m"]), "min_target_m": _num(clearance["min_target_m"]),
+                           "hazcam_margin_px": _num(hazcam_margin_px), "bound_by": bound})
+
+    @property
+    def found(self) -> bool:
+        return any(not t["bound_by"] for t in self.tried)
+
+    def binding(self) -> list:
+        """The constraints no candidate met (each alone); when every one was met by some candidate but never all
+        at once, the constraints of the candidate that broke the fewest. Empty when a plan cleared."""
+        if not self.tried or self.found:
+            return []
+        names = [ROCK, TARGET, FOV]
+        never = [n for n in names if all(n in t["bound_by"] for t in self.tried)]
+        if never:
+            return never
+        fewest = min(self.tried, key=lambda t: len(t["bound_by"]))
+        return list(fewest["bound_by"])
+
+    def best_for(self, rule: str) -> Optional[dict]:
+        """The candidate that came closest to meeting ``rule`` (largest clearance or margin)."""
+        key = {ROCK: "min_rock_m", TARGET: "min_target_m", FOV: "hazcam_margin_px"}[rule]
+        c = [t for t in self.tried if t[key] is not None]
+        return max(c, key=lambda t: t[key]) if c else None
+
+    def describe(self, rule: str) -> str:
+        """One sentence for a refusal on ``rule``: what was searched, the closest candidate, what would satisfy it."""
+        if not self.tried:
+            return "no approach was planned"
+        det = sorted({t["detour_deg"] for t in self.tried})
+        sto = sorted({t["standoff_m"] for t in self.tried})
+        span = (f"{len(self.tried)} approaches tried (detour {det[0]:+.0f}..{det[-1]:+.0f} deg, standoff "
+                f"{sto[0]:.2f}-{sto[-1]:.2f} m)")
+        if self.found:
+            return f"{span}; the plan kept clears it"
+        b = self.best_for(rule)
+        if rule == ROCK:
+            best = "" if b is None else (f"; the best comes to {b['min_rock_m']:.2f} m (detour {b['detour_deg']:+.0f} deg, "
+                                         f"standoff {b['standoff_m']:.2f} m)")
+            fix = ("another approach side (a detour beyond those in approach.detour_bearings_deg), a target on the "
+                   "rock's far side, or a new designation")
+        elif rule == TARGET:
+            best = "" if b is None else (f"; the best comes to {b['min_target_m']:.2f} m (detour {b['detour_deg']:+.0f} "
+                                         f"deg, standoff {b['standoff_m']:.2f} m)")
+            fix = "a longer standoff (the arm workspace's outer radius) or a smaller footprint keep-out"
+        else:
+            best = "" if b is None or b["hazcam_margin_px"] is None else (
+                f"; the best leaves {b['hazcam_margin_px']:.0f} px (detour {b['detour_deg']:+.0f} deg, standoff "
+                f"{b['standoff_m']:.2f} m)")
+            fix = "a target lower on the rock or a standoff farther out"
+        return f"{span} and none clears {rule}{best}: {fix} would"
+
+    def to_dict(self) -> dict:
+        return {"tried": [dict(t, bound_by=list(t["bound_by"])) for t in self.tried], "found": self.found,
+                "binding": self.binding()}
