@@ -202,9 +202,9 @@ def sequence(
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Output file (default: stdout)."),
     fmt: str = typer.Option("seqn", "--format", help="seqn | seqjson | json | text"),
     sigma_position_m: Optional[float] = typer.Option(
-        None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the Monte Carlo (default: from the downlink)."),
+        None, "--sigma-position-m", help="Pose-estimate 1-sigma position noise per stop, relative to the previous stop, for the Monte Carlo (default: the rules file's default_sigma_position_m)."),
     sigma_yaw_deg: Optional[float] = typer.Option(
-        None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
+        None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading noise per stop, relative to the previous stop, degrees (default: the rules file's default_sigma_yaw_deg)."),
     rules: Optional[Path] = _rules_option(),
     min_p_success: Optional[float] = typer.Option(
         None, "--min-p-success", help="Flight rule prediction-confidence: minimum predicted P(success) (overrides the rules file)."),
@@ -235,9 +235,9 @@ def report(
     src: Path = typer.Argument(..., help="Workspace or downlink."),
     out: Path = typer.Option(Path("report.html"), "-o", "--out", help="HTML report to write."),
     sigma_position_m: Optional[float] = typer.Option(
-        None, "--sigma-position-m", help="Pose-estimate 1-sigma position error per stop for the prediction (default: from the downlink)."),
+        None, "--sigma-position-m", help="Pose-estimate 1-sigma position noise per stop, relative to the previous stop, for the prediction (default: the rules file's default_sigma_position_m)."),
     sigma_yaw_deg: Optional[float] = typer.Option(
-        None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading error per stop, degrees (default: from the downlink)."),
+        None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading noise per stop, relative to the previous stop, degrees (default: the rules file's default_sigma_yaw_deg)."),
     rules: Optional[Path] = _rules_option(),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),

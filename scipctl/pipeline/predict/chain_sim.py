@@ -71,7 +71,6 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     surface point; a failed step loses the target for the rest of the chain.
     """
     from ...core.tracking import track
-    from ...core.windows import extract_window, scale_window, window_scale_for_handoff
 
     Xs = np.asarray(surface_point_site, float).reshape(3)
     n_mc = 0 if mc is None else min(int(n_samples if n_samples is not None else params.uncertainty.n_track_samples),
@@ -80,7 +79,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     samples = []
     for sid in sample_ids:
         prev = {"img": np.asarray(designation_img, np.float32), "origin": (0, 0), "uv": np.asarray(designation_uv, float),
-                "model": designation_model_site, "range": float(np.linalg.norm(Xs - designation_model_site.C))}
+                "model": designation_model_site, "range": float(np.linalg.norm(Xs - designation_model_site.C)), "X": Xs}
         X_est = Xs.copy()
         steps, lost = [], False
         nav_view = None
@@ -138,9 +137,8 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                 else:
                     rng_new = float(np.linalg.norm(Xr_est - m_bel.C))
                     radius = float(params.chain.search_radius(sh.camera))
-                    res = _track_step(terrain, prev, m_true, uv_pred, uv_true, rng_new, radius,
-                                      params.chain.template_half(sh.camera), params,
-                                      extract_window, scale_window, track, window_scale_for_handoff)
+                    res = _track_step(terrain, prev, m_true, uv_pred, uv_true, radius,
+                                      params.chain.template_half(sh.camera), params, track)
                 uv_tr, ncc, reason, view = res
                 rec["ncc"] = None if ncc is None or not np.isfinite(ncc) else float(ncc)
                 if uv_tr is None:
@@ -167,7 +165,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                 X_hit = hit.points[0] if hit.hit[0] else Xs
                 X_est = st.T_site_rover.apply(T_site_rover_true.inverse().apply(X_hit))
                 prev = {"img": view.image, "origin": view.origin_uv, "uv": uv_tr, "model": m_true,
-                        "range": float(np.linalg.norm(X_hit - m_true.C))}
+                        "range": float(np.linalg.norm(X_hit - m_true.C)), "X": X_hit}
                 if sh.camera == "navcam":
                     nav_view = {"view": view, "uv": uv_tr, "model": m_true}
         kept = bool(steps) and not lost and steps[-1]["kept"]
@@ -200,17 +198,39 @@ def _p_given_visible(vals, key):
     return float(np.mean([v[key] for v in vis])) if vis else None
 
 
-def _track_step(terrain, prev, m_true, uv_pred, uv_true, rng_new, radius, half, params,
-                extract_window, scale_window, track, window_scale_for_handoff):
-    """Track the previous window into a rendered crop. Returns (uv or None, ncc, reason, RenderedView)."""
-    ifov_prev = 1.0 / prev["model"].hs
-    ifov_new = 1.0 / m_true.hs
-    scale = window_scale_for_handoff(ifov_prev, prev["range"], ifov_new, rng_new)
-    src_half = max(3, int(math.ceil(half / scale)))
-    pimg = _fill(prev["img"])
-    puv = np.asarray(prev["uv"], float) - np.asarray(prev["origin"], float)
-    win = extract_window(pimg, puv, src_half)
-    tpl = scale_window(win, scale)
+def _draped_template(terrain, prev, m_new, X_prev, half: int):
+    """The previous view as the new camera sees it around the previously tracked 3-D point: the new camera's
+    rays ``(2 half + 1)^2`` around the projection of ``X_prev`` (3,) (site) cast onto the terrain and the
+    hits' intensities sampled in the previous view (``prev``: img, origin, model). This is the chain's own
+    template (``pipeline/chain.py`` renders the previous image into the new view through the target's plane),
+    with the terrain in place of the plane. Returns ``(template (h, w) float32, tracked point in template px)``
+    or ``(None, reason)``."""
+    from ...core.expected import bilinear_sample
+
+    uv_c = m_new.project(np.asarray(X_prev, float)[None])[0]
+    if not np.all(np.isfinite(uv_c)):
+        return None, "the tracked point does not project into the new view"
+    c = np.round(uv_c)
+    us, vs = np.meshgrid(np.arange(c[0] - half, c[0] + half + 1), np.arange(c[1] - half, c[1] + half + 1))
+    uv = np.stack([us, vs], -1).reshape(-1, 2)
+    oo, dd = m_new.unproject(uv)
+    hh = terrain.cast(oo, dd)
+    vals = np.full(len(uv), np.nan, np.float32)
+    if np.any(hh.hit):
+        puv = prev["model"].project(hh.points[hh.hit]) - np.asarray(prev["origin"], float)
+        vals[hh.hit] = bilinear_sample(prev["img"], puv)
+    tpl = vals.reshape(2 * half + 1, 2 * half + 1)
+    if np.isfinite(tpl).mean() < 0.5:
+        return None, "expected window mostly empty"
+    return _fill(tpl), uv_c - (c - half)
+
+
+def _track_step(terrain, prev, m_true, uv_pred, uv_true, radius, half, params, track):
+    """Track the previous view, draped into the new view (:func:`_draped_template`), in a rendered crop around the
+    prediction ``uv_pred``. Returns (uv or None, ncc, reason, RenderedView)."""
+    tpl, tc = _draped_template(terrain, prev, m_true, prev["X"], half)
+    if tpl is None:
+        return None, None, tc, None
     off = float(np.abs(uv_true - uv_pred).max())
     r_eff = min(radius, off + params.search_margin_px)
     if off > radius:
@@ -224,7 +244,7 @@ def _track_step(terrain, prev, m_true, uv_pred, uv_true, rng_new, radius, half, 
     if view.coverage < params.min_coverage * 0.5:
         return None, None, "no terrain data in the search region", view
     loc_pred = uv_pred - np.asarray(view.origin_uv, float)
-    tr = track(tpl, img, loc_pred, r_eff, min_score=0.3)
+    tr = track(tpl, img, loc_pred, r_eff, template_center_uv=tc, min_score=0.3)
     if not tr.ok or not np.all(np.isfinite(tr.uv)):
         return None, tr.score, f"track: {tr.reason}", view
     return tr.uv + np.asarray(view.origin_uv, float), tr.score, "", view

@@ -3,6 +3,7 @@ the stereo terrain sources at the rover's position and the pose-error sigmas."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Optional
 
@@ -86,23 +87,26 @@ def terrain_sources(dl, position, cameras=STEREO_CAMERAS, downsample: int = 2, t
 
 
 def sigmas_for(product, params: UncertaintyParams) -> tuple:
-    """(sigma_position_m, sigma_yaw_rad, source text): override, else the downlink pose's, else the defaults."""
+    """(sigma_position_m, sigma_yaw_rad, source text): the per-stop pose-estimate noise of the Monte Carlo, the
+    operator's override, else the defaults.
+
+    The downlinked pose's own ``sigma_position_m`` / ``sigma_yaw_rad`` are not used: they are the pose's
+    absolute uncertainty in the site frame, accumulated since the site's origin (0.56 m and 6.0 deg on the
+    bundled ``paper-s1-straight``), and cancel in the stop-to-stop motion the approach relies on (the target is
+    designated, planned and re-estimated in the rover's own estimated frame at each stop). Used as a per-leg
+    increment they made every view of the approach look hundreds of pixels off (issue #15). The source text
+    quotes them for the record.
+    """
     sp, sy = params.sigma_position_m, params.sigma_yaw_rad
-    src = []
-    if sp is None:
-        sp = product.pose.sigma_position_m
-        src.append("position: downlink" if sp is not None else "position: default")
-        if sp is None:
-            sp = params.default_sigma_position_m
-    else:
-        src.append("position: parameter")
-    if sy is None:
-        sy = product.pose.sigma_yaw_rad
-        src.append("yaw: downlink" if sy is not None else "yaw: default")
-        if sy is None:
-            sy = params.default_sigma_yaw_rad
-    else:
-        src.append("yaw: parameter")
+    src = [f"position: {'parameter' if sp is not None else 'per-stop default'}",
+           f"yaw: {'parameter' if sy is not None else 'per-stop default'}"]
+    sp = params.default_sigma_position_m if sp is None else sp
+    sy = params.default_sigma_yaw_rad if sy is None else sy
+    dp, dy = product.pose.sigma_position_m, product.pose.sigma_yaw_rad
+    if dp is not None or dy is not None:
+        src.append("downlink pose sigma (absolute, not used per stop): "
+                   + (f"{dp:.3g} m" if dp is not None else "-") + ", "
+                   + (f"{math.degrees(dy):.3g} deg" if dy is not None else "-"))
     return float(sp), float(sy), ", ".join(src)
 
 

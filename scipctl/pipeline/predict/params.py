@@ -171,9 +171,10 @@ class ApproachParams:
 class UncertaintyParams:
     """Pose-estimate error model for the Monte Carlo (1-sigma, per stop, relative to the previous stop).
 
-    ``sigma_position_m`` / ``sigma_yaw_rad``: ``None`` takes them from the
-    downlink pose of today's image (``sigma_position_m``, ``sigma_yaw_rad``),
-    else the defaults. Each leg adds ``drive_error_frac`` x leg length (m)
+    ``sigma_position_m`` / ``sigma_yaw_rad``: the per-stop noise of the rover's
+    pose estimate relative to the previous stop; ``None`` takes the defaults
+    (not the downlinked pose's absolute sigma: see
+    :func:`~scipctl.pipeline.predict.from_downlink.sigmas_for`). Each leg adds ``drive_error_frac`` x leg length (m)
     and ``yaw_error_rad_per_m`` x leg length in quadrature. The target's 3-D
     re-estimate at each stop has range noise ``r^2 sigma_d / (f b)``.
     """
