@@ -31,7 +31,10 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
             n += 1
         target_id = f"d{n}"
     params = designation_params(band_px)
-    rec = designate_target(dl, left, uv, target_id=target_id, params=params)
+    from ..io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
+
+    rec = designate_target(dl, left, uv, target_id=target_id, params=params,
+                           trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
     rec = replace(rec, provenance=provenance({"downlink": str(src)}))
     if not rec.ok:
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec.reason}",
@@ -44,6 +47,11 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     if json_out:
         emit_json(dict(rec.to_dict(), saved_to=str(path)))
     _print(rec, path)
+    if rec.go is False:
+        p = "n/a" if rec.p_ok is None else f"{rec.p_ok:.2f}"
+        raise CommandFailed(f"{rec.id}: designation NO-GO: P(within {rec.ok_tolerance_pct:g} % of the range of ideal "
+                            f"stereo) {p}; saved, but re-designate (another pixel or image) before planning on it",
+                            payload=None)  # the JSON record was already emitted above
 
 
 def _print(rec, saved_to):
@@ -57,6 +65,9 @@ def _print(rec, saved_to):
     sig = rec.range_sigma_m
     t.add_row("range (m)", f"{rec.range_m:.3f}" + (f" ± {sig:.3f}" if sig is not None else ""))
     t.add_row("match score", f"{rec.match_score:.3f}")
+    if rec.go is not None:
+        p = "n/a" if rec.p_ok is None else f"{rec.p_ok:.2f}"
+        t.add_row("trust", f"{'GO' if rec.go else 'NO-GO'}: P(within {rec.ok_tolerance_pct:g} % of the range) {p}")
     eo = rec.epipolar_offset_px
     t.add_row("epipolar offset (px)", "n/a" if eo is None else f"{eo:+.2f}")
     n = rec.surface_normal_rover

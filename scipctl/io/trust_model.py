@@ -17,6 +17,7 @@ from ..core.handoff.trust_model import TrustModel
 from ..errors import InputError
 
 PACKAGED = "trust_model.json"
+PACKAGED_DESIGNATION = "designation_model.json"  # the designation's (pipeline/designation_trust.py), same form
 
 
 def trust_model_from_text(text: str, source: str) -> TrustModel:
@@ -35,12 +36,13 @@ def load_trust_model(path) -> TrustModel:
     return trust_model_from_text(p.read_text(encoding="utf-8"), str(p))
 
 
-def load_packaged_trust_model() -> Optional[TrustModel]:
-    """The packaged trust model, or None when the package has none."""
-    ref = resources.files("scipctl.data").joinpath(PACKAGED)
+def load_packaged_trust_model(name: str = PACKAGED) -> Optional[TrustModel]:
+    """The packaged trust model ``scipctl/data/<name>`` (scip's by default, :data:`PACKAGED_DESIGNATION` for the
+    designation's), or None when the package has none."""
+    ref = resources.files("scipctl.data").joinpath(name)
     if not ref.is_file():
         return None
-    return trust_model_from_text(ref.read_text(encoding="utf-8"), f"scipctl/data/{PACKAGED}")
+    return trust_model_from_text(ref.read_text(encoding="utf-8"), f"scipctl/data/{name}")
 
 
 def trust_model_json(model: TrustModel) -> str:

@@ -22,7 +22,8 @@ EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warne
 _KNOWN_KEYS = ("id", "product_id", "right_product_id", "camera", "position", "pixel_uv", "band_px", "ok", "reason",
                "match_score", "match_ratio", "uv_right", "epipolar_offset_px", "warnings",
                "xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose",
-               "surface_normal_rover", "normal_points", "incidence_deg", "designated_from", "provenance")
+               "surface_normal_rover", "normal_points", "incidence_deg", "p_ok", "ok_tolerance_pct", "go",
+               "designated_from", "provenance")
 
 
 @dataclass(frozen=True)
@@ -33,6 +34,9 @@ class Designation:
     ``p_site = R p_rover + t``), ``xyz_site_m`` in the site frame, ``surface_normal_rover`` (unit, up: -z) in
     the rover frame. Pixels ``(u, v)`` as docs/conventions.md. ``band_px``: the epipolar band half-width used.
     ``ok`` False: no reliable stereo match (``reason``), and no 3-D point.
+    ``p_ok``: P(the point is within ``ok_tolerance_pct`` % of the range of ideal point stereo on the same
+    models) from the designation trust model, ``go`` = ``p_ok`` at or above its GO threshold
+    (:mod:`scipctl.pipeline.designation_trust`; None when no model was given).
     ``designated_from``: ``"mark"`` when designated on the fly from a target's mark (None: from targets.json);
     ``provenance``: how ``scipctl designate`` made it (None until saved).
     """
@@ -62,6 +66,9 @@ class Designation:
     surface_normal_rover: Optional[tuple] = None
     normal_points: Optional[int] = None
     incidence_deg: Optional[float] = None
+    p_ok: Optional[float] = None
+    ok_tolerance_pct: Optional[float] = None
+    go: Optional[bool] = None
     designated_from: Optional[str] = None
     provenance: Optional[dict] = None
     extra: dict = field(default_factory=dict)  # keys of a read record this version does not know (kept as read)
@@ -89,6 +96,8 @@ class Designation:
             d["normal_points"] = self.normal_points
             if self.incidence_deg is not None:
                 d["incidence_deg"] = self.incidence_deg
+        if self.go is not None:
+            d.update({"p_ok": self.p_ok, "ok_tolerance_pct": self.ok_tolerance_pct, "go": self.go})
         if self.designated_from is not None:
             d["designated_from"] = self.designated_from
         if self.provenance is not None:
@@ -123,7 +132,8 @@ class Designation:
             xyz_rover_m=r.vector("xyz_rover_m", 3), xyz_site_m=r.vector("xyz_site_m", 3), range_m=r.number("range_m"),
             range_sigma_m=r.number("range_sigma_m"), ray_miss_m=r.number("ray_miss_m"), pose=r.mapping("pose"),
             surface_normal_rover=r.vector("surface_normal_rover", 3), normal_points=r.integer("normal_points"),
-            incidence_deg=r.number("incidence_deg"), designated_from=r.text("designated_from"),
+            incidence_deg=r.number("incidence_deg"), p_ok=r.number("p_ok"),
+            ok_tolerance_pct=r.number("ok_tolerance_pct"), go=r.flag("go"), designated_from=r.text("designated_from"),
             provenance=r.mapping("provenance"), extra={k: v for k, v in d.items() if k not in _KNOWN_KEYS})
 
 
@@ -181,11 +191,12 @@ def surface_normal(xyz: np.ndarray, centre: np.ndarray, radius_m: float) -> tupl
 
 
 def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
-              params: Optional[PointStereoParams] = None) -> Designation:
+              params: Optional[PointStereoParams] = None, trust=None) -> Designation:
     """Point stereo at ``uv`` in ``left``; returns the :class:`Designation` (raises InputError).
 
     ``params``: the per-camera band and window (default :class:`PointStereoParams`, checked; an operator's
-    ``--band-px`` is :meth:`PointStereoParams.with_band`).
+    ``--band-px`` is :meth:`PointStereoParams.with_band`). ``trust``: the designation trust model
+    (:mod:`scipctl.pipeline.designation_trust`; None: ``p_ok``/``go`` stay None).
     """
     from ..core.point_stereo import point_stereo
 
@@ -244,7 +255,13 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
             incidence = float(np.degrees(np.arccos(abs(float(np.dot(ray, n))))))
         rec = replace(rec, surface_normal_rover=None if n is None else tuple(n.tolist()), normal_points=npts,
                       incidence_deg=incidence)
-    return replace(rec, warnings=tuple(warnings))
+    rec = replace(rec, warnings=tuple(warnings))
+    if trust is not None:
+        from .designation_trust import assess
+
+        a = assess(trust, rec)
+        rec = replace(rec, p_ok=a.p_ok, ok_tolerance_pct=a.tolerance_pct, go=a.go)
+    return rec
 
 
 _f = finite_or_none
