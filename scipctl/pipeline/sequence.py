@@ -163,14 +163,35 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
                          (f"terrain tilt at the final pose {math.degrees(fin.tilt_rad):.1f} deg "
                           f"(limit {math.degrees(r.max_tilt_rad):.1f} deg)") if fin.terrain_known
                          else "no stereo terrain under the final pose: tilt unknown"))
-    out.append(RuleCheck("prediction-confidence", pred.confidence >= r.min_confidence, pred.confidence, r.min_confidence,
-                         "", f"predicted P(success) {pred.confidence:.2f} (minimum {r.min_confidence:.2f})"))
+    conf_ok = pred.confidence >= r.min_confidence
+    out.append(RuleCheck("prediction-confidence", conf_ok, pred.confidence, r.min_confidence,
+                         "", f"predicted P(success) {pred.confidence:.2f} (minimum {r.min_confidence:.2f})"
+                         + ("" if conf_ok else _weakest(pred))))
     kf = plan.clearance.get("terrain_known_fraction", 0.0)
     out.append(RuleCheck("terrain-known-along-path", kf >= r.min_terrain_known_fraction, kf,
                          r.min_terrain_known_fraction, "",
                          f"{100 * kf:.0f}% of the path is covered by today's stereo (obstacles elsewhere are unchecked)",
                          blocking=False))
     return out
+
+
+def _weakest(pred) -> str:
+    """For a broken prediction-confidence: the stop that costs most (the lowest-probability risk) and what would
+    raise it."""
+    risks = [k for k in pred.risks if k.probability is not None]
+    if not risks:
+        return ""
+    k = min(risks, key=lambda x: (x.probability, x.stop))
+    why = "; ".join(k.reasons[:2]) if k.reasons else k.what
+    if k.what == "arm":
+        fix = "a standoff nearer the workspace centre (--standoff-m) or a closer final image"
+    elif any("field of view" in x or "search region" in x for x in k.reasons):
+        fix = "images from a closer stop (a shorter drive before re-pointing) or a larger search region (rules tracking.search_radius_px)"
+    elif any("occlu" in x for x in k.reasons):
+        fix = "another approach bearing (approach.detour_bearings_deg) or a new designation on the visible side"
+    else:
+        fix = "new images of the target (better light or closer) or a new designation"
+    return f"; weakest: stop {k.stop} {k.camera} {k.what} P {k.probability:.2f} ({why}): {fix} would raise it"
 
 
 def _searched(plan, rule: str, ok: bool) -> str:

@@ -198,3 +198,16 @@ def test_time_tags():
     assert Q.time_tag(0) == "R00:00:00"
     assert Q.time_tag(59.2) == "R00:01:00"
     assert Q.time_tag(3725) == "R01:02:05"
+
+
+def test_a_low_confidence_refusal_names_the_weakest_stop_and_what_would_raise_it(rc, flat_terrain):
+    from dataclasses import replace
+
+    pred = prediction(rc, flat_terrain, confidence=0.3)
+    risks = [P.Risk(4, "navcam", "view", 0.35, ["out of field of view (P in view 0.40)"]),
+             P.Risk(6, "hazcam", "view", 0.6, ["occlusion (P visible 0.60)"])]
+    chk = next(c for c in Q.check_rules(replace(pred, risks=risks), rc) if c.rule == "prediction-confidence")
+    assert not chk.ok and "weakest: stop 4 navcam view P 0.35" in chk.message and "closer stop" in chk.message
+    fine = next(c for c in Q.check_rules(replace(pred, confidence=0.9, risks=risks), rc)
+                if c.rule == "prediction-confidence")
+    assert fine.ok and "weakest" not in fine.message
