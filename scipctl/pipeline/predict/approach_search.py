@@ -73,6 +73,10 @@ class ApproachSearch:
                 f"{sto[0]:.2f}-{sto[-1]:.2f} m)")
         if self.found:
             return f"{span}; the plan kept clears it"
+        if any(rule not in t["bound_by"] for t in self.tried):
+            others = ", ".join(r for r in self.binding() if r != rule) or "the other constraints"
+            return (f"{span}: some clear {rule}, none together with {others}; the plan kept is the one closest to "
+                    f"clearing them all")
         b = self.best_for(rule)
         if rule == ROCK:
             best = "" if b is None else (f"; the best comes to {b['min_rock_m']:.2f} m (detour {b['detour_deg']:+.0f} deg, "

@@ -34,3 +34,12 @@ def test_no_rock_in_the_terrain_is_json_safe():
     s = _search((0.0, 0.8, math.inf, 0.30, 400.0))
     d = s.to_dict()
     assert d["tried"][0]["min_rock_m"] is None and d["found"]
+
+
+def test_a_rule_some_candidates_meet_is_not_reported_as_unmet():
+    # rock-keep-out met at a 45 deg detour, but that plan loses the target from the hazcams; the FOV binds everywhere
+    s = _search((0.0, 0.8, 0.12, 0.30, -248.0), (45.0, 1.0, 0.97, 0.50, -300.0))
+    assert s.binding() == ["hazcam-fov-final"]
+    msg = s.describe(ROCK)
+    assert "some clear rock-keep-out, none together with hazcam-fov-final" in msg and "none clears" not in msg
+    assert "none clears hazcam-fov-final" in s.describe(FOV)
