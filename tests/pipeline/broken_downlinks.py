@@ -240,6 +240,20 @@ def occluded_copy(dl: Downlink, haz_left: ImageProduct, target_ids: list, radius
     return _swap(dl, {p.product_id: with_pixels(p, px[p.product_id]) for p in (haz_left, haz_right)})
 
 
+def occluder_miss_m(dl: Downlink, haz_left: ImageProduct, target_id: str, range_frac: float) -> float:
+    """The larger, over both hazcam eyes, of the distance from :func:`occluded_copy`'s occluder centre to that
+    eye's line of sight to the target: the target is hidden from both eyes when this is below the radius."""
+    X = true_point_rover(dl, haz_left, target_id)
+    mL = dl.truth_for(haz_left.product_id).camera_model
+    Xo = mL.C + range_frac * (X - mL.C)
+    out = 0.0
+    for p in pair_of(dl, haz_left):
+        C = dl.truth_for(p.product_id).camera_model.C
+        d = (X - C) / np.linalg.norm(X - C)
+        out = max(out, float(np.linalg.norm(np.cross(Xo - C, d))))
+    return out
+
+
 # ------------------------------------------------------------------ the setup, reusing what did not change
 def setup_reusing(dl: Downlink, base_dl: Downlink, base: HandoffSetup) -> HandoffSetup:
     """:func:`~scipctl.pipeline.handoff.build_setup` of ``dl`` (a broken copy of ``base_dl``, whose setup is

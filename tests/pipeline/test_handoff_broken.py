@@ -11,9 +11,10 @@ what an operator needs from that break, decided per case (the issue's point: no 
 * **3 deg mast tilt error** (the near, then the far navcam pair's downlinked tilt off by 3 deg): the mast
   prediction is wrong by tens of px (checked), but the registrations and the other navcam can still find the
   target: a GO must be right;
-* **a target occluded in the hazcam** (a textured disk 60 % of the way from the left hazcam to each target,
-  hiding it from both hazcam eyes): the target cannot be seen, so no hazcam pixel is a right answer (the mark's
-  pixel shows the occluder): every target must be NO-GO, and so must every candidate;
+* **a target occluded in the hazcam** (a textured disk on the left hazcam's line of sight to each target, ~40 cm
+  or ~5 cm in front of it, hiding it from both hazcam eyes): the target cannot be seen, so no hazcam pixel is a
+  right answer (the mark's pixel shows the occluder): every target must be NO-GO, and so must every candidate
+  (for the 5 cm occluder an open failure, xfail with the measured reason);
 * **textureless sand** (no texture on the ground within 10 cm of the flat target, in every navcam and hazcam
   image): appearance cannot place the target inside the patch, geometry alone might: a GO must be right.
 
@@ -113,27 +114,62 @@ def test_3deg_mast_tilt_error_gives_no_wrong_go(sol, navcam):
 
 
 # ------------------------------------------------------------------ occluded in the hazcam
-OCCLUDER_RANGE_FRAC = 0.6  # the occluder's centre, as a fraction of the left hazcam's range to the target
-OCCLUDER_RADIUS_M = 0.06  # hides the target from the right eye too: its ray crosses the occluder's plane
-# (1 - 0.6) x the ~0.1 m hazcam baseline = 4 cm from the disk's centre
+# (range fraction of the occluder's centre along the left hazcam's line of sight to the target, its radius m)
+FAR_OCCLUDER = (0.6, 0.06)  # ~40 cm in front of targets ~1 m from the hazcams
+NEAR_OCCLUDER = (0.95, 0.03)  # ~5 cm in front: hazcam stereo still ranges it close to the target
+NEAR_OCCLUDER_CANDIDATES_OPEN = (
+    "open failure (measured with the packaged model, 2026-11-23): mesh-registration/far answers the mark's "
+    "pixel (0.5 px), which shows the occluder 5 cm in front of the hidden target, with p 0.905 (GO at 0.90), "
+    "and refined-kinematic/far a look-alike 54 px away with p 0.964 (the geometry veto is for scip's own answer)")
+OCCLUDERS = [pytest.param(FAR_OCCLUDER, id="occluder-40cm-in-front"),
+             pytest.param(NEAR_OCCLUDER, id="occluder-5cm-in-front")]
 
 
-def test_target_occluded_in_the_hazcams_is_no_go(sol):
-    """A textured disk in front of each target (``occluded_copy``): the hazcams see the occluder where the target
-    would be. No hazcam pixel is a right answer, so every target, and every candidate, must be NO-GO."""
+@pytest.fixture(scope="module")
+def occluded(sol):
+    """occluder -> (target id -> scip record), each occluder's downlink run once (lazily) for the tests below."""
     dl, base = sol
     ids = [t.id for t in dl.targets]
-    broken = B.occluded_copy(dl, base.hazcam, ids, OCCLUDER_RADIUS_M, OCCLUDER_RANGE_FRAC, seed=7)
-    recs, setup = run_scip(broken, sol)
-    haz = setup.cases["near"].haz
-    for tid, rec in recs.items():
-        # the break is real: hazcam stereo at the target's pixel ranges the occluder, not the target
-        r_true = float(np.linalg.norm(B.true_point_rover(dl, base.hazcam, tid)
-                                      - dl.truth_for(base.hazcam.product_id).camera_model.C))
-        X = haz.xyz_at(np.asarray(rec.truth_uv, float)[None])[0]
-        if np.all(np.isfinite(X)):
-            assert np.linalg.norm(X - haz.left_model.C) < 0.8 * r_true, tid
+    runs = {}
+
+    def get(occluder):
+        if occluder not in runs:
+            range_frac, radius_m = occluder
+            for tid in ids:  # the break is real: the disk covers both eyes' lines of sight to the target
+                assert B.occluder_miss_m(dl, base.hazcam, tid, range_frac) < 0.8 * radius_m, tid  # 20 % margin
+            broken = B.occluded_copy(dl, base.hazcam, ids, radius_m, range_frac, seed=7)
+            recs, setup = run_scip(broken, sol)
+            haz = setup.cases["near"].haz
+            for tid, rec in recs.items():
+                # and hazcam stereo at the target's pixel ranges the occluder (closer than the target)
+                r_true = float(np.linalg.norm(B.true_point_rover(dl, base.hazcam, tid)
+                                              - dl.truth_for(base.hazcam.product_id).camera_model.C))
+                X = haz.xyz_at(np.asarray(rec.truth_uv, float)[None])[0]
+                if np.all(np.isfinite(X)):
+                    assert np.linalg.norm(X - haz.left_model.C) < (1.0 + range_frac) / 2 * r_true, tid
+            runs[occluder] = recs
+        return runs[occluder]
+    return get
+
+
+@pytest.mark.parametrize("occluder", OCCLUDERS)
+def test_target_occluded_in_the_hazcams_is_no_go(occluded, occluder):
+    """A textured disk in front of each target (``occluded_copy``), hiding it from both hazcam eyes: the hazcams
+    see the occluder where the target would be. No hazcam pixel is a right answer: every target must be NO-GO.
+    (With the occluder 5 cm in front, scip's model alone says GO to a look-alike 42-53 px away, p 0.94-0.97: the
+    geometry veto, ``ScipParams.geometry_veto_px``, is what says NO-GO there.)"""
+    for rec in occluded(occluder).values():
         assert not rec.go, "occluded target GO: " + describe(rec)
+
+
+@pytest.mark.parametrize("occluder", [
+    pytest.param(FAR_OCCLUDER, id="occluder-40cm-in-front"),
+    pytest.param(NEAR_OCCLUDER, id="occluder-5cm-in-front",
+                 marks=pytest.mark.xfail(reason=NEAR_OCCLUDER_CANDIDATES_OPEN, strict=True)),
+])
+def test_target_occluded_in_the_hazcams_has_no_go_candidate(occluded, occluder):
+    """The same, for every candidate answer (each candidate method's record carries the model's GO)."""
+    for rec in occluded(occluder).values():
         assert not any(go for _, _, _, go in candidates(rec)), describe(rec)
 
 
