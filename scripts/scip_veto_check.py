@@ -59,7 +59,8 @@ def main(argv):
     res = [Evidence.from_dict(r.evidence).geo_best_nav_res_px for r in rows if r.error_px <= R_PX]
     res = [v for v in res if np.isfinite(v)]
     print(f"{len(rows)} candidates, {n} targets; GO at {go_min}, veto {veto} px")
-    print(f"held out: GO {go0} (false {fgo0}) without the veto, {go1} (false {fgo1}) with it; right answers vetoed: {lost}")
+    print(f"held out: GO {go0} (false {fgo0}) without the veto, {go1} (false {fgo1}) with it; "
+          f"right answers vetoed: {lost}")
     print(f"largest geo_best_nav_res_px of a candidate within {R_PX:g} px: {max(res):.1f} px")
 
 

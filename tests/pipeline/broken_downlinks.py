@@ -20,12 +20,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Optional
 
 import numpy as np
 
-from scipctl.core.handoff import HandoffCase, HandoffParams
-from scipctl.core.kinematics import T_roverB_roverA
+from scipctl.core.handoff import HandoffCase
 from scipctl.model import Downlink, ImageProduct, MastAngles
 from scipctl.pipeline.handoff import HandoffSetup, build_setup
 
@@ -278,13 +276,3 @@ def setup_reusing(dl: Downlink, base_dl: Downlink, base: HandoffSetup) -> Handof
             new.cases[label] = HandoffCase(label, old.nav if nav_same else case.nav, haz_view, case.T_haz_nav,
                                            case.params)
     return new
-
-
-def relative_pose_error(dl: Downlink, a: ImageProduct, b: ImageProduct) -> tuple[float, float]:
-    """(metres, degrees) between the estimated and the true rover motion from ``a``'s stop to ``b``'s."""
-    est = T_roverB_roverA(b.pose, a.pose)
-    tru = T_roverB_roverA(dl.truth_for(b.product_id).pose, dl.truth_for(a.product_id).pose)
-    d = tru.inverse() @ est
-    return float(np.linalg.norm(d.t)), math.degrees(d.rotation_angle_rad())
-
-

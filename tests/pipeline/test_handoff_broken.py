@@ -77,7 +77,8 @@ def assert_no_wrong_go(rec, sources_like: str = ""):
     assert not (rec.go and rec.error_px > SUCCESS_PX), "GO and wrong: " + describe(rec)
     for srcs, err, p, go in candidates(rec):
         if any(sources_like in s for s in srcs):
-            assert not (go and err > SUCCESS_PX), f"candidate {srcs} GO (p={p:.3f}) and {err:.1f} px off; " + describe(rec)
+            assert not (go and err > SUCCESS_PX), (f"candidate {srcs} GO (p={p:.3f}) and {err:.1f} px off; "
+                                                   + describe(rec))
 
 
 # ------------------------------------------------------------------ washed-out far navcams
