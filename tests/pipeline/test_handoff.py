@@ -228,3 +228,18 @@ def test_scip_is_go_within_1px_with_no_error(noerr):
     for r in scip:
         assert r.go is True and r.p_success is not None, (r.target, r.p_success)
         assert r.error_px <= 1.0, (r.target, r.error_px)
+
+
+def test_scip_is_go_within_1px_at_success_px_1_with_no_error(noerr):
+    """Issue #14 item 6 at the 1 px radius itself (`--success-px 1`: the model's 1 px probability and its 1 px GO
+    threshold): every surface target of the no-error downlink is GO, and within 1 px. Edge targets are checked
+    apart (window stereo straddles two ranges there). Reuses the fixture's setup: only scip's scoring reruns."""
+    dl, setup, _ = noerr
+    kind = {t.id: t.kind for t in dl.targets}
+    recs = run_targets(dl, setup, marked_targets(dl, setup), methods=("scip",), success_px=1.0,
+                       downlink_name=NOERR.name)
+    scip = [r for r in recs if kind[r.target] in SURFACE]
+    assert scip and all(r.method == "scip" and r.diagnostics["success_px"] == 1.0 for r in scip)
+    for r in scip:
+        assert r.go is True and r.p_success is not None, (r.target, r.p_success)
+        assert r.error_px <= 1.0, (r.target, r.error_px)

@@ -62,6 +62,11 @@ REGISTRATION_CHECK_KEYS = {
 NAN = float("nan")
 
 
+def _nanmin(*vals: float) -> float:
+    known = [v for v in vals if math.isfinite(v)]
+    return min(known) if known else NAN
+
+
 @dataclass
 class Evidence:
     """The evidence for one candidate answer (see the module docstring). Floats are NaN when unknown.
@@ -109,6 +114,14 @@ class Evidence:
     support_other_families: float = NAN  # families other than the candidate's own with an answer within agree_px
     other_navcam_px: float = NAN  # distance to the nearest candidate of the other navcam
     n_candidates: float = NAN
+
+    # derived (not stored: computed from the per-view fields, so evidence tables written before them have them)
+    @property
+    def geo_best_nav_res_px(self) -> float:
+        """The smaller of ``geo_near_nav_res_px`` / ``geo_far_nav_res_px`` (NaN when neither is known): how far
+        (hazcam px) the hazcam point at the candidate lands from the navcam target in the view whose registered
+        geometry agrees with it best (``scip``'s geometry veto, :class:`~.scip_params.ScipParams`)."""
+        return _nanmin(self.geo_near_nav_res_px, self.geo_far_nav_res_px)
 
     def to_dict(self) -> dict:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}

@@ -4,8 +4,9 @@ GO/NO-GO (pure numerics).
 Every method of :data:`~scipctl.core.handoff.evidence.CANDIDATE_METHODS` answers from every navcam view it has
 (near, far); each distinct answer is a candidate; each candidate gets its :class:`~.evidence.Evidence` and the
 trust model's P(within ``success_px`` | evidence); the answer is the most probable candidate, ``p_success`` its
-probability, ``go`` = ``p_success >= go_min_p``. Without a trust model (or for a ``success_px`` the model was not
-fitted around) ``p_success`` is None and the answer NO-GO.
+probability, ``go`` = ``p_success >= go_min_p`` unless the geometry vetoes the answer (its hazcam point is
+farther than ``geometry_veto_px`` from the navcam target in every view). Without a trust model (or for a
+``success_px`` the model was not fitted around) ``p_success`` is None and the answer NO-GO.
 """
 
 from __future__ import annotations
@@ -89,6 +90,11 @@ def scip_from_results(cases: dict[str, HandoffCase], nav_uvs: dict, results: lis
         best = int(np.argmax(p))
         p_best = float(p[best])
         go = bool(go_min is not None and p_best >= go_min)
+        res_px = ev[best].geo_best_nav_res_px
+        if go and sp.geometry_veto_px is not None and res_px > sp.geometry_veto_px:  # NaN (unknown): no veto
+            go = False
+            diag["geometry_veto"] = (f"the hazcam point at the answer lands {res_px:.1f} px from the navcam target "
+                                     f"in the view that agrees best (veto above {sp.geometry_veto_px:g} px)")
     scored = [ScoredCandidate(c, e, None if p is None else float(p[i])) for i, (c, e) in enumerate(zip(cands, ev))]
     chosen = cands[best]
     diag.update({

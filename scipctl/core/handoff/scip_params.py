@@ -29,6 +29,12 @@ class ScipParams:
     backtrack_radius_px: float = 30.0  # forward-backward: the hazcam window's search in the navcam (hazcam px)
     dedup_px: float = 0.25  # candidates closer than this are one candidate (evidence computed once)
     geometry_sigma_floor_m: float = 0.005  # 3-D agreement: sigma = hypot(stereo sigmas, this floor)
+    # geometry veto: NO-GO, whatever p_success, when the answer's hazcam point lands farther than this (hazcam px)
+    # from the navcam target in every view (Evidence.geo_best_nav_res_px; unknown: no veto). None: no veto.
+    # 40 px: 1.5x the largest of any candidate within 4 px in tests/data/trust/evidence-24dl.jsonl.gz (27.3 px;
+    # median 48.6 px for those > 20 px off); it vetoes none of the 321 held-out GO answers there and catches
+    # look-alike answers to hidden targets (tests/pipeline/test_handoff_broken.py, docs/handoff.md)
+    geometry_veto_px: Optional[float] = 40.0
 
     def check(self) -> "ScipParams":
         """Raise ``ValueError`` naming the first parameter out of its range; return ``self``."""
@@ -43,6 +49,8 @@ class ScipParams:
                      "geometry_sigma_floor_m"):
             if not getattr(self, name) > 0:
                 bad(name, "must be > 0")
+        if self.geometry_veto_px is not None and not self.geometry_veto_px > 0:
+            bad("geometry_veto_px", "must be > 0 (or None: no veto)")
         if self.go_min_p is not None and not 0 <= self.go_min_p <= 1:
             bad("go_min_p", "is a probability: must be in [0, 1]")
         if self.model is not None and not isinstance(self.model, TrustModel):

@@ -142,3 +142,28 @@ def test_params_check():
         ScipParams(agree_px=0.0).check()
     with pytest.raises(ValueError, match="model"):
         ScipParams(model="trust_model.json").check()
+
+
+def test_geometry_veto_turns_go_into_no_go(handoff_scene):
+    """``ScipParams.geometry_veto_px``: a GO answer whose hazcam point lands farther than the veto from the navcam
+    target in every view is NO-GO, whatever its probability; the answer and p_success stay."""
+    from dataclasses import replace
+
+    cases = handoff_scene.cases
+    t = handoff_scene.targets[0]
+    hp = cases["near"].params
+    results = [r for nc, c in cases.items() for r in run_candidates(c, t.nav_uv[nc], hp)]
+
+    def run(veto):
+        return scip_from_results(cases, t.nav_uv, results,
+                                 replace(hp, scip=ScipParams(model=constant_model(8.0), geometry_veto_px=veto)))
+
+    free = run(None)
+    res_px = Evidence.from_dict(free.result.diagnostics["evidence"]).geo_best_nav_res_px
+    assert free.go and math.isfinite(res_px) and res_px > 0 and "geometry_veto" not in free.result.diagnostics
+    assert run(res_px + 1.0).go  # below the veto: GO
+    vetoed = run(res_px / 2)
+    assert not vetoed.go and vetoed.result.reason == "NO-GO" and "geometry_veto" in vetoed.result.diagnostics
+    assert vetoed.p_success == free.p_success and np.array_equal(vetoed.result.uv, free.result.uv)
+    with pytest.raises(ValueError, match="geometry_veto_px"):
+        ScipParams(geometry_veto_px=0.0).check()
