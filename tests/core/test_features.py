@@ -83,6 +83,25 @@ def test_matches_computed_once_give_the_same_answer(scene):
         locate_by_features(a, p, b, ref_radius_px=50.0, knn=knn)  # matches of another reference set
 
 
+def test_integer_knn_equals_opencv_brute_force(scene):
+    """SIFT's descriptors are whole numbers: the float32 matrix-product 2-NN gives OpenCV's BFMatcher answer bit for
+    bit (indices and float32 distances), ties (duplicated target keypoints) included; other descriptors go to
+    OpenCV."""
+    from scipctl.core.features import _integer_descriptors, _knn2_integer
+
+    img, warped, _ = scene
+    a, b = detect_features(img), detect_features(warped)
+    assert _integer_descriptors(a.descriptors) and _integer_descriptors(b.descriptors)
+    t = np.concatenate([b.descriptors, b.descriptors[::7]])  # exact ties: the lower index must win, as in OpenCV
+    got = _knn2_integer(a.descriptors, t, block=100)
+    ms = cv2.BFMatcher(cv2.NORM_L2).knnMatch(a.descriptors, t, k=2)
+    assert np.array_equal(got.best, [m[0].trainIdx for m in ms])
+    assert np.array_equal(got.best_d, np.array([m[0].distance for m in ms], np.float32))
+    assert np.array_equal(got.second_d, np.array([m[1].distance for m in ms], np.float32))
+    assert np.any(got.best_d == got.second_d)  # the ties were exercised
+    assert not _integer_descriptors(a.descriptors + np.float32(0.5))
+
+
 def test_similarity_model_recovers_rotation_and_scale(scene):
     img, _, warped = scene
     a, b = detect_features(img), detect_features(warped)
