@@ -96,7 +96,7 @@ def _handoff(dl, job: DownlinkJob, options: CampaignOptions, res: DownlinkResult
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
 
     params = HandoffParams(dense_downsample=2 if options.fast else 1)
-    setup = build_setup(dl, params)
+    setup = build_setup(dl, params, shared=True)
     res.products = {"hazcam": setup.hazcam.product_id, "near": setup.near.product_id if setup.near else None,
                     "far": setup.far.product_id if setup.far else None}
     use_navcams = [n for n in options.navcams if n in setup.cases]

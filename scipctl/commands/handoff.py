@@ -74,7 +74,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
         for src, source in zip(srcs, sources):
             dl = source.downlink
             name = Path(src).name
-            setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far)
+            setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far, shared=True)
             if from_product is not None:
                 p = dl.product(from_product)
                 if p.camera != "navcam" or p.eye != "left":
@@ -83,7 +83,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                     "far" if setup.far is not None and p.product_id == setup.far.product_id else None)
                 if nc is None:
                     setup = build_setup(dl, params, hazcam=hazcam, near=p.product_id if p.position == setup.hazcam.position else near,
-                                        far=p.product_id if p.position != setup.hazcam.position else far)
+                                        far=p.product_id if p.position != setup.hazcam.position else far, shared=True)
                     nc = "near" if p.position == setup.hazcam.position else "far"
                 uv = parse_pixel(pixel)
                 if not (-0.5 <= uv[0] <= p.width - 0.5 and -0.5 <= uv[1] <= p.height - 0.5):

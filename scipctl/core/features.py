@@ -32,7 +32,7 @@ import numpy as np
 
 from .ransac import ransac
 
-__all__ = ["Features", "FeatureLocation", "detect_features", "locate_by_features", "to_uint8"]
+__all__ = ["Features", "FeatureLocation", "KnnMatches", "detect_features", "knn_matches", "locate_by_features", "to_uint8"]
 
 _MODELS = ("translation", "similarity", "affine", "homography")
 
@@ -85,6 +85,77 @@ class FeatureLocation:
     def failed(reason: str, n_matches: int = 0, n_inliers: int = 0) -> "FeatureLocation":
         return FeatureLocation(False, reason, np.full(2, np.nan), np.full((3, 3), np.nan), n_matches, n_inliers, 0,
                                float("nan"))
+
+
+@dataclass(frozen=True)
+class KnnMatches:
+    """The two nearest searched-image descriptors (L2) of every reference keypoint, as OpenCV's brute-force
+    ``knnMatch(k=2)`` finds them: ``best`` ``(N,)`` the nearest one's index, ``best_d`` / ``second_d`` ``(N,)``
+    their distances (float32, as OpenCV gives them; ``second_d`` is NaN where fewer than two exist).
+
+    A keypoint's neighbours depend only on its own descriptor and the searched set, so the matches of a
+    subset of the reference keypoints are the rows of the whole set's: :func:`locate_by_features` takes
+    them (``knn=``) to match a reference image once for several candidate reaches.
+    """
+
+    best: np.ndarray
+    best_d: np.ndarray
+    second_d: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.best.shape[0])
+
+
+def _integer_descriptors(d: np.ndarray) -> bool:
+    """Float32 descriptors whose values are whole numbers in [0, 255] (OpenCV's SIFT stores them so), few enough
+    per row that every squared distance and dot product is an integer below 2**24 (exact in float32)."""
+    return (d.dtype == np.float32 and d.ndim == 2 and 0 < d.shape[1] * 255**2 < 2**24 and d.size > 0
+            and float(d.min()) >= 0.0 and float(d.max()) <= 255.0 and bool(np.all(d == np.rint(d))))
+
+
+def _knn2_integer(q: np.ndarray, t: np.ndarray, block: int = 256) -> KnnMatches:
+    """OpenCV's brute-force 2-NN (L2) of integer-valued float32 descriptors ``q`` ``(N, D)`` in ``t`` ``(M >= 2, D)``,
+    bit for bit: ``|q|^2 + |t|^2 - 2 q.t`` are integers below 2**24, so float32 matrix products and sums are exact
+    whatever their order, as OpenCV's sum of squared differences is; the distance is their float32 square root;
+    ties go to the lower index (``argmin``), as in OpenCV's insertion. Queries in blocks (memory O(block M))."""
+    n = len(q)
+    best, best_d, second_d = np.zeros(n, np.int64), np.empty(n, np.float32), np.empty(n, np.float32)
+    q_sq = np.einsum("ij,ij->i", q, q)
+    t_sq = np.einsum("ij,ij->i", t, t)
+    tT = np.ascontiguousarray(t.T)
+    for s in range(0, n, block):
+        e = min(s + block, n)
+        d = q[s:e] @ tT
+        d *= np.float32(-2.0)
+        d += q_sq[s:e, None]
+        d += t_sq[None, :]
+        np.sqrt(d, out=d)
+        rows = np.arange(e - s)
+        j = d.argmin(axis=1)
+        best[s:e], best_d[s:e] = j, d[rows, j]
+        d[rows, j] = np.inf
+        second_d[s:e] = d[rows, d.argmin(axis=1)]
+    return KnnMatches(best, best_d, second_d)
+
+
+def knn_matches(ref: Features, target: Features) -> KnnMatches:
+    """:class:`KnnMatches` of every keypoint of ``ref`` among those of ``target``: OpenCV's brute-force L2 matcher
+    (``BFMatcher.knnMatch(k=2)``), or for SIFT's integer-valued descriptors the same answer computed exactly with
+    float32 matrix products (:func:`_knn2_integer`, ~4x less CPU; tests/core/test_features.py compares the two)."""
+    import cv2
+
+    n = len(ref)
+    if n and len(target) >= 2 and _integer_descriptors(ref.descriptors) and _integer_descriptors(target.descriptors) \
+            and ref.descriptors.shape[1] == target.descriptors.shape[1]:
+        return _knn2_integer(ref.descriptors, target.descriptors)
+    best, best_d, second_d = np.zeros(n, np.int64), np.full(n, np.nan, np.float32), np.full(n, np.nan, np.float32)
+    if n and len(target):
+        for i, m in enumerate(cv2.BFMatcher(cv2.NORM_L2).knnMatch(ref.descriptors, target.descriptors, k=2)):
+            if len(m) >= 1:
+                best[i], best_d[i] = m[0].trainIdx, m[0].distance
+            if len(m) >= 2:
+                second_d[i] = m[1].distance
+    return KnnMatches(best, best_d, second_d)
 
 
 def to_uint8(image, valid: Optional[np.ndarray] = None) -> np.ndarray:
@@ -206,6 +277,7 @@ def locate_by_features(
     min_inliers: int = 8,
     local_radius_px: Optional[float] = None,
     seed: int = 0,
+    knn: Optional[KnnMatches] = None,
 ) -> FeatureLocation:
     """Where the reference point ``ref_uv`` (reference-image pixels) lies in the target image.
 
@@ -236,14 +308,16 @@ def locate_by_features(
     seed : int
         Seed of the RANSAC draw (the same seed and keypoints give the same
         answer on every machine and OpenCV build).
+    knn : KnnMatches, optional
+        ``knn_matches(ref, target)``, computed once by a caller that locates
+        several points or reaches in the same pair of keypoint sets (the
+        same answer as matching here; not with a search square).
 
     Returns
     -------
     FeatureLocation
         ``uv`` (2,) in the target image's pixels.
     """
-    import cv2
-
     if model not in _MODELS:
         raise ValueError(f"model: expected one of {_MODELS}, got {model!r}")
     p = np.asarray(ref_uv, dtype=float).reshape(-1)
@@ -253,20 +327,26 @@ def locate_by_features(
         raise ValueError(f"ref_radius_px: must be finite and > 0, got {ref_radius_px}")
     if local_radius_px is None:
         local_radius_px = ref_radius_px / 2.0
-    r = ref.subset(np.linalg.norm(ref.uv - p, axis=1) <= ref_radius_px) if len(ref) else ref
+    keep = np.linalg.norm(ref.uv - p, axis=1) <= ref_radius_px if len(ref) else np.zeros(0, bool)
+    r = ref.subset(keep) if len(ref) else ref
     t = target
-    if search_center_uv is not None and search_radius_px is not None and len(t):
+    searched = search_center_uv is not None and search_radius_px is not None
+    if knn is not None and (searched or len(knn) != len(ref)):
+        raise ValueError("knn: must be knn_matches(ref, target) of the whole target (no search square)")
+    if searched and len(t):
         c = np.asarray(search_center_uv, dtype=float).reshape(2)
         t = t.subset(np.all(np.abs(t.uv - c) <= search_radius_px, axis=1))
     need = {"translation": 1, "similarity": 2, "affine": 3, "homography": 4}[model]
     if len(r) < max(need, 2) or len(t) < 2:
         return FeatureLocation.failed(f"too few keypoints (reference {len(r)}, target {len(t)})")
-    knn = cv2.BFMatcher(cv2.NORM_L2).knnMatch(r.descriptors, t.descriptors, k=2)
-    qi, ti = [], []
-    for m in knn:
-        if len(m) == 2 and m[0].distance < ratio * m[1].distance:
-            qi.append(m[0].queryIdx)
-            ti.append(m[0].trainIdx)
+    if knn is None:
+        knn = knn_matches(r, t)
+    else:
+        rows = np.flatnonzero(keep)
+        knn = KnnMatches(knn.best[rows], knn.best_d[rows], knn.second_d[rows])
+    # Lowe's ratio test, in double precision as on OpenCV's DMatch distances (float32 values)
+    passed = np.flatnonzero(knn.best_d.astype(np.float64) < ratio * knn.second_d.astype(np.float64))
+    qi, ti = passed.tolist(), knn.best[passed].tolist()
     n_matches = len(qi)
     if n_matches < max(need + 1, 3):
         return FeatureLocation.failed(f"too few feature matches ({n_matches})", n_matches)

@@ -61,17 +61,30 @@ def _check_pairs(src, dst) -> tuple[np.ndarray, np.ndarray]:
     return s, d
 
 
-def apply_model(M: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """``uv`` ``(N, 2)`` mapped through the homogeneous ``M`` ``(3, 3)``; ``(N, 2)`` (inf/NaN at infinity)."""
-    p = np.c_[uv, np.ones(len(uv))] @ np.asarray(M, float).T
+def _homogeneous(uv) -> np.ndarray:
+    """``(N, 3)`` float64 rows ``(u, v, 1)`` of ``uv`` ``(N, 2)``."""
+    uv = np.asarray(uv)
+    h = np.empty((len(uv), 3))
+    h[:, :2] = uv
+    h[:, 2] = 1.0
+    return h
+
+
+def _dehomogenise(p: np.ndarray) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         return p[:, :2] / p[:, 2:3]
 
 
+def apply_model(M: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """``uv`` ``(N, 2)`` mapped through the homogeneous ``M`` ``(3, 3)``; ``(N, 2)`` (inf/NaN at infinity)."""
+    return _dehomogenise(_homogeneous(uv) @ np.asarray(M, float).T)
+
+
 def _normaliser(p: np.ndarray) -> np.ndarray:
     """Hartley's similarity taking ``p`` ``(N, 2)`` to zero mean and mean distance sqrt(2)."""
-    c = p.mean(axis=0)
-    d = np.sqrt(((p - c) ** 2).sum(axis=1)).mean()
+    n = len(p)
+    c = np.add.reduce(p, axis=0) / n  # p.mean(axis=0), without its Python-level overhead (same arithmetic)
+    d = np.add.reduce(np.sqrt(((p - c) ** 2).sum(axis=1))) / n
     s = np.sqrt(2.0) / d if d > 0 else 1.0
     return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
 
@@ -147,8 +160,10 @@ def fit_model(model: str, src, dst) -> np.ndarray | None:
     return M
 
 
-def _residual_sq(M, s, d):
-    r = apply_model(M, s) - d
+def _residual_sq(M, s, d, s_h=None):
+    """Squared residuals ``(N,)`` of ``M`` on the pairs (inf where not finite); ``s_h``: ``_homogeneous(s)``,
+    if the caller keeps it."""
+    r = _dehomogenise((_homogeneous(s) if s_h is None else s_h) @ np.asarray(M, float).T) - d
     e = (r**2).sum(axis=1)
     return np.where(np.isfinite(e), e, np.inf)
 
@@ -174,6 +189,7 @@ def ransac(model: str, src, dst, threshold_px: float, seed: int = 0, max_iterati
     t2 = float(threshold_px) ** 2
     fit = _FITTERS[model]
     rng = np.random.default_rng(seed)
+    s_h = _homogeneous(s)
     best_cost, best_M, best_count = np.inf, None, 0
     needed, it = max_iterations, 0
     while it < min(needed, max_iterations):
@@ -182,7 +198,7 @@ def ransac(model: str, src, dst, threshold_px: float, seed: int = 0, max_iterati
         M = fit(s[idx], d[idx])
         if M is None or not np.all(np.isfinite(M)):
             continue
-        e = _residual_sq(M, s, d)
+        e = _residual_sq(M, s, d, s_h)
         cost = float(np.minimum(e, t2).sum())
         if cost < best_cost:
             best_cost, best_M = cost, M
@@ -196,14 +212,14 @@ def ransac(model: str, src, dst, threshold_px: float, seed: int = 0, max_iterati
         return RansacResult(None, np.zeros(n, bool), it)
     # local optimisation: least squares on the consensus set until it stops changing
     M = best_M
-    inl = _residual_sq(M, s, d) <= t2
+    inl = _residual_sq(M, s, d, s_h) <= t2
     for _ in range(lo_iterations):
         if inl.sum() < k:
             break
         M2 = fit(s[inl], d[inl])
         if M2 is None or not np.all(np.isfinite(M2)):
             break
-        inl2 = _residual_sq(M2, s, d) <= t2
+        inl2 = _residual_sq(M2, s, d, s_h) <= t2
         if inl2.sum() < inl.sum():
             break  # the refit lost support: keep the previous model
         M, done = M2, bool(np.array_equal(inl2, inl))

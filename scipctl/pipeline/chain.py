@@ -446,7 +446,7 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
     by ``(product id, downsampling)``. ``info`` records the path, the
     winner's inlier counts and the coarse position.
     """
-    from ..core.features import detect_features, locate_by_features
+    from ..core.features import detect_features, knn_matches, locate_by_features
     from ..core.tracking import TrackResult, track
 
     info = {"coarse": "features", "feature_inliers": 0, "feature_local_inliers": 0}
@@ -476,10 +476,15 @@ def _feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals,
                 reasons.append(f"plane {k}: the previous view does not cover the prediction")
                 continue
             ref = detect_features(view)
+            # the keypoints within the largest reach, matched once: each candidate takes its reach's rows
+            reach_max = max(cand[0] for cand in params.feature_candidates)
+            if len(ref):
+                ref = ref.subset(np.linalg.norm(ref.uv - vc, axis=1) <= reach_max * vhalf)
+            knn = knn_matches(ref, feats[key])
             for reach, model, min_inliers in params.feature_candidates:
                 loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model=model,
                                          ransac_threshold_px=2.0 * step_px, min_inliers=min_inliers,
-                                         local_radius_px=params.feature_local_px / step_px)
+                                         local_radius_px=params.feature_local_px / step_px, knn=knn)
                 if not loc.ok:
                     reasons.append(f"x{factor:g} plane {k} reach {reach:g}: {loc.reason}")
                     continue
@@ -566,7 +571,7 @@ def _hazcam_handoff(dl, nav, nav_uv, haz, method, step, params: ChainParams):
     from ..core.handoff import run_method
     from .handoff import build_setup
 
-    setup = build_setup(dl, hazcam=haz.product_id, near=nav.product_id)
+    setup = build_setup(dl, hazcam=haz.product_id, near=nav.product_id, shared=True)
     case = setup.cases["near"]
     res = run_method(case, method, nav_uv)
     uv = res.uv if res.uv is not None and np.all(np.isfinite(res.uv)) else None

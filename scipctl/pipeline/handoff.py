@@ -9,6 +9,8 @@ computed once), and runs every method on every marked target.
 from __future__ import annotations
 
 import math
+import pickle
+import weakref
 from dataclasses import dataclass, field
 from typing import Callable, Optional
 
@@ -74,8 +76,28 @@ def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str
     return haz, nr, fr
 
 
-def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=None, near=None, far=None) -> HandoffSetup:
-    """The handoff cases of ``dl``; ``params`` without a trust model for ``scip`` get the packaged one."""
+# id(downlink) -> its shared views and cases (build_setup(..., shared=True)); emptied when the downlink is freed
+_SHARED: dict = {}
+
+
+def _shared_store(dl: Downlink) -> dict:
+    key = id(dl)
+    if key not in _SHARED:
+        _SHARED[key] = {}
+        weakref.finalize(dl, _SHARED.pop, key, None)
+    return _SHARED[key]
+
+
+def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=None, near=None, far=None,
+                shared: bool = False) -> HandoffSetup:
+    """The handoff cases of ``dl``; ``params`` without a trust model for ``scip`` get the packaged one.
+
+    ``shared``: the cases (with what they compute once: dense stereo, clouds, registration, point stereo,
+    method steps) are those of an earlier shared setup of the same downlink object with the same products
+    and equal ``params``, if any, so that the chain's hazcam handoffs reuse what the handoff computed.
+    Nothing changes in the answers (each of those is a function of the images, models and params alone);
+    without ``shared``, every product is computed afresh (benchmarks and tests that time or isolate them).
+    """
     params = params or HandoffParams()
     if params.scip.model is None:
         from dataclasses import replace
@@ -85,14 +107,29 @@ def build_setup(dl: Downlink, params: Optional[HandoffParams] = None, hazcam=Non
         params = replace(params, scip=replace(params.scip, model=load_packaged_trust_model()))
     haz, nr, fr = find_products(dl, hazcam, near, far)
     ds = params.dense_downsample
-    haz_view = _view(dl, haz, 0.3, 6.0, ds)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m
+    # this setup's views and cases (the near and far cases share the hazcam view), or the downlink's shared ones
+    store = _shared_store(dl) if shared else {}
+    pkey = pickle.dumps(params) if shared else None  # equal params, equal bytes (a differing pickle: not shared)
+
+    def view(prod, lo, hi):
+        k = ("view", prod.product_id, lo, hi, ds)
+        if k not in store:
+            store[k] = _view(dl, prod, lo, hi, ds)
+        return store[k]
+
+    def case(label, nav, T_roverhaz_rovernav):
+        k = ("case", label, nav.product_id, haz.product_id, pkey)
+        if k not in store:
+            store[k] = HandoffCase(label, view(nav, 0.8, 30.0), view(haz, 0.3, 6.0), T_roverhaz_rovernav, params)
+        return store[k]
+
+    view(haz, 0.3, 6.0)  # ranges: hazcam sees 0.3-6 m, navcams 0.8-30 m (an error here before any navcam's)
     setup = HandoffSetup(haz, nr, fr)
     if nr is not None:
         T_roverhaz_rovernav = T_roverB_roverA(haz.pose, nr.pose) if nr.position != haz.position else RigidTransform.identity()
-        setup.cases["near"] = HandoffCase("near", _view(dl, nr, 0.8, 30.0, ds), haz_view, T_roverhaz_rovernav, params)
+        setup.cases["near"] = case("near", nr, T_roverhaz_rovernav)
     if fr is not None:
-        T_roverhaz_rovernav = T_roverB_roverA(haz.pose, fr.pose)
-        setup.cases["far"] = HandoffCase("far", _view(dl, fr, 0.8, 30.0, ds), haz_view, T_roverhaz_rovernav, params)
+        setup.cases["far"] = case("far", fr, T_roverB_roverA(haz.pose, fr.pose))
     return setup
 
 

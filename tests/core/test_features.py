@@ -5,7 +5,7 @@ import pytest
 
 cv2 = pytest.importorskip("cv2")
 
-from scipctl.core.features import Features, detect_features, locate_by_features, to_uint8  # noqa: E402
+from scipctl.core.features import Features, detect_features, knn_matches, locate_by_features, to_uint8  # noqa: E402
 
 
 def _texture(shape=(480, 480), seed=0):
@@ -60,6 +60,46 @@ def test_homography_maps_the_point(scene, downsample):
         assert np.linalg.norm(loc.uv - _map(H_TRUE, p)) < tol, (loc.uv, _map(H_TRUE, p))
         # the returned transform maps reference pixels to target pixels
         assert np.allclose(_map(loc.transform, p), loc.uv)
+
+
+def test_matches_computed_once_give_the_same_answer(scene):
+    """Matching the reference keypoints once (``knn_matches``) and locating at several reaches and models gives
+    exactly what matching per call gives: the same matches, inliers and position bit for bit."""
+    img, warped, _ = scene
+    a, b = detect_features(img), detect_features(warped)
+    p = np.array([240.0, 250.0])
+    ref = a.subset(np.linalg.norm(a.uv - p, axis=1) <= 200.0)
+    knn = knn_matches(ref, b)
+    assert len(knn) == len(ref) > 100
+    for radius, model in ((40.0, "similarity"), (90.0, "homography"), (200.0, "homography"), (150.0, "affine")):
+        once = locate_by_features(ref, p, b, ref_radius_px=radius, model=model, knn=knn)
+        each = locate_by_features(ref, p, b, ref_radius_px=radius, model=model)
+        assert (once.ok, once.reason, once.n_matches, once.n_inliers, once.n_local_inliers) == \
+            (each.ok, each.reason, each.n_matches, each.n_inliers, each.n_local_inliers)
+        assert np.array_equal(once.uv, each.uv) and np.array_equal(once.transform, each.transform)
+    with pytest.raises(ValueError, match="knn"):
+        locate_by_features(ref, p, b, ref_radius_px=50.0, knn=knn, search_center_uv=p, search_radius_px=60.0)
+    with pytest.raises(ValueError, match="knn"):
+        locate_by_features(a, p, b, ref_radius_px=50.0, knn=knn)  # matches of another reference set
+
+
+def test_integer_knn_equals_opencv_brute_force(scene):
+    """SIFT's descriptors are whole numbers: the float32 matrix-product 2-NN gives OpenCV's BFMatcher answer bit for
+    bit (indices and float32 distances), ties (duplicated target keypoints) included; other descriptors go to
+    OpenCV."""
+    from scipctl.core.features import _integer_descriptors, _knn2_integer
+
+    img, warped, _ = scene
+    a, b = detect_features(img), detect_features(warped)
+    assert _integer_descriptors(a.descriptors) and _integer_descriptors(b.descriptors)
+    t = np.concatenate([b.descriptors, b.descriptors[::7]])  # exact ties: the lower index must win, as in OpenCV
+    got = _knn2_integer(a.descriptors, t, block=100)
+    ms = cv2.BFMatcher(cv2.NORM_L2).knnMatch(a.descriptors, t, k=2)
+    assert np.array_equal(got.best, [m[0].trainIdx for m in ms])
+    assert np.array_equal(got.best_d, np.array([m[0].distance for m in ms], np.float32))
+    assert np.array_equal(got.second_d, np.array([m[1].distance for m in ms], np.float32))
+    assert np.any(got.best_d == got.second_d)  # the ties were exercised
+    assert not _integer_descriptors(a.descriptors + np.float32(0.5))
 
 
 def test_similarity_model_recovers_rotation_and_scale(scene):

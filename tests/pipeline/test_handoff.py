@@ -243,3 +243,22 @@ def test_scip_is_go_within_1px_at_success_px_1_with_no_error(noerr):
     for r in scip:
         assert r.go is True and r.p_success is not None, (r.target, r.p_success)
         assert r.error_px <= 1.0, (r.target, r.error_px)
+
+
+def test_shared_setups_reuse_cases_only_for_the_same_products_and_params():
+    """build_setup(shared=True) hands the chain's hazcam handoff the handoff's own cases (same downlink object,
+    products and equal params; so their dense stereo and registration are computed once); anything else, or
+    shared=False, gets fresh ones."""
+    from scipctl.core.handoff import HandoffParams
+
+    dl = read_downlink(SAMPLE)
+    a = build_setup(dl, shared=True)
+    b = build_setup(dl, hazcam=a.hazcam.product_id, near=a.near.product_id, shared=True)  # as the chain asks
+    assert b.cases["near"] is a.cases["near"] and b.cases["far"] is a.cases["far"]
+    assert a.cases["near"].haz is a.cases["far"].haz  # one hazcam view per setup, as without sharing
+    fresh = build_setup(dl)
+    assert fresh.cases["near"] is not a.cases["near"] and fresh.cases["near"].haz is fresh.cases["far"].haz
+    fast = build_setup(dl, HandoffParams(dense_downsample=2), shared=True)
+    assert fast.cases["near"] is not a.cases["near"] and fast.cases["near"].nav is not a.cases["near"].nav
+    other = build_setup(read_downlink(SAMPLE), shared=True)  # another downlink object: its own cases
+    assert other.cases["near"] is not a.cases["near"]
