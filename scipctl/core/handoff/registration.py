@@ -118,10 +118,12 @@ def _haz_point_near(case: HandoffCase, uv: np.ndarray, range_m: float):
 
     def compute():
         f = p.haz_point_stereo_range_frac
+        lo, hi = max(case.haz.min_range_m, (1 - f) * range_m), min(case.haz.max_range_m, (1 + f) * range_m)
+        if not lo < hi:  # the point is beyond the hazcam's stereo range: nothing to search
+            return None
         ps = point_stereo(case.haz.left_img, case.haz.right_img, case.haz.left_model, case.haz.right_model, uv,
                           band_px=p.point_stereo_band_px, window_px=p.haz_point_stereo_window_px,
-                          min_range_m=max(case.haz.min_range_m, (1 - f) * range_m),
-                          max_range_m=min(case.haz.max_range_m, (1 + f) * range_m))
+                          min_range_m=lo, max_range_m=hi)
         return ps.xyz.copy() if ps.ok else None
 
     return case.memo(key, compute)
