@@ -8,7 +8,11 @@ navcam pair, exact marks: ``scipctl.sim.extra_targets``) besides the run's three
 uses (the ``near`` and ``far`` stops) are rendered, as ``scipctl synth`` renders them (same exposure, noise
 and seeds); the pancam and mid-stop images are left black, to halve the rendering time.
 
-Families (scene draw = seed; error settings; rover; texture):
+FAMILY is one of the six trust families below (scene draw = seed; error settings; rover; texture), or any
+other name of the simulator's scene families (``scipctl.sim.families.FAMILIES``: ``bedrock-slabs``,
+``sand-sheet``, ``pebble-field``, ``angular-rocks``, ``low-sun``, ...; its terrain, rocks, sun, error scale,
+rover and texture as ``scipctl synth --family`` builds them; ``mixed`` realised per scene from the seed). The six
+keep their own settings and output (``m2020`` is the trust family below, not the simulator's family of that name):
 
 * ``paper``: the scenario's default errors;
 * ``noerr``: ``ErrorSettings.none()``;
@@ -18,7 +22,8 @@ Families (scene draw = seed; error settings; rover; texture):
 * ``mars-tex``: default errors, the terrain textured from real Mars navcam pictures
   (``$SCIPCTL_SHARED_REAL/05_dora_msl_navcam_left``).
 
-A ``.sim.json`` record beside it says the family, settings and the extra targets.
+A ``.sim.json`` record beside it says the family (``family``: the name given), settings and the extra targets;
+for a simulator family also ``scene_family``, the realised :class:`~scipctl.sim.families.SceneFamily`.
 """
 
 from __future__ import annotations
@@ -34,8 +39,15 @@ import numpy as np
 SCALED_FIELDS = ("mast_tilt_offset_rad", "mast_pan_offset_rad", "mast_tilt_axis_error_rad", "odometry_scale_sigma",
                  "odometry_scale_leg_sigma", "heading_drift_sigma_rad_per_m", "heading_noise_sigma_rad",
                  "turn_scale_sigma", "tilt_sensor_sigma_rad", "vibration_max_rad", "pointing_noise_frac")
-FAMILIES = ("paper", "noerr", "err05", "err2", "m2020", "mars-tex")
+TRUST_FAMILIES = ("paper", "noerr", "err05", "err2", "m2020", "mars-tex")
 SCENARIO = "paper"
+
+
+def family_names() -> list:
+    """Every FAMILY this script takes: the six trust families, then the simulator's other families."""
+    from scipctl.sim.families import FAMILIES as SIM_FAMILIES
+
+    return list(TRUST_FAMILIES) + [f for f in SIM_FAMILIES if f not in TRUST_FAMILIES]
 
 
 def scaled_errors(base, s: float):
@@ -45,7 +57,7 @@ def scaled_errors(base, s: float):
 
 
 def family_settings(family: str):
-    """(errors, rover, texture) of a family."""
+    """(errors, rover, texture) of one of the six trust families (``TRUST_FAMILIES``)."""
     from scipctl.sim.errors import ErrorSettings
     from scipctl.sim.scenarios import default_errors
 
@@ -66,7 +78,7 @@ def family_settings(family: str):
 
         texture = read_texture_sources(real / "05_dora_msl_navcam_left")
     elif family != "paper":
-        raise SystemExit(f"unknown family {family!r} (known: {', '.join(FAMILIES)})")
+        raise SystemExit(f"not a trust family: {family!r} (known: {', '.join(TRUST_FAMILIES)})")
     return errors, rover, texture
 
 
@@ -96,7 +108,7 @@ def render_some(sim, errors, seed: int, run: str, stops: set, supersample: int =
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("family", choices=FAMILIES)
+    ap.add_argument("family", choices=family_names())
     ap.add_argument("seed", type=int)
     ap.add_argument("run")
     ap.add_argument("out", type=Path)
@@ -111,8 +123,17 @@ def main(argv=None):
     from scipctl.sim.extra_targets import choose_extra_targets, extra_marks
     from scipctl.sim.scenarios import _rng
 
-    errors, rover, texture = family_settings(a.family)
-    sim = build_run(SCENARIO, a.run, a.seed, errors=errors, render=False, rover=rover, texture=texture)
+    scene_family = None
+    if a.family in TRUST_FAMILIES:
+        errors, rover, texture = family_settings(a.family)
+        sim = build_run(SCENARIO, a.run, a.seed, errors=errors, render=False, rover=rover, texture=texture)
+    else:
+        from scipctl.sim.families import family_of_run
+        from scipctl.sim.scenarios import default_errors
+
+        scene_family = family_of_run(a.family, SCENARIO, a.run, a.seed)
+        errors = default_errors(SCENARIO).scaled(scene_family.error_scale)  # what build_run uses for the family
+        sim = build_run(SCENARIO, a.run, a.seed, errors=errors, render=False, family=scene_family)
     pid = {(p.stop, p.camera, p.eye): p.product_id for p in sim.products}
     haz = pid[("near", "hazcam", "left")]
     req = [pid[("near", "hazcam", "right")], pid[("near", "navcam", "left")], pid[("near", "navcam", "right")]]
@@ -127,6 +148,8 @@ def main(argv=None):
                rendered_stops=["near", "far"],
                written_by={"tool": "scipctl", "version": __version__,
                            "regenerate": f"python scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"})
+    if scene_family is not None:
+        rec["scene_family"] = scene_family.to_dict()
     atomic_write_text(a.out / f"{name}.sim.json", json.dumps(rec, indent=1, sort_keys=True, default=str) + "\n")
     print(path)
 

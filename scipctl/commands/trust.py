@@ -22,6 +22,15 @@ def _sim_record(src: Path) -> dict:
         raise InputError(str(p), "sim record", "not JSON") from None
 
 
+def family_of_record(rec: dict) -> str:
+    """The family name of a ``.sim.json`` record: its ``family`` (a name, as ``scripts/trust_render.py`` writes
+    it, or a realised scene family, as ``synth --family`` writes it: its ``name``), else its scenario."""
+    fam = rec.get("family")
+    if isinstance(fam, dict):
+        fam = fam.get("name")
+    return str(fam or rec.get("scenario") or "unknown")
+
+
 def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool, products_root=None) -> None:
     """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically)."""
     from ..io.atomic import atomic_write_text
@@ -33,7 +42,7 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     con = stderr_console()
     for src, source in zip(srcs, sources):
         rec = _sim_record(Path(src))
-        fam = family or rec.get("family") or rec.get("scenario") or "unknown"
+        fam = family or family_of_record(rec)
         meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
         meta["downlink_sha256"] = source.downlink.source_sha256
         got = evidence_rows(source.downlink, Path(src).name, str(fam), meta)

@@ -83,7 +83,7 @@ def test_fit_trust_bad_table_is_exit_2(tmp_path):
 
 
 def test_packaged_model_is_reproduced_by_its_command(tmp_path, monkeypatch):
-    """Issue #14 item 6: `scipctl fit-trust tests/data/trust/evidence-24dl.jsonl.gz -o scipctl/data/trust_model.json`
+    """Issue #14 item 6: `scipctl fit-trust tests/data/trust/evidence-20dl-11fam.jsonl.gz -o scipctl/data/trust_model.json`
     (the command in the packaged model's provenance) makes the packaged file again: run from the repository root
     with the same arguments, only the output path differs, and it is not recorded in the fit."""
     packaged = ROOT / "scipctl/data/trust_model.json"
@@ -98,3 +98,12 @@ def test_packaged_model_is_reproduced_by_its_command(tmp_path, monkeypatch):
     got["provenance"]["command"] = want["provenance"]["command"]  # argv here is pytest's
     assert got == want
     assert trust_model_json(TrustModel.from_dict(got)) == packaged.read_text()  # and so the same bytes
+
+
+def test_family_of_a_sim_record():
+    from scipctl.commands.trust import family_of_record
+    from scipctl.sim.families import FAMILIES
+
+    assert family_of_record({"family": "err2", "scenario": "paper"}) == "err2"  # scripts/trust_render.py
+    assert family_of_record({"family": FAMILIES["low-sun"].to_dict(), "scenario": "paper"}) == "low-sun"  # synth --family
+    assert family_of_record({"scenario": "paper"}) == "paper" and family_of_record({}) == "unknown"

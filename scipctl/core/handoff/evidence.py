@@ -50,13 +50,14 @@ CANDIDATE_METHODS = tuple(METHOD_FAMILY)
 VIEWS = ("near", "far")
 
 # registration-check evidence in mesh-registration's diagnostics (issue #14 item 2), when present:
-# Evidence field suffix -> diagnostics key
+# Evidence field suffix -> (where, key, absolute value): "diag" a key of the diagnostics (the ICP of the chosen
+# answer), "check" a key of diagnostics["registration_check"] (core.registration_check.RegistrationEvidence)
 REGISTRATION_CHECK_KEYS = {
-    "fitness": "icp_fitness",
-    "rmse_m": "icp_rmse_m",
-    "global_agree_px": "global_agreement_px",
-    "seed_spread_px": "seed_spread_px",
-    "target_residual_m": "target_residual_m",
+    "fitness": ("diag", "icp_fitness", False),
+    "rmse_m": ("diag", "icp_rmse_m", False),
+    "global_agree_px": ("check", "global_px", False),  # global-seeded basin's answer against the chosen, at the target
+    "seed_spread_px": ("check", "spread_px", False),  # largest distance to another basin's answer at the target
+    "target_residual_m": ("check", "range_residual_m", True),  # |range - hazcam point stereo's range| at the answer
 }
 
 NAN = float("nan")
@@ -176,10 +177,11 @@ def target_view(case: HandoffCase, nav_uv, hparams: HandoffParams, sigma_floor_m
     T_reg = T_seed if isinstance(reg, Exception) else reg.T_target_source
     regd = {}
     if registration is not None:
-        for suffix, key in REGISTRATION_CHECK_KEYS.items():
-            v = registration.diagnostics.get(key)
+        check = registration.diagnostics.get("registration_check") or {}
+        for suffix, (where, key, absolute) in REGISTRATION_CHECK_KEYS.items():
+            v = (registration.diagnostics if where == "diag" else check).get(key)
             if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-                regd[suffix] = float(v)
+                regd[suffix] = abs(float(v)) if absolute else float(v)
     elif not isinstance(reg, Exception):
         regd = {"fitness": float(reg.fitness), "rmse_m": float(reg.inlier_rmse_m)}
     ps = case.point_stereo(nav_uv)

@@ -80,7 +80,7 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
         # dense stereo point whose range is nearest X's within residual_window_px, where every pixel there has one
         Cn = reg.T_target_source.apply(case.nav.left_model.C[None])[0]
         fb_h, fb_n = haz.dense.focal_baseline_px_m, case.nav.dense.focal_baseline_px_m
-        Xp = case.haz_point(uv, range_hint_m=float(np.linalg.norm(X - C)))
+        Xp = _haz_point_near(case, uv, float(np.linalg.norm(X - C)))
         if Xp is not None:
             ev.range_residual_m, ev.range_residual_sigmas = range_residual(
                 X, Xp, C, Cn, fb_h, fb_n, p.point_disparity_sigma_px, p.point_disparity_sigma_px)
@@ -104,6 +104,29 @@ def _surface_residuals(case: HandoffCase, reg: CheckedRegistration, X: np.ndarra
             signed = ((q[ok] - haz_pts[j[ok]]) * normals[j[ok]]).sum(axis=1)
             ev.local_residual_m = float(np.median(np.abs(signed)))
             ev.local_bias_m = float(np.median(signed))
+
+
+def _haz_point_near(case: HandoffCase, uv: np.ndarray, range_m: float):
+    """Hazcam point stereo at the hazcam-left pixel ``uv`` (2,), searched within
+    ``haz_point_stereo_range_frac`` of ``range_m`` (as :meth:`HandoffCase.haz_point` does with a range hint, but
+    cached under its own key, so that it never shares a cached result with the other methods): the point ``(3,)``
+    (hazcam rover frame) or None."""
+    from ..point_stereo import point_stereo
+
+    p = case.params
+    key = ("registration_check_haz_point", tuple(np.round(uv, 4)), round(range_m, 6))
+
+    def compute():
+        f = p.haz_point_stereo_range_frac
+        lo, hi = max(case.haz.min_range_m, (1 - f) * range_m), min(case.haz.max_range_m, (1 + f) * range_m)
+        if not lo < hi:  # the point is beyond the hazcam's stereo range: nothing to search
+            return None
+        ps = point_stereo(case.haz.left_img, case.haz.right_img, case.haz.left_model, case.haz.right_model, uv,
+                          band_px=p.point_stereo_band_px, window_px=p.haz_point_stereo_window_px,
+                          min_range_m=lo, max_range_m=hi)
+        return ps.xyz.copy() if ps.ok else None
+
+    return case.memo(key, compute)
 
 
 def _haz_dense_window(case: HandoffCase, uv: np.ndarray, radius_px: float) -> tuple[np.ndarray, float]:

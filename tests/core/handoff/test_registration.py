@@ -57,3 +57,15 @@ def test_a_seed_wrong_beyond_its_sigma_is_flagged(handoff_scene, rotvec, t_m):
         assert not r.ok and r.reason, (t.id, err)
         ev = RegistrationEvidence.from_dict(r.diagnostics["registration_check"])
         assert registration_verdict(ev, case.params.registration_check) == (False, r.reason)
+
+
+def test_a_registered_point_beyond_the_hazcams_range_has_no_point_stereo_and_no_error(handoff_scene):
+    """A wrong registration can put the target beyond the hazcam's stereo range (measured: 10.5 m on a report
+    scene, where the range window of the search was empty and point stereo raised): no evidence, no exception."""
+    from scipctl.core.handoff.registration import _haz_point_near
+
+    case = handoff_scene.cases["far"]
+    uv = handoff_scene.targets[0].haz_uv
+    assert _haz_point_near(case, uv, 2.0 * case.haz.max_range_m) is None
+    X = _haz_point_near(case, uv, float(np.linalg.norm(handoff_scene.targets[0].xyz_site_m - case.haz.left_model.C)))
+    assert X is not None and np.linalg.norm(X - handoff_scene.targets[0].xyz_site_m) < 0.02  # found at the truth

@@ -54,6 +54,33 @@ def test_evidence_prefers_the_true_pixel(correct_and_displaced):
         assert bad.app_near_offset_px > 2.0 or bad.app_near_score_at < good.app_near_score_at - 0.2
 
 
+def test_registration_check_reaches_the_evidence(handoff_scene):
+    """The registration check's evidence in mesh-registration's diagnostics (issue #14 item 2) becomes the
+    candidates' reg_* evidence, each from its key of REGISTRATION_CHECK_KEYS (a residual as its absolute value)."""
+    from scipctl.core.handoff.evidence import REGISTRATION_CHECK_KEYS
+    from scipctl.core.handoff.registration import mesh_registration
+
+    cases = handoff_scene.cases
+    hp = cases["near"].params
+    t = handoff_scene.targets[0]
+    reg = mesh_registration(cases["near"], t.nav_uv["near"], hp)
+    check = reg.diagnostics["registration_check"]
+    view = target_views(cases, t.nav_uv, hp, hp.scip, {"near": reg})["near"]
+    ev = candidate_evidence({"near": view}, [Candidate(np.asarray(t.haz_uv, float), [("mesh-registration", "near")])],
+                            0, hp.scip)
+    seen = 0
+    for suffix, (where, key, absolute) in REGISTRATION_CHECK_KEYS.items():
+        v = (reg.diagnostics if where == "diag" else check).get(key)
+        got = getattr(ev, f"reg_near_{suffix}")
+        if v is None:
+            assert math.isnan(got), suffix
+            continue
+        assert got == (abs(v) if absolute else v), suffix
+        seen += where == "check"
+    assert seen >= 1  # the check's evidence is there, not only ICP's fitness / RMS
+    assert math.isnan(ev.reg_far_fitness)  # no far registration given
+
+
 def test_packaged_model_gives_the_true_pixel_the_higher_probability(correct_and_displaced):
     from scipctl.io.trust_model import load_packaged_trust_model
 
