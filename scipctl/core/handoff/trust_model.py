@@ -23,9 +23,9 @@ import numpy as np
 
 # feature name -> (Evidence field, transform): the default feature set of a fit. Evidence kept out of it (measured
 # leave-one-family-out, docs/handoff.md "Trust: scip"): the NCC peak's ratio and sharpness (sharpness is per px^2,
-# so it moves with the image scale; neither helped held out) and the registration's fitness/RMS (one value per
-# downlink: 24 downlinks are too few to fit it on). OPTIONAL_FEATURES are there to be added when a refit has data
-# for them (the registration checks of issue #14 item 2).
+# so it moves with the image scale; neither helped held out), the registration's fitness/RMS (one value per
+# downlink: too few downlinks to fit it on) and the registration check's evidence of issue #14 item 2 (no gain
+# held out on the 20-downlink table). OPTIONAL_FEATURES are there to be added when a refit has more data.
 FEATURES: dict[str, tuple[str, str]] = {}
 OPTIONAL_FEATURES: dict[str, tuple[str, str]] = {}
 for _v in ("near", "far"):
