@@ -14,7 +14,7 @@ what an operator needs from that break, decided per case (the issue's point: no 
 * **a target occluded in the hazcam** (a textured disk on the left hazcam's line of sight to each target, ~40 cm
   or ~5 cm in front of it, hiding it from both hazcam eyes): the target cannot be seen, so no hazcam pixel is a
   right answer (the mark's pixel shows the occluder): every target must be NO-GO, and so must every candidate
-  (for the 5 cm occluder this held only after the session-7 refit: see NEAR_OCCLUDER_CANDIDATES_HISTORY);
+  (for the 5 cm occluder this holds only since the session-7 refit: the comment above OCCLUDERS);
 * **textureless sand** (no texture on the ground within 10 cm of the flat target, in every navcam and hazcam
   image): appearance cannot place the target inside the patch, geometry alone might: a GO must be right.
 
@@ -123,7 +123,6 @@ NEAR_OCCLUDER = (0.95, 0.03)  # ~5 cm in front: hazcam stereo still ranges it cl
 # at 0.90), refined-kinematic/far a look-alike 54 px away with p 0.964 (the geometry veto is for scip's own
 # answer). With the refit on evidence-20dl-11fam the highest candidate p is 0.834 (t1 mesh-registration/far),
 # 0.733 (t2), 0.042 (t3): NO-GO, but with 0.07 of margin; a refit that moves it back fails this test.
-NEAR_OCCLUDER_CANDIDATES_HISTORY = "see the comment above"
 OCCLUDERS = [pytest.param(FAR_OCCLUDER, id="occluder-40cm-in-front"),
              pytest.param(NEAR_OCCLUDER, id="occluder-5cm-in-front")]
 
