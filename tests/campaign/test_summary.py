@@ -41,11 +41,14 @@ def _make_store(tmp_path, with_trust: bool, n_per_family: int = 30):
             ch_err, ch_p, conf = float(rng.exponential(6.0)), float(rng.uniform()), float(rng.uniform())
             go = p > 0.5
             res.handoff = [_handoff(name, "t1", err, p if with_trust else None, go)]
-            step = {"error_px": ch_err, "mark_uv": [10.0, 20.0], "ok": True, "extra": {"final": True}}
+            step = {"camera": "hazcam", "error_px": ch_err, "mark_uv": [10.0, 20.0], "ok": True,
+                    "extra": {"final": True}}
+            first = {"camera": "navcam", "error_px": 1.0, "mark_uv": [1.0, 2.0], "ok": True, "extra": {}}
             if with_trust:
                 step.update(p_success=ch_p, go=ch_p > 0.5)
-            res.chains = [{"downlink": name, "target": "t1", "steps": [{"error_px": 1.0, "mark_uv": [1.0, 2.0], "ok": True, "extra": {}},
-                                                                          step]}]
+                # a tracking step's p_success is for the step model's radius in mm, not success_px: left out
+                first.update(p_success=0.3, go=False)
+            res.chains = [{"downlink": name, "target": "t1", "steps": [first, step]}]
             res.predictions = [{"target": "t1", "confidence": conf, "sequence_written": conf > 0.3}]
             res.seconds, res.cpu_s = {"total": 1.0 + i, "handoff": 0.5}, 2.0
             store.write(res)
@@ -77,7 +80,7 @@ def test_go_and_reliability_from_records_that_carry_them(tmp_path):
             assert b["n"] == len(inside)
             if inside:
                 assert math.isclose(b["observed"], sum(t[2] <= 4.0 for t in inside) / len(inside), rel_tol=1e-12)
-        # chain steps with p_success: both steps of a chain count only when they carry it (the final one here)
+        # chain steps with p_success: the hazcam handoffs only (scip's p is for success_px; the tracking steps' is not)
         steps = sec["reliability"]["chain_steps"]
         assert math.isclose(steps["brier"], _brier([(t[5], t[4] <= 4.0) for t in rows]), rel_tol=1e-12)
         assert sec["go"]["chain_final"]["n"] == len(rows)
