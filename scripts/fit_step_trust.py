@@ -135,6 +135,23 @@ def cmd_fit(args) -> None:
             all_fit += fits
             report["fit"][fam] = _summary(fits)
         report["held_out"]["pooled"] = {"chains": _summary(all_out), "steps": _step_stats(pairs, go_min_p)}
+        # the simple rule the model must beat: GO = the chain's own ok flag and a confirmed feature match (or the
+        # same-stop IFOV-scaled handoff); p = 1 / 0
+        report["rule"] = {}
+        rule_all, rule_pairs_all = [], []
+        for fam in ho:
+            outs, rp = [], []
+            for c in fam_chains[fam]:
+                pc = [None if s.evidence is None else float(s.answered and s.evidence.ok == 1.0 and (
+                    s.evidence.status_confirmed == 1.0 or s.evidence.same_stop == 1.0)) for s in c.steps]
+                pc = [p if s.kind != "hazcam-handoff" else s.p_scip for p, s in zip(pc, c.steps)]
+                outs.append(judge_chain(c, pc, 0.5, success_mm))
+                rp += [(p, step_within(s, success_mm)) for p, s in zip(pc, c.steps)
+                       if s.evidence is not None and s.answered and step_within(s, success_mm) is not None]
+            rule_all += outs
+            rule_pairs_all += rp
+            report["rule"][fam] = {"chains": _summary(outs), "steps": _step_stats(rp, 0.5)}
+        report["rule"]["pooled"] = {"chains": _summary(rule_all), "steps": _step_stats(rule_pairs_all, 0.5)}
         report["fit"]["pooled"] = _summary(all_fit)
         report["misses_not_caught"] = [
             {"family": c.family, "downlink": c.downlink, "target": c.target, "final_error_px": o.final_error_px,

@@ -103,3 +103,18 @@ def test_no_trust_fields_means_no_go_tables_and_no_handoff_reliability(tmp_path)
     assert s["overall"]["reliability"]["prediction_vs_chain"]["n"] == 6  # confidence is there without the trust work
     js, page = write_summary(store, s)
     assert "GO / NO-GO" not in page.read_text()
+
+
+def test_chain_go_is_the_chains_verdict_when_recorded():
+    """A chain record with its verdict (``go``: every step up to the final hazcam answer GO) counts as that, not
+    as its final step's GO: a GO hazcam handoff after a NO-GO track is a NO-GO chain."""
+    from scipctl.campaign.summary import _section
+
+    job = DownlinkJob("d", "flat", "0" * 64)
+    res = DownlinkResult(job, job_key(job.input_sha256, OPTIONS.key()))
+    haz = {"camera": "hazcam", "error_px": 9.0, "mark_uv": [1.0, 1.0], "ok": True, "extra": {"final": True},
+           "p_success": 0.99, "go": True}
+    res.chains = [{"downlink": "d", "target": "t1", "steps": [haz], "go": False, "advice": "new image at this stop"},
+                  {"downlink": "d", "target": "t2", "steps": [dict(haz, error_px=1.0)], "go": True}]
+    go = _section([res], 4.0)["go"]["chain_final"]
+    assert (go["nogo_miss"], go["go_success"], go["go_miss"], go["nogo_success"]) == (1, 1, 0, 0)
