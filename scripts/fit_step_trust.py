@@ -44,10 +44,22 @@ def cmd_table(args) -> None:
             if header.get("status") != "ok":
                 continue
             fam = _family(header, dirs)
+            path = (header.get("job") or {}).get("path")
+            # a downlink file is named by its folder too (scenes/def1/paper-s1-arc.mcap and def2's differ)
+            name = f"{Path(path).parent.name}/{Path(path).name}" if path else str(header.get("downlink"))
             for rec in lines[1:]:
                 if rec.get("kind") == "chain":
-                    rows.append(chain_row(rec["record"], fam))
+                    row = chain_row(rec["record"], fam)
+                    row.downlink = name
+                    rows.append(row)
     rows.sort(key=lambda c: (c.family, c.downlink, c.target))
+    # the same downlink run by two campaigns: its first chains only
+    seen, unique = set(), []
+    for c in rows:
+        if (c.downlink, c.target) not in seen:
+            seen.add((c.downlink, c.target))
+            unique.append(c)
+    rows = unique
     text = "".join(json.dumps(c.to_dict(), sort_keys=True, allow_nan=False) + "\n" for c in rows)
     Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
     fams = {}
@@ -168,8 +180,38 @@ def cmd_fit(args) -> None:
                                           "observed": float(yy[m].mean()) if m.any() else None})
         report["coef"] = dict(zip(model.features, model.coef))
         Path(args.report).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+        if args.markdown:
+            print(markdown(report))
     print(json.dumps({"out": str(args.out), "go_min_p": go_min_p, "success_mm": success_mm, "steps": int(len(y))}),
           file=sys.stderr)
+
+
+def _pct(a, b) -> str:
+    return "-" if not b else f"{a} / {b} ({100.0 * a / b:.0f} %)"
+
+
+def _rate(x) -> str:
+    return "-" if x is None else f"{100.0 * x:.0f} %"
+
+
+def markdown(report: dict) -> str:
+    """The report's held-out and rule tables as markdown (docs/stereo-and-tracking.md)."""
+    out = ["| family held out | chains | final hazcam answer | within 4 px | median final px | GO chains (within 4 px) "
+           "| misses | misses NO-GO at or before the wrong step | tracking steps | GO steps (within) | GO precision "
+           "| miss recall | Brier | rule: GO steps (within), miss recall | rule: misses caught |",
+           "|" + "---|" * 15]
+    for fam, sec in report["held_out"].items():
+        c, st = sec["chains"], sec["steps"]
+        rc, rs = report["rule"][fam]["chains"], report["rule"][fam]["steps"]
+        med = "-" if c["median_final_px"] is None else f"{c['median_final_px']:.2f}"
+        name = f"**{fam}**" if fam == "pooled" else fam
+        out.append(
+            f"| {name} | {c['chains']} | {c['final_answers']} | {_pct(c['within_4px'], c['chains'])} | {med} "
+            f"| {c['go']} ({c['go_within']}) | {c['misses']} | {_pct(c['misses_caught'], c['misses'])} "
+            f"| {st['steps']} | {st['go']} ({st['go_within']}) | {_rate(st['go_precision'])} "
+            f"| {_rate(st['miss_recall'])} | {st['brier']:.3f} | {rs['go']} ({rs['go_within']}), "
+            f"{_rate(rs['miss_recall'])} | {_pct(rc['misses_caught'], rc['misses'])} |")
+    return "\n".join(out)
 
 
 def main(argv=None) -> None:
@@ -183,6 +225,7 @@ def main(argv=None) -> None:
     f.add_argument("table")
     f.add_argument("-o", "--out", required=True)
     f.add_argument("--report")
+    f.add_argument("--markdown", action="store_true", help="with --report: its tables as markdown on stdout")
     args = ap.parse_args(argv)
     {"table": cmd_table, "fit": cmd_fit}[args.cmd](args)
 
