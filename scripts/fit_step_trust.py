@@ -103,14 +103,14 @@ def _step_stats(pairs: list, t: float) -> dict:
 def cmd_fit(args) -> None:
     from scipctl.io.provenance import provenance
     from scipctl.io.step_trust_model import step_trust_model_json
-    from scipctl.pipeline.step_trust_fit import (C_REG, GO_PRECISION, choose_threshold, fit_logistic, held_out,
-                                                 judge_chain, step_within, success_mm_of, training_steps)
+    from scipctl.pipeline.step_trust_fit import (C_REG, choose_threshold, fit_logistic, held_out, judge_chain,
+                                                 step_within, success_mm_of, training_steps)
 
     chains = read_table(args.table)
     success_mm = success_mm_of(chains)
     ho = held_out(chains, success_mm)
     fam_chains = {f: [c for c in chains if c.family == f] for f in ho}
-    # held-out (p, outcome) of every tracking step with a pixel and a mark: the GO threshold is chosen on them
+    # held-out (p, outcome) of every tracking step with a pixel and a mark
     pairs, per_fam_pairs = [], {}
     for fam, (_, probs) in ho.items():
         per_fam_pairs[fam] = []
@@ -122,13 +122,14 @@ def cmd_fit(args) -> None:
                 if w is not None:
                     per_fam_pairs[fam].append((p, w))
         pairs += per_fam_pairs[fam]
-    go_min_p = choose_threshold(pairs)
+    go_min_p = choose_threshold(chains, ho, success_mm)
     ev, y, fams = training_steps(chains, success_mm)
     counts = {f: sum(1 for x in fams if x == f) for f in sorted(set(fams))}
     prov = provenance({"table0": str(args.table)}, deterministic=True)
     import sklearn
 
-    prov.update({"C": C_REG, "go_precision": GO_PRECISION, "n_steps": int(len(y)), "n_chains": len(chains),
+    prov.update({"C": C_REG, "go_rule": "smallest p in 0.50..0.99 at which every held-out missing chain is NO-GO "
+                                        "at or before the step where it went wrong", "n_steps": int(len(y)), "n_chains": len(chains),
                  "per_family_steps": counts, "training_families": sorted(counts), "scikit_learn": sklearn.__version__,
                  "success_mm": success_mm, "command": "python scripts/fit_step_trust.py fit " + " ".join(
                      [str(args.table), "-o", str(args.out)])})

@@ -22,9 +22,9 @@ from ..core.handoff.trust_model import feature_matrix
 
 C_REG = 0.1  # inverse L2 strength on standardised features (the scip model's; ~500 steps from ~40 downlinks)
 CLIP_Z = 5.0
-# GO threshold: the smallest p on GO_GRID whose held-out GO steps are within success_mm at least GO_PRECISION of the
-# time. A NO-GO step costs the operator an image or a fall-back; a false GO may cost the arm placement
-GO_PRECISION = 0.97
+# GO threshold: the smallest p on GO_GRID at which every held-out chain that misses (final hazcam answer not within
+# 4 px, or none) is NO-GO at or before the step where it went wrong -- issue #14's requirement for the chain, chosen
+# on the leave-one-family-out probabilities (so the held-out figure at that threshold is not independent of it)
 GO_GRID = tuple(round(0.50 + 0.01 * i, 2) for i in range(50))  # 0.50 .. 0.99
 SIG = 10  # significant digits kept in the model file (bit-for-bit reproducible across BLAS builds)
 HAZCAM_SUCCESS_PX = 4.0
@@ -204,14 +204,19 @@ def chain_probabilities(c: ChainRow, model: StepTrustModel) -> list:
     return out
 
 
-def choose_threshold(pairs: list, precision: float = GO_PRECISION, grid=GO_GRID) -> float:
-    """The smallest p on ``grid`` whose GO steps among ``pairs`` ((p, outcome) of held-out tracking steps) are
-    right at least ``precision`` of the time (the grid's top when none is)."""
-    p = np.array([a for a, _ in pairs], float)
-    y = np.array([b for _, b in pairs], bool)
+def choose_threshold(chains: list, held: dict, success_mm: float, grid=GO_GRID) -> float:
+    """The smallest p on ``grid`` at which every chain of ``chains`` that misses is NO-GO at or before the step
+    where it went wrong, each family's steps scored by ``held`` (:func:`held_out`); the grid's top when none."""
     for t in grid:
-        go = p >= t
-        if go.any() and y[go].mean() >= precision:
+        ok = True
+        for fam, (_, probs) in held.items():
+            for c, pc in zip([c for c in chains if c.family == fam], probs):
+                if not judge_chain(c, pc, t, success_mm).caught:
+                    ok = False
+                    break
+            if not ok:
+                break
+        if ok:
             return float(t)
     return float(grid[-1])
 
