@@ -244,6 +244,8 @@ class ChainOutcome:
 def judge_chain(c: ChainRow, probs: list, go_min_p: float, success_mm: float) -> ChainOutcome:
     """:class:`ChainOutcome` of ``c`` with step probabilities ``probs`` (tracking steps GO at ``go_min_p``, the
     hazcam handoff at scip's GO, the designation GO), by the rule of :func:`~scipctl.pipeline.chain_trust.chain_verdict`."""
+    if not c.steps:  # the chain stopped on its designation (no stereo there): NO-GO, wrong, at step 0
+        return ChainOutcome(c.family, None, False, False, 0, 0)
     final = next((i for i, s in enumerate(c.steps) if s.final), None)
     upto = c.steps if final is None else c.steps[: final + 1]
     first_nogo, wrong_at = None, None
