@@ -139,13 +139,15 @@ def test_every_step_has_p_success_and_go(chains):
         assert v.go == all(s.go for s in steps)
 
 
-def test_a_blank_navcam_image_makes_its_step_nogo_with_advice(dl):
-    """Forced failure: the navcam image at the middle stop replaced by a flat grey one (nothing to track). That
-    step is NO-GO and says take a new image at this stop; the chain is NO-GO from that step on."""
+def test_a_blank_navcam_image_makes_its_step_nogo_with_advice():
+    """Forced failure (paper-s1-straight t2, every track confirmed as it is): the navcam image at the middle stop
+    replaced by a flat grey one (nothing to track). That step is NO-GO and says take a new image at this stop; the
+    chain is NO-GO from that step on."""
     import dataclasses
 
     from scipctl.pipeline.chain_trust import NEW_IMAGE, chain_verdict
 
+    dl = read_downlink(SAMPLES[0])
     navs = sorted((im for im in dl.images if im.camera == "navcam" and im.eye == "left"), key=lambda i: i.time_s)
     mid = navs[1]  # navcams at 4.5 m (the handoff), ~3 m (this one), ~1.7 m
     flat = np.full_like(mid.pixels, int(np.median(mid.pixels)))
