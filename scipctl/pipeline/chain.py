@@ -134,6 +134,7 @@ class ChainStep:
     ``xyz_site_m``: point stereo at the tracked pixel, site frame through the downlinked pose;
     ``truth_xyz_site_m``: the true target (simulation truth). ``ok`` False: a weak or unverified step
     (``reason``), not used as the next stop's reference. ``extra``: how it was found (docs/stereo-and-tracking.md).
+    ``p_success``/``go``/``advice``: the step's trust (:mod:`scipctl.pipeline.chain_trust`).
     """
 
     position: tuple  # (site, drive)
