@@ -149,7 +149,7 @@ def simulate_handoff(
     near: Optional[str] = typer.Option(None, "--near", help="Left near-navcam product id."),
     far: Optional[str] = typer.Option(None, "--far", help="Left far-navcam product id."),
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
-    chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation."),
+    chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation (each step with p_success and GO)."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
     trust_model: Optional[Path] = typer.Option(None, "--trust-model", help="scip's trust model (scipctl fit-trust; default: the packaged one)."),
     products_dir: Optional[Path] = _products_dir_option(),
@@ -157,7 +157,8 @@ def simulate_handoff(
 ):
     """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline.
 
-    Exit code 1 when scip's answer for any requested target is NO-GO (p_success under its GO threshold)."""
+    Exit code 1 when scip's answer for any requested target is NO-GO (p_success under its GO threshold), or
+    with --chain when a requested target's chain ends NO-GO (a step NO-GO, or no final hazcam answer)."""
     from .commands import handoff as command
 
     command.simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,

@@ -120,9 +120,13 @@ def _section(results: list, success_px: float) -> dict:
             fs = final_step(ch.get("steps") or [])
             finals[(res.job.job_id, ch["target"])] = fs
             for s in ch.get("steps") or []:
-                if s.get("p_success") is not None:
+                # the hazcam handoffs' p_success is for success_px (scip's); the tracking steps' is for the step
+                # model's success_mm (pipeline/chain_trust.py), not comparable with success_px
+                if s.get("p_success") is not None and s.get("camera") == "hazcam":
                     rel_steps.append((s["p_success"], step_success(s, success_px)))
-            if fs is not None and fs.get("go") is not None:
+            if ch.get("go") is not None:  # the chain's verdict: every step up to the final hazcam answer GO
+                go_chain.append((ch["go"], step_success(fs, success_px), None if fs is None else fs.get("error_px")))
+            elif fs is not None and fs.get("go") is not None:
                 go_chain.append((fs["go"], step_success(fs, success_px), fs.get("error_px")))
     scored = {k: step_success(f, success_px) for k, f in finals.items()}
     scored = {k: v for k, v in scored.items() if v is not None}

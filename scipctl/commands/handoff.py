@@ -126,18 +126,25 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     }
     if chain:
         doc["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in chains]
-    # scip's NO-GO answers: the command's answer is "no" (exit 1)
+    # scip's NO-GO answers, and chains that end NO-GO: the command's answer is "no" (exit 1)
     nogo = [f"{r.downlink}:{r.target}" for r in records if r.method == "scip" and not r.go]
-    if json_out and not nogo:
+    nogo_chains = [f"{c['downlink']}:{c['target']}" for c in chains if not c.get("go")]
+    if json_out and not nogo and not nogo_chains:
         emit_json(doc)
     _print_table(con, rows, records)
     if chain:
         _print_chains(con, chains)
-    if nogo:
+    if nogo or nogo_chains:
         from ..errors import CommandFailed
 
-        raise CommandFailed(f"scip: NO-GO for {len(nogo)} of {sum(r.method == 'scip' for r in records)} targets "
-                            f"({', '.join(nogo[:6])}{', ...' if len(nogo) > 6 else ''})", payload=doc)
+        parts = []
+        if nogo:
+            parts.append(f"scip: NO-GO for {len(nogo)} of {sum(r.method == 'scip' for r in records)} targets "
+                         f"({', '.join(nogo[:6])}{', ...' if len(nogo) > 6 else ''})")
+        if nogo_chains:
+            parts.append(f"chain: NO-GO for {len(nogo_chains)} of {len(chains)} chains "
+                         f"({', '.join(nogo_chains[:6])}{', ...' if len(nogo_chains) > 6 else ''})")
+        raise CommandFailed("; ".join(parts), payload=doc)
 
 
 def _print_table(con, rows, records):
@@ -162,15 +169,22 @@ def _print_chains(con, chains):
 
     for ch in chains:
         tab = Table(title=f"{ch['downlink']} target {ch['target']}: tracking chain")
-        for c in ("stop", "camera", "kind", "tracked uv", "mark uv", "err px", "range m", "3-D err m", "trust"):
+        for c in ("stop", "camera", "kind", "tracked uv", "mark uv", "err px", "range m", "3-D err m", "p", "GO",
+                  "trust"):
             tab.add_column(c)
         for s in ch["steps"]:
             f2 = lambda v: "-" if v is None else f"{v[0]:.1f},{v[1]:.1f}"  # noqa: E731
             tab.add_row(f"{s.position[0]}/{s.position[1]}", s.camera, s.kind, f2(s.tracked_uv), f2(s.mark_uv),
                         "-" if s.error_px is None else f"{s.error_px:.2f}",
                         "-" if s.range_m is None else f"{s.range_m:.2f}",
-                        "-" if s.error_3d_m is None else f"{s.error_3d_m:.3f}", _trust(s))
+                        "-" if s.error_3d_m is None else f"{s.error_3d_m:.3f}",
+                        "-" if s.p_success is None else f"{s.p_success:.2f}",
+                        "GO" if s.go else f"NO-GO: {s.advice}", _trust(s))
         con.print(tab)
+        if ch.get("error"):
+            con.print(f"chain: {ch['error']}")
+        con.print(f"chain {'GO' if ch.get('go') else 'NO-GO'}"
+                  + ("" if ch.get("go") else f": {ch.get('advice')} ({ch.get('why')})"))
 
 
 def _trust(step) -> str:

@@ -326,10 +326,13 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         if t["chain"]:
             add("<h3>Tracking chain through the downlink's stops</h3>")
             add(_table(["stop", "camera", "kind", "chain prediction", "tracked", "mark", "error px", "NCC", "range m",
-                        "3-D error m", "note"],
+                        "3-D error m", "p_success", "GO", "note"],
                        [[f"{s.position[0]}/{s.position[1]}", _e(s.camera), _e(s.kind), _uv(s.predicted_uv),
                          _uv(s.tracked_uv), _uv(s.mark_uv), _f(s.error_px, 2), _f(s.ncc_peak),
-                         _f(s.range_m), _f(s.error_3d_m, 3), _e(s.reason or "")] for s in t["chain"]]))
+                         _f(s.range_m), _f(s.error_3d_m, 3), _f(s.p_success),
+                         '<span class="ok">GO</span>' if s.go else
+                         '<span class="bad">NO-GO: ' + _e(s.advice or "") + "</span>",
+                         _e(s.reason or "")] for s in t["chain"]]))
         if t["handoff"]:
             add("<h3>Handoff predictions for this target</h3>")
             add(_table(["method", "navcam", "predicted", "true", "error px", "success", "note"],

@@ -134,6 +134,7 @@ class ChainStep:
     ``xyz_site_m``: point stereo at the tracked pixel, site frame through the downlinked pose;
     ``truth_xyz_site_m``: the true target (simulation truth). ``ok`` False: a weak or unverified step
     (``reason``), not used as the next stop's reference. ``extra``: how it was found (docs/stereo-and-tracking.md).
+    ``p_success``/``go``/``advice``: the step's trust (:mod:`scipctl.pipeline.chain_trust`).
     """
 
     position: tuple  # (site, drive)
@@ -152,6 +153,11 @@ class ChainStep:
     ok: bool
     reason: str = ""
     extra: dict = field(default_factory=dict)
+    # P(within the step's success radius of its mark) and p >= the GO threshold (docs/stereo-and-tracking.md,
+    # "Trust along the chain"); None / False: not scored. ``advice``: what the operator should do at a NO-GO step.
+    p_success: Optional[float] = None
+    go: bool = False
+    advice: Optional[str] = None
 
     def to_dict(self):
         d = dict(self.__dict__)
@@ -180,13 +186,16 @@ class ChainStep:
             xyz_site_m=r.vector("xyz_site_m", 3, required=True, kind=list),
             truth_xyz_site_m=r.vector("truth_xyz_site_m", 3, required=True, kind=list),
             error_3d_m=r.number("error_3d_m", required=True), ok=ok, reason=r.text("reason") or "",
-            extra=r.mapping("extra") or {})
+            extra=r.mapping("extra") or {}, p_success=r.number("p_success"),
+            go=bool(r.flag("go")), advice=r.text("advice"))
 
 
 _f = finite_or_none
 
 
-def _stereo(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
+def stereo_at(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
+    """Point stereo at the left-image pixel ``uv`` (2,) with the chain's band and window for that camera (rover
+    frame); None when ``left`` has no right eye."""
     from ..core.point_stereo import point_stereo
 
     right = dl.stereo_pair(left)
@@ -198,8 +207,8 @@ def _stereo(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
 
 
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
-              handoff_method: str = "consensus", template_mode: str = "plane", handoff_at: str = "every",
-              params: Optional[ChainParams] = None) -> list:
+              handoff_method: str = "scip", template_mode: str = "plane", handoff_at: str = "every",
+              params: Optional[ChainParams] = None, step_model=None, setups: Optional[dict] = None) -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
     ``template_mode``: ``"plane"`` (default) renders the previous stop's image
@@ -213,7 +222,9 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     from a pancam image at an earlier stop (the 4.5 m pancam track was not
     trusted) goes through the feature path. Returns the list of
     :class:`ChainStep`; the last step is the navcam->hazcam handoff by
-    ``handoff_method`` (near navcams) when a hazcam pair exists.
+    ``handoff_method`` when a hazcam pair exists: ``scip`` (default) from the chain's navcam pixel at that stop
+    and its last verified navcam pixel at an earlier stop (:func:`~scipctl.pipeline.chain_handoff.hazcam_handoff`),
+    another method from the near navcams alone.
     ``handoff_at``: at which stops with hazcam images the navcam->hazcam
     handoff is made: ``"every"`` (default; the navcam track goes on through
     all stops, each handoff is a step, the last one has ``extra["final"]``
@@ -222,6 +233,11 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     ``ok=False`` whose ``reason`` starts ``weak match`` or ``unverified`` has a
     pixel that is reported but not used as the next stop's reference.
     ``params``: window sizes and feature settings (:class:`ChainParams`, checked).
+    Every step gets ``p_success``/``go`` (and ``advice`` when NO-GO): the tracking steps from ``step_model``
+    (:class:`~scipctl.core.step_trust.StepTrustModel`; None: the packaged one), the hazcam handoff from
+    ``scip`` (:mod:`scipctl.pipeline.chain_trust`). ``setups``: a dict shared by the chains of one downlink,
+    where the hazcam handoffs keep their :class:`~scipctl.pipeline.handoff.HandoffSetup` by product ids (dense
+    stereo and registrations do not depend on the target: computed once, the same answers).
     """
     params = (params or ChainParams()).check()
     if template_mode not in ("plane", "scale"):
@@ -230,6 +246,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         raise ValueError(f"handoff_at must be 'every', 'last' or 'first', got {handoff_at!r}")
     from ..core.tracking import track
     from ..core.windows import extract_window, scale_window, window_scale_for_handoff
+    from .chain_handoff import far_reference, hazcam_handoff
 
     tgt = None
     truth_xyz = None
@@ -261,15 +278,21 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 # in the rover frame, where stereo measures it (the site-frame error is mostly pose-estimate error)
                 X_true_rover = tp.pose.T_site_rover.inverse().apply(truth_xyz)
                 e3 = float(np.linalg.norm(np.asarray(ps.xyz, float) - X_true_rover))
+        # the target's footprint of one pixel of this image (its stereo range, else the current estimate's):
+        # how the chain's trust compares pixel errors of different cameras and ranges (chain_trust.py)
+        est = rng if rng is not None else float(np.linalg.norm(
+            prod.pose.T_site_rover.inverse().apply(X_site) - prod.camera_model.C))
+        extra = dict(extra or {})
+        extra["px_mm"] = None if est is None else _f(1000.0 * est / prod.camera_model.hs)
         return ChainStep(prod.position, prod.camera, prod.product_id, kind,
                          None if pred is None else [float(x) for x in pred],
                          None if uv is None else [float(x) for x in uv], mk, err, _f(ncc), rng,
                          None if xyz_site is None else xyz_site.tolist(),
-                         None if truth_xyz is None else truth_xyz.tolist(), e3, ok, reason, extra or {})
+                         None if truth_xyz is None else truth_xyz.tolist(), e3, ok, reason, extra)
 
     steps = []
     uv = np.asarray(start_uv, float)
-    ps = _stereo(dl, start, uv, params)
+    ps = stereo_at(dl, start, uv, params)
     if ps is None or not ps.ok:
         reason = "no right eye" if ps is None else ps.reason
         raise InputError(start.product_id, "pixel", f"designation has no stereo: {reason}")
@@ -358,7 +381,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             if not tr.ok or not np.all(np.isfinite(tr.uv)):
                 steps.append(step(prod, kind, pred, None, None, tr.score, ok=False, reason=f"track: {tr.reason}"))
                 continue
-            ps = _stereo(dl, prod, tr.uv, params)
+            ps = stereo_at(dl, prod, tr.uv, params)
             ok = ps is not None and ps.ok
             reasons = [] if ok else ["no right eye" if ps is None else f"stereo: {ps.reason}"]
             weak = False
@@ -393,13 +416,23 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             prev, prev_uv, cam = prod, tr.uv, c
         if "hazcam" in lefts and cam == "navcam" and prev.position == pos:
             if handoff_at != "last" or pos == haz_positions[-1]:
-                steps.append(_hazcam_handoff(dl, prev, prev_uv, lefts["hazcam"], handoff_method, step, params))
+                haz = lefts["hazcam"]
+                steps.append(hazcam_handoff(dl, prev, prev_uv, haz, handoff_method, step,
+                                            lambda uv, _h=haz: stereo_at(dl, _h, uv, params),
+                                            far=far_reference(steps, pos), target_id=target_id, setups=setups))
             if handoff_at == "first":
                 break
     handoffs = [s for s in steps if s.camera == "hazcam" and s.kind == "handoff"]
     for s in handoffs:
         s.extra["final"] = s is handoffs[-1]
     _mark_after_unverified(steps)
+    from .chain_trust import score_steps
+
+    if step_model is None:
+        from ..io.step_trust_model import load_packaged_step_trust_model
+
+        step_model = load_packaged_step_trust_model()
+    score_steps(steps, step_model)
     return steps
 
 
@@ -565,16 +598,3 @@ def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-
             return x_new
         x = x_new
     return x
-
-
-def _hazcam_handoff(dl, nav, nav_uv, haz, method, step, params: ChainParams):
-    from ..core.handoff import run_method
-    from .handoff import build_setup
-
-    setup = build_setup(dl, hazcam=haz.product_id, near=nav.product_id, shared=True)
-    case = setup.cases["near"]
-    res = run_method(case, method, nav_uv)
-    uv = res.uv if res.uv is not None and np.all(np.isfinite(res.uv)) else None
-    ps = _stereo(dl, haz, uv, params) if uv is not None else None
-    return step(haz, "handoff", None, uv, ps, res.diagnostics.get("ncc_peak"), ok=uv is not None,
-                reason=res.reason, extra={"method": method, "navcam": "near", "reference": nav.product_id})

@@ -11,15 +11,18 @@ from ..model import Downlink
 
 def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = None) -> list:
     """One entry per target marked in the first left pancam image (or only the target ``only``):
-    ``{"downlink", "target", "steps": [ChainStep, ...]}``, or with ``"error"`` (one line) and no steps
-    when the chain stops on bad input. Empty when the downlink has no left pancam image."""
+    ``{"downlink", "target", "steps": [ChainStep, ...], "go", "nogo_step", "advice", "why"}`` (the chain's
+    verdict, :func:`~scipctl.pipeline.chain_trust.chain_verdict`), or with ``"error"`` (one line), no steps and
+    ``go`` False when the chain stops on bad input. Empty when the downlink has no left pancam image."""
     from .chain import run_chain
+    from .chain_trust import REDESIGNATE, chain_verdict
 
     out = []
     starts = sorted((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
     if not starts:
         return out
     start = starts[0]
+    setups = {}  # the hazcam handoffs' setups, shared by the targets (same products, same answers)
     for t in dl.targets:
         if only and t.id != only:
             continue
@@ -27,8 +30,10 @@ def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = No
         if mk is None:
             continue
         try:
-            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id)
-            out.append({"downlink": downlink_name, "target": t.id, "steps": steps})
+            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups)
+            out.append({"downlink": downlink_name, "target": t.id, "steps": steps,
+                        **chain_verdict(steps).to_dict()})
         except InputError as e:
-            out.append({"downlink": downlink_name, "target": t.id, "error": str(e), "steps": []})
+            out.append({"downlink": downlink_name, "target": t.id, "error": str(e), "steps": [], "go": False,
+                        "nogo_step": 0, "advice": REDESIGNATE, "why": str(e)})
     return out

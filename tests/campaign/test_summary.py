@@ -41,11 +41,14 @@ def _make_store(tmp_path, with_trust: bool, n_per_family: int = 30):
             ch_err, ch_p, conf = float(rng.exponential(6.0)), float(rng.uniform()), float(rng.uniform())
             go = p > 0.5
             res.handoff = [_handoff(name, "t1", err, p if with_trust else None, go)]
-            step = {"error_px": ch_err, "mark_uv": [10.0, 20.0], "ok": True, "extra": {"final": True}}
+            step = {"camera": "hazcam", "error_px": ch_err, "mark_uv": [10.0, 20.0], "ok": True,
+                    "extra": {"final": True}}
+            first = {"camera": "navcam", "error_px": 1.0, "mark_uv": [1.0, 2.0], "ok": True, "extra": {}}
             if with_trust:
                 step.update(p_success=ch_p, go=ch_p > 0.5)
-            res.chains = [{"downlink": name, "target": "t1", "steps": [{"error_px": 1.0, "mark_uv": [1.0, 2.0], "ok": True, "extra": {}},
-                                                                          step]}]
+                # a tracking step's p_success is for the step model's radius in mm, not success_px: left out
+                first.update(p_success=0.3, go=False)
+            res.chains = [{"downlink": name, "target": "t1", "steps": [first, step]}]
             res.predictions = [{"target": "t1", "confidence": conf, "sequence_written": conf > 0.3}]
             res.seconds, res.cpu_s = {"total": 1.0 + i, "handoff": 0.5}, 2.0
             store.write(res)
@@ -77,7 +80,7 @@ def test_go_and_reliability_from_records_that_carry_them(tmp_path):
             assert b["n"] == len(inside)
             if inside:
                 assert math.isclose(b["observed"], sum(t[2] <= 4.0 for t in inside) / len(inside), rel_tol=1e-12)
-        # chain steps with p_success: both steps of a chain count only when they carry it (the final one here)
+        # chain steps with p_success: the hazcam handoffs only (scip's p is for success_px; the tracking steps' is not)
         steps = sec["reliability"]["chain_steps"]
         assert math.isclose(steps["brier"], _brier([(t[5], t[4] <= 4.0) for t in rows]), rel_tol=1e-12)
         assert sec["go"]["chain_final"]["n"] == len(rows)
@@ -100,3 +103,18 @@ def test_no_trust_fields_means_no_go_tables_and_no_handoff_reliability(tmp_path)
     assert s["overall"]["reliability"]["prediction_vs_chain"]["n"] == 6  # confidence is there without the trust work
     js, page = write_summary(store, s)
     assert "GO / NO-GO" not in page.read_text()
+
+
+def test_chain_go_is_the_chains_verdict_when_recorded():
+    """A chain record with its verdict (``go``: every step up to the final hazcam answer GO) counts as that, not
+    as its final step's GO: a GO hazcam handoff after a NO-GO track is a NO-GO chain."""
+    from scipctl.campaign.summary import _section
+
+    job = DownlinkJob("d", "flat", "0" * 64)
+    res = DownlinkResult(job, job_key(job.input_sha256, OPTIONS.key()))
+    haz = {"camera": "hazcam", "error_px": 9.0, "mark_uv": [1.0, 1.0], "ok": True, "extra": {"final": True},
+           "p_success": 0.99, "go": True}
+    res.chains = [{"downlink": "d", "target": "t1", "steps": [haz], "go": False, "advice": "new image at this stop"},
+                  {"downlink": "d", "target": "t2", "steps": [dict(haz, error_px=1.0)], "go": True}]
+    go = _section([res], 4.0)["go"]["chain_final"]
+    assert (go["nogo_miss"], go["go_success"], go["go_miss"], go["nogo_success"]) == (1, 1, 0, 0)

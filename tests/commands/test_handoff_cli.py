@@ -87,14 +87,18 @@ def test_missing_and_corrupt_inputs_exit_2(tmp_path):
 
 def test_chain_option_reports_every_step_against_the_marks(sol):
     """--chain: the whole chain from the pancam designation, in the JSON (per step: the mark, the error, the
-    trust flag) and as a table on stderr with a trust column."""
+    trust flag, p_success and GO; per chain its GO and advice) and as a table on stderr with a trust column. A
+    chain that ends NO-GO is the command's "no" (exit 1), its JSON written all the same."""
     r = runner.invoke(app, ["simulate-handoff", str(sol), "--target", "t2", "--methods", "pure-kinematic-near",
                             "--chain", "--json"])
-    assert r.exit_code == 0, r.stderr
     doc = json.loads(r.stdout)
     (ch,) = doc["chains"]
+    assert r.exit_code == (0 if ch["go"] else 1), r.stderr
+    if not ch["go"]:
+        assert "chain: NO-GO for 1 of 1 chains" in r.stderr and ch["advice"] and ch["why"]
     assert ch["target"] == "t2"
     steps = ch["steps"]
+    assert all(isinstance(s["go"], bool) and "p_success" in s for s in steps)
     assert [s["kind"] for s in steps][0] == "designate" and steps[0]["camera"] == "pancam"
     assert steps[-1]["camera"] == "hazcam"
     assert {s["camera"] for s in steps} == {"pancam", "navcam", "hazcam"}

@@ -1,6 +1,6 @@
 """Benchmark (not a timed test): the whole tracking chain for one target of a bundled sample sol — designation
 stereo, the feature-guided tracks through the stops, the pancam->navcam handoff and the navcam->hazcam handoff
-(consensus) — and over the half-size traverse of tests/data/chain (16 stops, 5 hazcam handoffs).
+(scip, near and far; its timing was measured with consensus, docs/stereo-and-tracking.md) — and over the half-size traverse of tests/data/chain (16 stops, 5 hazcam handoffs).
 
     .venv/bin/python -m pytest tests/pipeline/test_bench_chain.py --benchmark-enable
 """

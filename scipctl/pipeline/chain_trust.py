@@ -1,0 +1,139 @@
+"""Trust along the tracking chain: each step's ``p_success`` and ``go``, what to do at a NO-GO step, and the
+chain's own GO (docs/stereo-and-tracking.md, "Trust along the chain").
+
+- tracking steps (pancam track, pancam -> navcam handoff, navcam track): ``p_success`` from the step model
+  (:class:`~scipctl.core.step_trust.StepTrustModel`, packaged ``scipctl/data/step_trust_model.json``) over the
+  step's own diagnostics (:func:`step_evidence`), ``go`` = ``p_success >= go_min_p``; a lost step
+  (no pixel) has ``p_success`` 0;
+- the navcam -> hazcam handoff: ``scip``'s (set by :func:`~scipctl.pipeline.chain.run_chain`);
+- the designation: not scored here (``p_success`` None, ``go`` True: the chain starts from what the operator
+  designated; the designation's own trust is ``designate``'s);
+- the chain is GO only when every step up to the final hazcam handoff is GO and there is a final hazcam answer
+  (:func:`chain_verdict`); each NO-GO step carries ``advice`` (:data:`ADVICE`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+from ..core.step_trust import StepEvidence, StepTrustModel
+
+REDESIGNATE = "re-designate"
+NEW_IMAGE = "new image at this stop"
+FALL_BACK = "fall back to near navcams"
+ADVICE = (REDESIGNATE, NEW_IMAGE, FALL_BACK)
+
+
+def _num(v) -> float:
+    return math.nan if v is None else float(v)
+
+
+def step_kind(step) -> Optional[str]:
+    """``pancam-track`` | ``navcam-handoff`` | ``navcam-track`` for a tracking step (None: any other step)."""
+    if step.kind == "track" and step.camera in ("pancam", "navcam"):
+        return f"{step.camera}-track"
+    if step.kind == "handoff" and step.camera == "navcam":
+        return "navcam-handoff"
+    return None
+
+
+def step_evidence(steps: list, i: int) -> StepEvidence:
+    """The :class:`StepEvidence` of ``steps[i]`` (a :class:`~scipctl.pipeline.chain.ChainStep`), from its own
+    record and the chain's earlier tracking steps."""
+    s = steps[i]
+    x = s.extra or {}
+    status = x.get("feature_status")
+    prior = [p for p in steps[:i] if step_kind(p) is not None]
+    nccs = [p.ncc_peak for p in prior if p.ncc_peak is not None]
+    return StepEvidence(
+        kind=step_kind(s) or "", same_stop=1.0 if x.get("template") == "scale" else 0.0,
+        status_confirmed=float(status == "confirmed"), status_unconfirmed=float(status == "unconfirmed"),
+        status_failed=float(status == "failed"), ncc_peak=_num(s.ncc_peak), ncc_ratio=_num(x.get("ncc_ratio")),
+        local_inliers=_num(x.get("feature_local_inliers")) if status in ("confirmed", "unconfirmed") else math.nan,
+        inliers=_num(x.get("feature_inliers")) if status in ("confirmed", "unconfirmed") else math.nan,
+        confirmed=_num(x.get("feature_confirmed")), shift_px=_num(x.get("feature_shift_px")),
+        stereo_ok=float(s.range_m is not None), ok=float(bool(s.ok)),
+        follows_unverified=float(bool(x.get("follows_unverified"))), zoom=_num(x.get("scale")),
+        px_mm=_num(x.get("px_mm")), prior_flagged=float(sum(1 for p in prior if not p.ok)),
+        prior_min_ncc=min(nccs) if nccs else math.nan, prior_steps=float(len(prior)))
+
+
+def score_steps(steps: list, model: Optional[StepTrustModel]) -> None:
+    """Set ``p_success``/``go`` of every tracking step of ``steps`` in place (None/False without a model); the
+    designation is GO (unscored); the hazcam handoff keeps what ``scip`` gave it."""
+    idx = [i for i, s in enumerate(steps) if step_kind(s) is not None]
+    for s in steps:
+        if s.kind == "designate":
+            s.p_success, s.go = None, True
+    if model is None:
+        for i in idx:
+            steps[i].p_success, steps[i].go = None, False
+        return
+    p = model.probability([step_evidence(steps, i) for i in idx])
+    for i, pi in zip(idx, p):
+        s = steps[i]
+        if s.tracked_uv is None:
+            s.p_success, s.go = 0.0, False
+        else:
+            s.p_success = float(pi)
+            s.go = bool(pi >= model.go_min_p)
+    for i, s in enumerate(steps):
+        s.advice = None if s.go else advice_for(steps, i)
+
+
+def advice_for(steps: list, i: int) -> str:
+    """What the operator should do when ``steps[i]`` is NO-GO (one of :data:`ADVICE`):
+
+    - the hazcam handoff, or a navcam step at the hazcam's stop: the chain's pixel there cannot be trusted, but
+      the near navcams see the target at arm's range: designate it there and hand off from them
+      (``fall back to near navcams``);
+    - the first track after the designation lost it or found no feature match the NCC confirmed: the designated
+      place cannot be found again from the designation image (textureless, or not the feature the operator
+      meant): ``re-designate``;
+    - any other tracking step (stereo failed, a weak or unconfirmed match, a low probability): the next stop
+      would inherit its error; take ``new image at this stop`` (or hand on from the last GO step's image).
+    """
+    s = steps[i]
+    haz_positions = {p.position for p in steps if p.camera == "hazcam"}
+    if s.camera == "hazcam" or (s.camera == "navcam" and s.position in haz_positions):
+        return FALL_BACK
+    first_track = next((j for j, p in enumerate(steps) if step_kind(p) is not None), None)
+    status = (s.extra or {}).get("feature_status")
+    if i == first_track and (s.tracked_uv is None or status in ("failed", "unconfirmed")):
+        return REDESIGNATE
+    return NEW_IMAGE
+
+
+@dataclass
+class ChainVerdict:
+    """The chain's GO/NO-GO: GO when every step up to the final hazcam handoff is GO and there is one.
+    ``step``: index of the first NO-GO step (None: GO, or no step NO-GO but no final answer); ``advice`` and
+    ``why`` for the operator."""
+
+    go: bool
+    step: Optional[int]
+    advice: Optional[str]
+    why: str
+
+    def to_dict(self) -> dict:
+        return {"go": self.go, "nogo_step": self.step, "advice": self.advice, "why": self.why}
+
+
+def chain_verdict(steps: list) -> ChainVerdict:
+    """The :class:`ChainVerdict` of a scored chain (steps after the final hazcam handoff are not part of it)."""
+    final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
+    upto = steps if final is None else steps[: final + 1]
+    for i, s in enumerate(upto):
+        if s.camera == "hazcam" and i != final:
+            continue  # a handoff at an earlier hazcam stop is a side answer: the chain goes on by navcam
+        if not s.go:
+            p = "-" if s.p_success is None else f"{s.p_success:.2f}"
+            return ChainVerdict(False, i, s.advice or advice_for(steps, i),
+                                f"step {i} ({s.camera} {s.kind} at {s.position[0]}/{s.position[1]}) is NO-GO "
+                                f"(p_success {p}{'; ' + s.reason if s.reason else ''})")
+    if final is None:
+        return ChainVerdict(False, None, FALL_BACK, "the chain has no hazcam answer (no hazcam stop reached from a "
+                                                    "verified navcam reference)")
+    return ChainVerdict(True, None, None, "")

@@ -1,0 +1,116 @@
+"""Trust along the chain: scoring steps, the advice at a NO-GO step and the chain's verdict (hand-made chains;
+the bundled sols' chains are in test_chain.py)."""
+
+import numpy as np
+import pytest
+
+from scipctl.core.step_trust import STEP_FEATURES, StepTrustModel
+from scipctl.pipeline.chain import ChainStep
+from scipctl.pipeline.chain_trust import (FALL_BACK, NEW_IMAGE, REDESIGNATE, advice_for, chain_verdict, score_steps,
+                                          step_evidence)
+
+
+def _step(pos, camera, kind, status="confirmed", ok=True, uv=(10.0, 10.0), final=False, ncc=0.8, **extra):
+    x = {"px_mm": 1.5, "scale": 2.0}
+    if kind != "designate" and camera != "hazcam":
+        x.update({"feature_status": status, "feature_local_inliers": 20, "feature_inliers": 40,
+                  "feature_confirmed": 3 if status == "confirmed" else 0, "template": "plane, feature-guided"})
+    if camera == "hazcam":
+        x["final"] = final
+    x.update(extra)
+    return ChainStep((1, pos), camera, f"{camera}-{pos}", kind, None, None if uv is None else list(uv), [10.0, 10.0],
+                     None if uv is None else 0.5, ncc, 2.0 if ok else None, None, None, None, ok, "", x)
+
+
+def _chain():
+    """designate (pancam, stop 0), pancam track and navcam handoff (stop 1), navcam track (stop 2), navcam track
+    and the hazcam handoff (stop 3)."""
+    return [_step(0, "pancam", "designate"), _step(1, "pancam", "track"), _step(1, "navcam", "handoff"),
+            _step(2, "navcam", "track"), _step(3, "navcam", "track"), _step(3, "hazcam", "handoff", final=True)]
+
+
+# a model that trusts exactly the steps the chain marked ok (a large weight on the ok flag)
+OK_MODEL = StepTrustModel({"ok": STEP_FEATURES["ok"]}, [0.5], [0.5], [0.5], [10.0], 0.0, 0.9, 6.5)
+
+
+def _score(steps, haz_go=True):
+    steps[-1].p_success, steps[-1].go = (0.99, True) if haz_go else (0.3, False)
+    score_steps(steps, OK_MODEL)
+    return steps
+
+
+def test_every_step_scored_and_the_chain_go_when_all_are():
+    steps = _score(_chain())
+    assert steps[0].p_success is None and steps[0].go  # the designation: taken as given
+    for s in steps[1:5]:
+        assert s.p_success == pytest.approx(1 / (1 + np.exp(-10.0 * (1 - 0.5) / 0.5))) and s.go and s.advice is None
+    assert steps[-1].p_success == 0.99 and steps[-1].go  # scip's, kept
+    v = chain_verdict(steps)
+    assert v.go and v.step is None and v.advice is None
+
+
+def test_first_track_without_a_confirmed_match_says_re_designate():
+    steps = _chain()
+    steps[1] = _step(1, "pancam", "track", status="failed", ok=False)
+    _score(steps)
+    assert not steps[1].go and steps[1].advice == REDESIGNATE
+    v = chain_verdict(steps)
+    assert not v.go and v.step == 1 and v.advice == REDESIGNATE and "pancam track" in v.why
+
+
+def test_a_lost_step_has_p_zero():
+    steps = _chain()
+    steps[3] = _step(2, "navcam", "track", uv=None, ok=False)
+    _score(steps)
+    assert steps[3].p_success == 0.0 and not steps[3].go and steps[3].advice == NEW_IMAGE
+    assert chain_verdict(steps).step == 3
+
+
+def test_intermediate_step_says_new_image_and_the_stop_at_the_hazcam_says_fall_back():
+    steps = _chain()
+    steps[3] = _step(2, "navcam", "track", status="unconfirmed", ok=False)
+    _score(steps)
+    assert steps[3].advice == NEW_IMAGE
+    steps = _chain()
+    steps[4] = _step(3, "navcam", "track", ok=False)
+    _score(steps)
+    assert steps[4].advice == FALL_BACK
+    assert chain_verdict(steps).advice == FALL_BACK
+
+
+def test_a_nogo_hazcam_handoff_says_fall_back():
+    steps = _score(_chain(), haz_go=False)
+    assert steps[-1].advice == FALL_BACK
+    v = chain_verdict(steps)
+    assert not v.go and v.step == 5 and v.advice == FALL_BACK
+
+
+def test_a_chain_with_no_hazcam_answer_is_nogo():
+    steps = _score(_chain())[:-1]
+    v = chain_verdict(steps)
+    assert not v.go and v.advice == FALL_BACK and "no hazcam answer" in v.why
+
+
+def test_an_earlier_hazcam_stop_does_not_decide_the_chain():
+    """With a handoff at every hazcam stop, only the final one is on the chain's path."""
+    steps = _chain()
+    steps.insert(4, _step(2, "hazcam", "handoff", final=False))
+    steps[4].p_success, steps[4].go = 0.1, False
+    _score(steps)
+    assert chain_verdict(steps).go
+
+
+def test_without_a_model_tracking_steps_are_unscored_and_nogo():
+    steps = _chain()
+    score_steps(steps, None)
+    assert all(s.p_success is None and not s.go for s in steps[1:5])
+    assert not chain_verdict(steps).go
+
+
+def test_evidence_counts_the_earlier_steps():
+    steps = _chain()
+    steps[1] = _step(1, "pancam", "track", ok=False, ncc=0.4)
+    ev = step_evidence(steps, 3)
+    assert ev.kind == "navcam-track" and ev.prior_steps == 2 and ev.prior_flagged == 1 and ev.prior_min_ncc == 0.4
+    assert ev.status_confirmed == 1.0 and ev.px_mm == 1.5 and ev.zoom == 2.0
+    assert advice_for(steps, 1) == NEW_IMAGE  # confirmed features, only the flag: not a re-designation
