@@ -80,7 +80,15 @@ def test_handoff_and_chain_records_are_those_of_simulate_handoff(first_run, refe
             assert_same(got, exp, rel, f"{sol.name} handoff[{i}] {exp['target']} {exp['method']} {exp['navcam']}")
         want_chains = [c for c in reference["chains"] if c["downlink"] == sol.name]
         assert len(res.chains) == len(want_chains) >= 2  # the targets marked in the first pancam image
-        assert_same(res.chains, want_chains, 0.0, f"{sol.name} chains")
+        # tracking steps bit for bit; the hazcam step is scip's answer, which may be mesh-registration's: the same
+        # ICP run-to-run rounding as the handoff records (measured 5e-15 relative on error_3d_m)
+        for i, (got, exp) in enumerate(zip(res.chains, want_chains)):
+            steps_got, steps_exp = got.pop("steps"), exp.pop("steps")
+            assert_same(got, exp, ICP_REL, f"{sol.name} chains[{i}]")
+            assert len(steps_got) == len(steps_exp), f"{sol.name} chains[{i}]: step counts differ"
+            for j, (sg, se) in enumerate(zip(steps_got, steps_exp)):
+                rel = ICP_REL if se.get("camera") == "hazcam" else 0.0
+                assert_same(sg, se, rel, f"{sol.name} chains[{i}].steps[{j}]")
         # the records file says where they came from
         assert res.provenance["inputs"]["downlink"]["sha256"] == res.job.input_sha256 == res.downlink_sha256
         assert res.provenance["version"] == __version__ and res.provenance["command"] == command_line()  # this process's
