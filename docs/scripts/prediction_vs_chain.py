@@ -1,9 +1,9 @@
 """The pre-uplink prediction against what the chain then did (docs/sequence.md, "Measured").
 
-    python docs/scripts/prediction_vs_chain.py CHAIN_CAMPAIGN PRED_CAMPAIGN [--scenes FILE.mcap ...] [--success-px 4]
+    python docs/scripts/prediction_vs_chain.py PRED_CAMPAIGN CHAIN_CAMPAIGN [CHAIN_CAMPAIGN ...] [--scenes FILE.mcap ...]
 
-CHAIN_CAMPAIGN: a ``scipctl campaign`` folder with chain records; PRED_CAMPAIGN: one with prediction records
-(the same downlinks, matched by their SHA-256). An approach succeeds when the chain's last hazcam answer is
+PRED_CAMPAIGN: a ``scipctl campaign`` folder with prediction records; CHAIN_CAMPAIGN: folders with chain records
+(the same downlinks, matched by their SHA-256; a downlink in several is taken from the first). An approach succeeds when the chain's last hazcam answer is
 within ``--success-px`` of the mark (no hazcam answer: a miss). The family is the campaign's, or, with
 ``--scenes``, the name of the folder holding each downlink file (for downlinks rendered outside the scene
 families). Prints the markdown tables of docs/sequence.md.
@@ -30,8 +30,11 @@ def _records(folder: Path) -> dict:
     return out
 
 
-def approaches(chain_dir: Path, pred_dir: Path, success_px: float, folder_of: dict) -> list:
-    chains, preds = _records(chain_dir), _records(pred_dir)
+def approaches(chain_dirs: list, pred_dir: Path, success_px: float, folder_of: dict) -> list:
+    chains, preds = {}, _records(pred_dir)
+    for d in chain_dirs:
+        for k, v in _records(d).items():
+            chains.setdefault(k, v)
     rows = []
     for sha, recs in preds.items():
         if sha not in chains:
@@ -51,8 +54,8 @@ def approaches(chain_dir: Path, pred_dir: Path, success_px: float, folder_of: di
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("chains", type=Path)
     ap.add_argument("preds", type=Path)
+    ap.add_argument("chains", type=Path, nargs="+")
     ap.add_argument("--scenes", nargs="*", type=Path, default=[])
     ap.add_argument("--success-px", type=float, default=4.0)
     a = ap.parse_args(argv)
