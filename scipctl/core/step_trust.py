@@ -20,11 +20,11 @@ the same few mm: ``success_mm`` is the hazcam's success radius (4 px) at the arm
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from .handoff.trust_model import feature_matrix
+from .handoff.trust_model import evidence_from_dict, evidence_to_dict, feature_matrix
 
 STEP_KINDS = ("pancam-track", "navcam-handoff", "navcam-track")
 
@@ -63,17 +63,11 @@ class StepEvidence:
         return 1.0 if self.kind == "navcam-handoff" else 0.0
 
     def to_dict(self) -> dict:
-        return {f.name: (None if isinstance(getattr(self, f.name), float) and not math.isfinite(getattr(self, f.name))
-                         else getattr(self, f.name)) for f in fields(self)}
+        return evidence_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "StepEvidence":
-        kw = {}
-        for f in fields(cls):
-            if f.name in d:
-                v = d[f.name]
-                kw[f.name] = str(v) if f.name == "kind" else (math.nan if v is None else float(v))
-        return cls(**kw)
+        return evidence_from_dict(cls, d)
 
 
 # feature name -> (StepEvidence attribute, transform of core.handoff.trust_model.transform)

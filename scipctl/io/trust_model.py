@@ -20,12 +20,26 @@ PACKAGED = "trust_model.json"
 PACKAGED_DESIGNATION = "designation_model.json"  # the designation's (pipeline/designation_trust.py), same form
 
 
+def model_from_text(cls, text: str, source: str, what: str = "trust model"):
+    """Parse a fitted model of class ``cls`` (any with ``from_dict``: :class:`TrustModel`, the chain's
+    ``StepTrustModel``); :class:`InputError` naming ``source`` and ``what`` when it is not one."""
+    try:
+        return cls.from_dict(json.loads(text))
+    except (ValueError, AttributeError) as e:
+        raise InputError(source, what, str(e)) from None
+
+
+def load_packaged_model(name: str, cls, what: str):
+    """The packaged model ``scipctl/data/<name>`` parsed as ``cls``, or None when the package has none."""
+    ref = resources.files("scipctl.data").joinpath(name)
+    if not ref.is_file():
+        return None
+    return model_from_text(cls, ref.read_text(encoding="utf-8"), f"scipctl/data/{name}", what)
+
+
 def trust_model_from_text(text: str, source: str) -> TrustModel:
     """Parse a trust model; :class:`InputError` naming ``source`` when it is not one."""
-    try:
-        return TrustModel.from_dict(json.loads(text))
-    except (ValueError, AttributeError) as e:
-        raise InputError(source, "trust model", str(e)) from None
+    return model_from_text(TrustModel, text, source)
 
 
 def load_trust_model(path) -> TrustModel:
@@ -39,12 +53,9 @@ def load_trust_model(path) -> TrustModel:
 def load_packaged_trust_model(name: str = PACKAGED) -> Optional[TrustModel]:
     """The packaged trust model ``scipctl/data/<name>`` (scip's by default, :data:`PACKAGED_DESIGNATION` for the
     designation's), or None when the package has none."""
-    ref = resources.files("scipctl.data").joinpath(name)
-    if not ref.is_file():
-        return None
-    return trust_model_from_text(ref.read_text(encoding="utf-8"), f"scipctl/data/{name}")
+    return load_packaged_model(name, TrustModel, "trust model")
 
 
-def trust_model_json(model: TrustModel) -> str:
-    """Deterministic JSON text of ``model`` (same model, same bytes)."""
+def trust_model_json(model) -> str:
+    """Deterministic JSON text of a fitted model (anything with ``to_dict``; same model, same bytes)."""
     return json.dumps(model.to_dict(), indent=1, sort_keys=True, allow_nan=False) + "\n"

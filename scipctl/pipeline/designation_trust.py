@@ -16,20 +16,19 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
 
-from ..core.handoff.trust_model import LogisticFit, TrustModel, feature_matrix
+from ..core.handoff.trust_model import LogisticFit, TrustModel, evidence_from_dict, evidence_to_dict, feature_matrix
+# fitted as scip's trust model is: the same regularisation, clipping, standardisation and rounding
+from .trust_fit import C_REG, CLIP_Z, _fit_logistic, _round, _standardise
 
 RADII_PCT = (0.5, 1.0, 2.0)
 DEFAULT_TOLERANCE_PCT = 1.0
-C_REG = 0.1  # inverse L2 strength on standardised features, as scip's trust model
-CLIP_Z = 5.0
 GO_PRECISION = 0.98  # the GO threshold: smallest p on GO_GRID whose held-out GO designations are right this often
 GO_GRID = tuple(round(0.90 + 0.01 * i, 2) for i in range(10))
-SIG = 10  # significant digits in the model file (bit-for-bit reproducible)
 
 # feature name -> (DesignationEvidence field, transform of core.handoff.trust_model.transform)
 FEATURES = {
@@ -66,11 +65,11 @@ class DesignationEvidence:
                    f(rec.ray_miss_m, 1000.0))
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return evidence_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "DesignationEvidence":
-        return cls(**{k: math.nan if d.get(k) is None else float(d[k]) for k in cls.__dataclass_fields__})
+        return evidence_from_dict(cls, d)
 
 
 @dataclass(frozen=True)
@@ -107,28 +106,15 @@ class DesignationRow:
     error_pct: float
 
 
-def _round(x: float) -> float:
-    return float(f"{x:.{SIG}g}")
-
-
 def _fit(rows: list[DesignationRow]) -> TrustModel:
-    from sklearn.linear_model import LogisticRegression
-
+    """One logistic regression per tolerance."""
     X = feature_matrix([r.evidence for r in rows], FEATURES)
-    fill = np.array([np.nanmean(c) if np.isfinite(c).any() else 0.0 for c in X.T])
-    Xf = np.where(np.isfinite(X), X, fill)
-    mean, scale = Xf.mean(axis=0), Xf.std(axis=0)
-    scale = np.where(scale > 1e-12, scale, 1.0)
-    Z = np.clip((Xf - mean) / scale, -CLIP_Z, CLIP_Z)
+    fill, mean, scale = _standardise(X)
+    Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)
     err = np.array([r.error_pct for r in rows], float)
     fits = []
     for tol in RADII_PCT:
-        y = err <= tol
-        if y.all() or not y.any():
-            coef, b = np.zeros(Z.shape[1]), math.log(0.999 if y.all() else 0.001) - math.log(0.001 if y.all() else 0.999)
-        else:
-            lr = LogisticRegression(C=C_REG, solver="lbfgs", max_iter=10000, tol=1e-10).fit(Z, y)
-            coef, b = lr.coef_[0], float(lr.intercept_[0])
+        coef, b = _fit_logistic(Z, err <= tol)
         fits.append(LogisticFit(float(tol), [_round(c) for c in coef], _round(b), 1.0))
     return TrustModel(dict(FEATURES), [_round(v) for v in fill], [_round(v) for v in mean],
                       [_round(v) for v in scale], fits, clip_z=CLIP_Z)

@@ -27,7 +27,7 @@ Features are NaN (``None`` in JSON) when they cannot be computed; the trust mode
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
@@ -37,6 +37,7 @@ from ..transforms import RigidTransform
 from .case import HandoffCase
 from .params import HandoffParams
 from .result import MethodResult, NoAnswer
+from .trust_model import evidence_from_dict, evidence_to_dict
 from .steps import track
 from .windows import nav_plane_normal, plane_window
 
@@ -125,17 +126,12 @@ class Evidence:
         return _nanmin(self.geo_near_nav_res_px, self.geo_far_nav_res_px)
 
     def to_dict(self) -> dict:
-        return {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in asdict(self).items()}
+        return evidence_to_dict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "Evidence":
         """From :meth:`to_dict`'s output; unknown keys are ignored, missing or null features are NaN."""
-        kw = {}
-        for f in fields(cls):
-            if f.name in d:
-                v = d[f.name]
-                kw[f.name] = v if f.type == "str" else (NAN if v is None else float(v))
-        return cls(**kw)
+        return evidence_from_dict(cls, d)
 
     def feature(self, name: str) -> float:
         return float(getattr(self, name))

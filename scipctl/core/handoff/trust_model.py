@@ -16,7 +16,7 @@ probability fitted for 4 px is never reused for 1 px.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Optional
 
 import numpy as np
@@ -77,6 +77,23 @@ def transform(value, kind: str) -> float:
     if kind == "log":
         return math.log(max(v, 1e-3))
     raise ValueError(f"unknown feature transform {kind!r} (known: {', '.join(TRANSFORMS)})")
+
+
+def evidence_to_dict(ev) -> dict:
+    """A dataclass of evidence as JSON-ready values: its fields in order, NaN (not measured) as None."""
+    return {f.name: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for f in fields(ev) for v in (getattr(ev, f.name),)}
+
+
+def evidence_from_dict(cls, d: dict):
+    """``cls`` (an evidence dataclass) from :func:`evidence_to_dict`'s output: unknown keys ignored, missing
+    fields at their defaults, null numbers NaN; fields annotated ``str`` kept as text."""
+    kw = {}
+    for f in fields(cls):
+        if f.name in d:
+            v = d[f.name]
+            kw[f.name] = (v if v is None else str(v)) if f.type in ("str", str) else (math.nan if v is None else float(v))
+    return cls(**kw)
 
 
 def feature_matrix(evidence: list, spec: dict) -> np.ndarray:
