@@ -1,7 +1,6 @@
 """`scipctl designate` on a bundled sample sol (copied: designations are saved beside the input)."""
 
 import json
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -16,14 +15,6 @@ from scipctl.io.downlink import read_downlink
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_sols/mcap/paper-s1-straight.mcap"
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def sol(tmp_path_factory):
-    d = tmp_path_factory.mktemp("sol")
-    p = d / SAMPLE.name
-    shutil.copy(SAMPLE, p)
-    return p
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,6 @@
 """`scipctl simulate-handoff` from the command line: JSON contract, Table 1, bad input."""
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
@@ -12,13 +11,6 @@ from scipctl.cli import app
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_sols/mcap/paper-s1-straight.mcap"
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def sol(tmp_path_factory):
-    p = tmp_path_factory.mktemp("sol") / SAMPLE.name
-    shutil.copy(SAMPLE, p)
-    return p
 
 
 def test_json_results_carry_the_contract_fields(sol):

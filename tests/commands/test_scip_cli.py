@@ -2,7 +2,6 @@
 `scipctl fit-trust` reproduces its model file from the same table."""
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
@@ -16,13 +15,6 @@ from tests.pipeline.trust_table import small_table, write_table
 ROOT = Path(__file__).resolve().parents[2]
 SAMPLE = ROOT / "sample_sols/mcap/paper-s1-straight.mcap"
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def sol(tmp_path_factory):
-    p = tmp_path_factory.mktemp("sol") / SAMPLE.name
-    shutil.copy(SAMPLE, p)
-    return p
 
 
 def _constant_model(tmp_path, logit: float) -> Path:
