@@ -136,7 +136,7 @@ class ApproachParams:
         for d in self.hazcam_stops_m:
             _check_number(c, "hazcam_stops_m[]", d, 0.0, lo_open=True)
         _check_number(c, "standoff_m", self.standoff_m, 0.0, lo_open=True, none_ok=True)
-        _check_number(c, "standoff_step_m", self.standoff_step_m, 0.0, lo_open=True)
+        _check_number(c, "standoff_step_m", self.standoff_step_m, 0.01)  # finer: hundreds of plans per bearing
         if not self.detour_bearings_rad or self.detour_bearings_rad[0] != 0.0:
             raise ValueError(f"{c}.detour_bearings_rad: must start with 0.0 (the direct approach), "
                              f"got {self.detour_bearings_rad!r}")

@@ -38,6 +38,7 @@ BAD = [
     (P.ApproachParams(hazcam_handoff_m=5.0), "ApproachParams.pancam_handoff_m: must be a number > hazcam_handoff_m (5)"),
     (P.ApproachParams(detour_bearings_rad=(0.2, 0.0)), "ApproachParams.detour_bearings_rad: must start with 0.0"),
     (P.ApproachParams(standoff_m=-1.0), "ApproachParams.standoff_m: must be a number > 0 or None"),
+    (P.ApproachParams(standoff_step_m=1e-6), "ApproachParams.standoff_step_m: must be a number >= 0.01, got 1e-06"),
     (P.ApproachParams(arm=P.ArmWorkspace(half_width_m=-1.0)), "ArmWorkspace.half_width_m"),
     (P.UncertaintyParams(n_samples=0), "UncertaintyParams.n_samples: must be an integer >= 1, got 0"),
     (P.UncertaintyParams(n_samples=10.0), "UncertaintyParams.n_samples: must be an integer >= 1, got 10.0"),
