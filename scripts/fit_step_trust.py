@@ -103,7 +103,8 @@ def _step_stats(pairs: list, t: float) -> dict:
 def cmd_fit(args) -> None:
     from scipctl.io.provenance import provenance
     from scipctl.io.step_trust_model import step_trust_model_json
-    from scipctl.pipeline.step_trust_fit import (C_REG, choose_threshold, fit_logistic, held_out, judge_chain,
+    from scipctl.pipeline.trust_fit import C_REG
+    from scipctl.pipeline.step_trust_fit import (choose_threshold, fit_logistic, held_out, judge_chain,
                                                  step_within, success_mm_of, training_steps)
 
     chains = read_table(args.table)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..core.handoff.trust_model import LogisticFit, TrustModel, evidence_from_dict, evidence_to_dict, feature_matrix
 # fitted as scip's trust model is: the same regularisation, clipping, standardisation and rounding
-from .trust_fit import C_REG, CLIP_Z, _fit_logistic, _round, _standardise
+from .trust_fit import C_REG, CLIP_Z, fit_logistic, round_sig, standardise
 
 RADII_PCT = (0.5, 1.0, 2.0)
 DEFAULT_TOLERANCE_PCT = 1.0
@@ -109,15 +109,15 @@ class DesignationRow:
 def _fit(rows: list[DesignationRow]) -> TrustModel:
     """One logistic regression per tolerance."""
     X = feature_matrix([r.evidence for r in rows], FEATURES)
-    fill, mean, scale = _standardise(X)
+    fill, mean, scale = standardise(X)
     Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)
     err = np.array([r.error_pct for r in rows], float)
     fits = []
     for tol in RADII_PCT:
-        coef, b = _fit_logistic(Z, err <= tol)
-        fits.append(LogisticFit(float(tol), [_round(c) for c in coef], _round(b), 1.0))
-    return TrustModel(dict(FEATURES), [_round(v) for v in fill], [_round(v) for v in mean],
-                      [_round(v) for v in scale], fits, clip_z=CLIP_Z)
+        coef, b = fit_logistic(Z, err <= tol)
+        fits.append(LogisticFit(float(tol), [round_sig(c) for c in coef], round_sig(b), 1.0))
+    return TrustModel(dict(FEATURES), [round_sig(v) for v in fill], [round_sig(v) for v in mean],
+                      [round_sig(v) for v in scale], fits, clip_z=CLIP_Z)
 
 
 def held_out(rows: list[DesignationRow]) -> dict:

@@ -11,7 +11,6 @@ on and what the chain figures of :func:`chain_table` are measured on.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Optional
 
@@ -19,19 +18,14 @@ import numpy as np
 
 from ..core.step_trust import STEP_FEATURES, StepEvidence, StepTrustModel
 from ..core.handoff.trust_model import feature_matrix
+from .trust_fit import CLIP_Z, round_sig, standardise, usable_features
+from .trust_fit import fit_logistic as logistic  # the same regularisation (C_REG) as the scip model
 
-C_REG = 0.1  # inverse L2 strength on standardised features (the scip model's; ~500 steps from ~40 downlinks)
-CLIP_Z = 5.0
 # GO threshold: the smallest p on GO_GRID at which every held-out chain that misses (final hazcam answer not within
 # 4 px, or none) is NO-GO at or before the step where it went wrong -- issue #14's requirement for the chain, chosen
 # on the leave-one-family-out probabilities (so the held-out figure at that threshold is not independent of it)
 GO_GRID = tuple(round(0.50 + 0.01 * i, 2) for i in range(50))  # 0.50 .. 0.99
-SIG = 10  # significant digits kept in the model file (bit-for-bit reproducible across BLAS builds)
 HAZCAM_SUCCESS_PX = 4.0
-
-
-def _round(x: float) -> float:
-    return float(f"{x:.{SIG}g}")
 
 
 @dataclass
@@ -140,39 +134,19 @@ def training_steps(chains: list, success_mm: float):
     return ev, np.array(y, bool), fam
 
 
-def _usable(X: np.ndarray, names: list) -> list:
-    keep = []
-    for j, n in enumerate(names):
-        fin = X[:, j][np.isfinite(X[:, j])]
-        if len(fin) >= 2 and np.ptp(fin) > 0:
-            keep.append(n)
-    return keep
-
-
 def fit_logistic(evidence: list, y: np.ndarray, success_mm: float, go_min_p: float = 0.5,
                  features: Optional[dict] = None, provenance: Optional[dict] = None) -> StepTrustModel:
     """One logistic model on ``evidence``/``y`` (features that vary in the data only; unknown at the mean)."""
-    from sklearn.linear_model import LogisticRegression
-
     spec = dict(STEP_FEATURES if features is None else features)
     X = feature_matrix(evidence, spec)
-    names = _usable(X, list(spec))
+    names = usable_features(X, list(spec))
     spec = {n: spec[n] for n in names}
     X = feature_matrix(evidence, spec)
-    fill = np.array([np.nanmean(c) if np.isfinite(c).any() else 0.0 for c in X.T])
-    Xf = np.where(np.isfinite(X), X, fill)
-    mean = Xf.mean(axis=0)
-    scale = Xf.std(axis=0)
-    scale = np.where(scale > 1e-12, scale, 1.0)
-    Z = np.clip((Xf - mean) / scale, -CLIP_Z, CLIP_Z)
-    if y.all() or not y.any():
-        coef, icpt = np.zeros(len(names)), math.log((0.999 if y.all() else 0.001) / (1 - (0.999 if y.all() else 0.001)))
-    else:
-        lr = LogisticRegression(C=C_REG, solver="lbfgs", max_iter=10000, tol=1e-10)
-        lr.fit(Z, y)
-        coef, icpt = lr.coef_[0], float(lr.intercept_[0])
-    return StepTrustModel(spec, [_round(v) for v in fill], [_round(v) for v in mean], [_round(v) for v in scale],
-                          [_round(v) for v in coef], _round(icpt), go_min_p, success_mm, dict(provenance or {}),
+    fill, mean, scale = standardise(X)
+    Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)
+    coef, icpt = logistic(Z, y)
+    return StepTrustModel(spec, [round_sig(v) for v in fill], [round_sig(v) for v in mean], [round_sig(v) for v in scale],
+                          [round_sig(v) for v in coef], round_sig(icpt), go_min_p, success_mm, dict(provenance or {}),
                           CLIP_Z)
 
 

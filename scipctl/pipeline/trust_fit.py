@@ -30,7 +30,8 @@ GO_GRID = tuple(round(0.90 + 0.01 * i, 2) for i in range(10))  # 0.90 .. 0.99
 SIG = 10  # significant digits kept in the model file (bit-for-bit reproducible across BLAS builds)
 
 
-def _round(x: float) -> float:
+def round_sig(x: float) -> float:
+    """``x`` to SIG significant digits: what a model file keeps (the same file from every BLAS build)."""
     return float(f"{x:.{SIG}g}")
 
 
@@ -41,7 +42,7 @@ def _prep(rows: list[EvidenceRow], spec: dict):
     return X, err
 
 
-def _usable_features(X: np.ndarray, names: list) -> list:
+def usable_features(X: np.ndarray, names: list) -> list:
     """The features that vary in the training rows (a feature never known or constant carries nothing)."""
     keep = []
     for j, n in enumerate(names):
@@ -52,7 +53,9 @@ def _usable_features(X: np.ndarray, names: list) -> list:
     return keep
 
 
-def _standardise(X: np.ndarray):
+def standardise(X: np.ndarray):
+    """``(fill, mean, scale)`` of the feature matrix ``X`` (N, F): NaN is filled with the column's mean, then
+    each column is centred and scaled (a constant column keeps scale 1)."""
     fill = np.array([np.nanmean(c) if np.isfinite(c).any() else 0.0 for c in X.T])
     Xf = np.where(np.isfinite(X), X, fill)
     mean = Xf.mean(axis=0)
@@ -61,7 +64,9 @@ def _standardise(X: np.ndarray):
     return fill, mean, scale
 
 
-def _fit_logistic(Z: np.ndarray, y: np.ndarray):
+def fit_logistic(Z: np.ndarray, y: np.ndarray):
+    """L2 logistic regression of ``y`` (N,) bool on standardised ``Z`` (N, F): ``(coef (F,), intercept)``; a
+    constant model when ``y`` has one class."""
     from sklearn.linear_model import LogisticRegression
 
     if y.all() or not y.any():  # one class only: a constant model
@@ -75,16 +80,16 @@ def _fit_logistic(Z: np.ndarray, y: np.ndarray):
 def _raw_model(rows: list[EvidenceRow], radii=RADII_PX, features: Optional[dict] = None) -> TrustModel:
     spec = dict(FEATURES if features is None else features)
     X, err = _prep(rows, spec)
-    names = _usable_features(X, list(spec))
+    names = usable_features(X, list(spec))
     spec = {n: spec[n] for n in names}
     X, _ = _prep(rows, spec)
-    fill, mean, scale = _standardise(X)
+    fill, mean, scale = standardise(X)
     Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)  # as TrustModel evaluates
     fits = []
     for r in radii:
-        coef, b = _fit_logistic(Z, err <= r)
-        fits.append(LogisticFit(float(r), [_round(c) for c in coef], _round(b), 1.0))
-    return TrustModel(spec, [_round(v) for v in fill], [_round(v) for v in mean], [_round(v) for v in scale], fits,
+        coef, b = fit_logistic(Z, err <= r)
+        fits.append(LogisticFit(float(r), [round_sig(c) for c in coef], round_sig(b), 1.0))
+    return TrustModel(spec, [round_sig(v) for v in fill], [round_sig(v) for v in mean], [round_sig(v) for v in scale], fits,
                       clip_z=CLIP_Z)
 
 
