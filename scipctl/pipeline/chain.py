@@ -414,12 +414,20 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 X_site = prod.pose.T_site_rover.apply(o[0] + rng_new * d[0])
                 prev_range = rng_new
             prev, prev_uv, cam = prod, tr.uv, c
-        if "hazcam" in lefts and cam == "navcam" and prev.position == pos:
-            if handoff_at != "last" or pos == haz_positions[-1]:
-                haz = lefts["hazcam"]
-                steps.append(hazcam_handoff(dl, prev, prev_uv, haz, handoff_method, step,
-                                            lambda uv, _h=haz: stereo_at(dl, _h, uv, params),
-                                            far=far_reference(steps, pos), target_id=target_id, setups=setups))
+        if "hazcam" in lefts and cam == "navcam" and (handoff_at != "last" or pos == haz_positions[-1]):
+            haz = lefts["hazcam"]
+            hstereo = (lambda uv, _h=haz: stereo_at(dl, _h, uv, params))
+            far = far_reference(steps, pos)
+            if prev.position == pos:
+                steps.append(hazcam_handoff(dl, prev, prev_uv, haz, handoff_method, step, hstereo,
+                                            far=far, target_id=target_id, setups=setups))
+            elif handoff_method == "scip" and "navcam" in lefts and far is not None:
+                # this stop's navcam track is not verified: scip hands off from the last verified navcam pixel
+                # (an earlier stop) alone, as simulate-handoff does with a far mark only
+                steps.append(hazcam_handoff(dl, lefts["navcam"], None, haz, handoff_method, step, hstereo,
+                                            far=far, target_id=target_id, setups=setups))
+            else:
+                continue
             if handoff_at == "first":
                 break
     handoffs = [s for s in steps if s.camera == "hazcam" and s.kind == "handoff"]

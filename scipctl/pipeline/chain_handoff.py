@@ -24,20 +24,24 @@ def hazcam_handoff(dl, nav, nav_uv, haz, method, step, stereo, far=None, target_
 
     ``scip`` weighs the near navcam view and, when given, ``far`` = ``(navcam product, pixel)``, the chain's
     last verified navcam track at an earlier stop (as ``simulate-handoff`` weighs the near and far marks); its
-    ``p_success`` and ``go`` become the step's. Other methods answer from the near view alone (unscored).
+    ``p_success`` and ``go`` become the step's. ``nav_uv`` None (this stop's navcam track was not verified):
+    ``scip`` answers from ``far`` alone (``extra["navcam"]`` says which view it used). Other methods answer
+    from the near view alone (unscored).
     """
     from ..core.handoff import run_method
     from ..core.handoff.scip import SCIP
     from .handoff import build_setup, run_targets
 
-    extra = {"method": method, "navcam": "near", "reference": nav.product_id}
+    extra = {"method": method, "navcam": "near" if nav_uv is not None else "far",
+             "reference": nav.product_id if nav_uv is not None or far is None else far[0]}
     setups = {} if setups is None else setups
     if method == SCIP:
         key = (haz.product_id, nav.product_id, None if far is None else far[0])
         if key not in setups:
             setups[key] = build_setup(dl, hazcam=key[0], near=key[1], far=key[2], shared=True)
         setup = setups[key]
-        src = {"near": [float(x) for x in nav_uv], "far": None if far is None else [float(x) for x in far[1]]}
+        src = {"near": None if nav_uv is None else [float(x) for x in nav_uv],
+               "far": None if far is None else [float(x) for x in far[1]]}
         tid = target_id or "target"
         outcomes = {}
         run_targets(dl, setup, [(tid, src, None)], methods=[SCIP], navcams=tuple(setup.cases), only=set(),
@@ -50,6 +54,9 @@ def hazcam_handoff(dl, nav, nav_uv, haz, method, step, stereo, far=None, target_
                       "scip_chosen": res.diagnostics.get("chosen"), "go_min_p": res.diagnostics.get("go_min_p")})
         p_success, go = out.p_success, bool(out.go)
     else:
+        if nav_uv is None:
+            return step(haz, "handoff", None, None, None, ok=False, reason=f"{method}: no verified near navcam pixel",
+                        extra=extra)
         key = (haz.product_id, nav.product_id, None)
         if key not in setups:
             setups[key] = build_setup(dl, hazcam=key[0], near=key[1], shared=True)

@@ -163,6 +163,44 @@ def test_a_blank_navcam_image_makes_its_step_nogo_with_advice():
     assert not v.go and v.step is not None and v.step <= i
 
 
+def test_an_unverified_navcam_at_the_hazcam_stop_hands_off_from_the_earlier_navcam():
+    """Forced failure (paper-s1-straight t2): the navcam image at the hazcam stop replaced by a flat grey one. Its
+    track cannot be verified, so it is not handed off from; scip hands off from the chain's last verified navcam
+    pixel (the ~3 m stop) alone: the same answer as scip given that pixel as its far mark and no near one. (It
+    hands on that pixel's error: measured 4.1 px from the hazcam mark, the 3 m track being 2.4 navcam px off.)
+    The chain stays NO-GO at or before the failed step."""
+    import dataclasses
+
+    from scipctl.pipeline.chain_trust import chain_verdict
+
+    dl = read_downlink(SAMPLES[0])
+    navs = sorted((im for im in dl.images if im.camera == "navcam" and im.eye == "left"), key=lambda i: i.time_s)
+    near = navs[-1]
+    flat = np.full_like(near.pixels, int(np.median(near.pixels)))
+    blank = dataclasses.replace(near, _pixels=flat)
+    dl2 = dataclasses.replace(dl, images=[blank if im is near else im for im in dl.images])
+    start = min((im for im in dl2.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl2.target("t2").mark_in(start.product_id)
+    steps = run_chain(dl2, start, [mk.u, mk.v], target_id="t2")
+    (i,) = [k for k, s in enumerate(steps) if s.product_id == near.product_id]
+    assert not steps[i].ok and not steps[i].go
+    haz = steps[-1]
+    assert haz.camera == "hazcam" and haz.kind == "handoff" and haz.extra["final"]
+    assert haz.extra["navcam"] == "far" and haz.extra["reference"] == navs[-2].product_id
+    far = steps[[k for k, s in enumerate(steps) if s.product_id == navs[-2].product_id][0]]
+    from scipctl.core.handoff.scip import SCIP
+    from scipctl.pipeline.handoff import build_setup, run_targets
+
+    setup = build_setup(dl2, hazcam=haz.product_id, far=far.product_id)
+    (rec,) = run_targets(dl2, setup, [("t2", {"near": None, "far": far.tracked_uv}, None)], methods=[SCIP],
+                         navcams=tuple(setup.cases), only=set())
+    # the registration's Open3D ICP differs between runs by ~1e-15 relative (docs/campaign.md): 1e-9 px
+    assert np.allclose(haz.tracked_uv, rec.predicted_uv, rtol=0, atol=1e-9)
+    assert haz.p_success == pytest.approx(rec.p_success, abs=1e-9) and haz.go == rec.go
+    v = chain_verdict(steps)
+    assert not v.go and v.step is not None and v.step <= i
+
+
 @pytest.mark.parametrize("change, field, why", [
     ({"position": [1]}, "steps[3].position", "expected [site, drive]"),
     ({"tracked_uv": [1.0, None]}, "steps[3].tracked_uv", "expected 2 finite numbers"),
