@@ -186,7 +186,9 @@ class Terrain:
     # ------------------------------------------------------------------ casting
     def _raycaster(self):
         if self._scene is None:
-            import open3d as o3d
+            from ...core.open3d_import import open3d
+
+            o3d = open3d()
 
             sc = o3d.t.geometry.RaycastingScene()
             sc.add_triangles(o3d.core.Tensor((self.vertices - self._ref).astype(np.float32)),
@@ -196,7 +198,9 @@ class Terrain:
 
     def cast(self, origins, directions) -> RayHits:
         """Cast rays ``origins`` (N, 3), unit ``directions`` (N, 3) (site frame) into the mesh."""
-        import open3d as o3d
+        from ...core.open3d_import import open3d
+
+        o3d = open3d()
 
         o = np.asarray(origins, float).reshape(-1, 3)
         d = np.asarray(directions, float).reshape(-1, 3)
