@@ -62,7 +62,9 @@ def grid_mesh(xyz: np.ndarray, centre_m, max_edge_ratio: float = 20.0, min_edge_
     tri1 = np.stack([idx[s00][t1], idx[s10][t1], idx[s01][t1]], axis=1)
     tri2 = np.stack([idx[s01][t2], idx[s10][t2], idx[s11][t2]], axis=1)
     tris = np.concatenate([tri1, tri2], axis=0)
-    used = np.unique(tris)
+    mark = np.zeros(h * w, bool)  # np.unique(tris) (sorted vertex indices), without sorting millions of them
+    mark[tris.reshape(-1)] = True
+    used = np.flatnonzero(mark)
     remap = np.full(h * w, -1, np.int64)
     remap[used] = np.arange(len(used))
     verts = P.reshape(-1, 3)[used]

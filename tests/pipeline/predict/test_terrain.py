@@ -29,8 +29,12 @@ def test_grid_mesh_keeps_a_surface_and_drops_a_depth_step():
     assert len(t2) == 2 * (h - 1) * (w - 1) - 2 * (h - 1)
     holes = _pinhole_grid(h, w, np.full((h, w), 5.0))
     holes[3, 4] = np.nan  # one invalid vertex removes the 6 triangles that use it
-    _, t3, _ = P.grid_mesh(holes, np.zeros(3))
+    v3, t3, used3 = P.grid_mesh(holes, np.zeros(3))
     assert len(t3) == 2 * (h - 1) * (w - 1) - 6
+    # the kept vertices: each grid vertex some triangle uses, once, in grid order, and nothing else
+    assert np.all(np.diff(used3) > 0) and len(used3) == h * w - 1 and 3 * w + 4 not in used3
+    assert np.array_equal(np.unique(t3), np.arange(len(used3)))
+    assert np.array_equal(v3, holes.reshape(-1, 3)[used3])
 
 
 def test_smooth_grid_reduces_range_noise_and_keeps_steps():
