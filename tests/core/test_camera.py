@@ -156,3 +156,18 @@ def test_single_pixel_and_point_shapes(name):
     uv = m.project(o + 2.0 * d)
     assert uv.shape == (2,)
     assert np.allclose(uv, [300.0, 400.0], atol=1e-6)
+
+
+def test_the_small_cross_product_is_numpys_bit_for_bit():
+    """camera._cross3 (the models' 3-vector cross products, on the hot path of building and unprojecting
+    models) gives np.cross's very numbers, overflow included."""
+    from scipctl.core.camera import _cross3
+
+    rng = np.random.default_rng(5)
+    for scale in (1e-9, 1.0, 1e9, 1e160):
+        a, b = rng.normal(size=(2000, 3)) * scale, rng.normal(size=(2000, 3)) * scale  # 1e160: products overflow
+        with np.errstate(over="ignore", invalid="ignore"):
+            want = np.cross(a, b)
+        with np.errstate(over="ignore", invalid="ignore"):
+            got = np.array([_cross3(x, y) for x, y in zip(a, b)])
+        assert np.array_equal(got, want, equal_nan=True)
