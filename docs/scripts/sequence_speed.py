@@ -26,9 +26,11 @@ document as written, the ``--json`` summary without its timings, the exit code):
 difference).
 
 ``--code DIR`` times and snapshots another checkout's ``scipctl`` (e.g. the main branch: the "before").
+``--versus DIR`` also times the checkout DIR, its runs alternating with ``--code``'s (A B B A ...), so that a
+load that changes during the measurement weighs on both alike.
 
     PYTHONPATH=. .venv/bin/python docs/scripts/sequence_speed.py [--cases r1,t1,t2,t3] [--repeat 3] [--stages]
-        [--snapshot DIR] [--code DIR] [--json]
+        [--snapshot DIR] [--code DIR] [--versus DIR] [--workdir DIR] [--json]
     PYTHONPATH=. .venv/bin/python docs/scripts/sequence_speed.py --compare before/ after/
 """
 
@@ -292,6 +294,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workdir", type=Path, help="where the workspace and outputs go (default: a temporary directory);"
                     " give the same one to runs whose snapshots are compared: the command lines and r1's designation"
                     " record (it carries its time) are then the same")
+    ap.add_argument("--versus", type=Path, help="also time this checkout, runs alternating with --code's")
     ap.add_argument("--compare", nargs=2, type=Path, metavar=("A", "B"))
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
@@ -307,18 +310,19 @@ def main(argv=None) -> int:
         tmp.mkdir(parents=True, exist_ok=True)
         ws = _workspace(tmp, code) if "r1" in cases else None
         for case in cases:
-            runs = []
+            runs, vs_runs = [], []
             for i in range(a.repeat):
-                out = Path(f"{case}-{i}.json")
-                r = _scipctl(_sequence_args(case, ws, out), code, tmp)
-                if r["rc"] not in (0, 1):
-                    raise SystemExit(f"sequence --target {case} exited {r['rc']}:\n{r['stderr'][-2000:]}")
-                runs.append({"wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "rc": r["rc"], "load1": os.getloadavg()[0]})
-            res = {"runs": runs, "rc": runs[0]["rc"] if runs else None,
-                   "wall_s_median": statistics.median(x["wall_s"] for x in runs) if runs else None,
-                   "cpu_s_median": statistics.median(x["cpu_s"] for x in runs) if runs else None,
-                   "wall_s_min": min((x["wall_s"] for x in runs), default=None),
-                   "cpu_s_min": min((x["cpu_s"] for x in runs), default=None)}
+                order = [(code, runs)] + ([(a.versus.resolve(), vs_runs)] if a.versus else [])
+                for c, into in (order if i % 2 == 0 else order[::-1]):
+                    out = Path(f"{case}-{i}.json")
+                    r = _scipctl(_sequence_args(case, ws, out), c, tmp)
+                    if r["rc"] not in (0, 1):
+                        raise SystemExit(f"sequence --target {case} exited {r['rc']} ({c}):\n{r['stderr'][-2000:]}")
+                    into.append({"wall_s": r["wall_s"], "cpu_s": r["cpu_s"], "rc": r["rc"], "load1": os.getloadavg()[0]})
+            res = _summary(runs)
+            if a.versus:
+                res["versus"] = _summary(vs_runs)
+                res["versus"]["code"] = str(a.versus.resolve())
             if a.stages or a.snapshot:
                 out = Path(f"{case}-stages-out.json")
                 if (tmp / out).exists():
@@ -342,11 +346,25 @@ def main(argv=None) -> int:
     return 0
 
 
-def _print_case(case, res):
+def _summary(runs: list) -> dict:
+    return {"runs": runs, "rc": runs[0]["rc"] if runs else None,
+            "wall_s_median": statistics.median(x["wall_s"] for x in runs) if runs else None,
+            "cpu_s_median": statistics.median(x["cpu_s"] for x in runs) if runs else None,
+            "wall_s_min": min((x["wall_s"] for x in runs), default=None),
+            "cpu_s_min": min((x["cpu_s"] for x in runs), default=None)}
+
+
+def _print_runs(label, res):
     runs = res["runs"]
-    line = ", ".join(f"{x['wall_s']:.2f}/{x['cpu_s']:.2f}" for x in runs)
-    print(f"{case}: exit {res['rc']}; wall/CPU s per run: {line}; median wall {res['wall_s_median']:.2f} s, "
-          f"CPU {res['cpu_s_median']:.2f} s" if runs else f"{case}: no timed run")
+    line = ", ".join(f"{x['wall_s']:.2f}/{x['cpu_s']:.2f} (load {x['load1']:.1f})" for x in runs)
+    print(f"{label}: exit {res['rc']}; wall/CPU s per run: {line}; median wall {res['wall_s_median']:.2f} s, "
+          f"CPU {res['cpu_s_median']:.2f} s" if runs else f"{label}: no timed run")
+
+
+def _print_case(case, res):
+    _print_runs(case, res)
+    if "versus" in res:
+        _print_runs(f"{case} versus {res['versus']['code']}", res["versus"])
     if "stages" in res:
         for k, v in res["stages"].items():
             print(f"    {k:34s} CPU {v['cpu_s']:6.2f} s  wall {v['wall_s']:6.2f} s  ({v['calls']} calls)")
