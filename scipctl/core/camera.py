@@ -52,6 +52,19 @@ def _cross3(a, b) -> np.ndarray:
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
+def _columns(cols, lead: tuple) -> np.ndarray:
+    """A C-ordered ``lead + (3,)`` array from its three components ``(M,)`` (``M = prod(lead)``).
+
+    The per-point arithmetic of this module is written per component (``x_k = a_k - b * c_k``): the same
+    operations on the same numbers as on ``(..., 3)`` arrays, but numpy's broadcasting of ``(N, 1)`` or ``(3,)``
+    against ``(N, 3)`` costs 4-10x more (an inner loop of 3 per point). The arrays are packed back in the
+    layout the ``(..., 3)`` expressions gave, so that :func:`_dot` sums exactly as before."""
+    out = np.empty((len(cols[0]), 3))
+    for k in range(3):
+        out[:, k] = cols[k]
+    return out.reshape(lead + (3,))
+
+
 def _dot(a, b):
     """Row-wise dot product over the last axis (einsum: no temporary product array)."""
     a, b = np.broadcast_arrays(a, b)
@@ -240,7 +253,9 @@ class CameraModel:
         P = np.asarray(P, dtype=float)
         if P.shape[-1] != 3:
             raise ValueError(f"P: expected shape (..., 3), got {P.shape}")
-        d = P - self.C
+        lead = P.shape[:-1]
+        Pf = P.reshape(-1, 3)
+        d = _columns([Pf[:, k] - self.C[k] for k in range(3)], lead)  # P - C
         if self.kind == "CAHV":
             w, J_w = d, None
         elif self.kind == "CAHVOR":
@@ -273,11 +288,13 @@ class CameraModel:
         O = self.O
         r0, r1, r2 = self.R
         zeta = _dot(d, O)
-        lam = d - zeta[..., None] * O
+        lead, df, zf = d.shape[:-1], d.reshape(-1, 3), zeta.reshape(-1)
+        lam = _columns([df[:, k] - zf * O[k] for k in range(3)], lead)  # d - zeta O
         with np.errstate(divide="ignore", invalid="ignore"):
             tau = _dot(lam, lam) / (zeta * zeta)
         mu = r0 + (r1 + r2 * tau) * tau
-        w = d + mu[..., None] * lam
+        lf, mf = lam.reshape(-1, 3), mu.reshape(-1)
+        w = _columns([df[:, k] + mf * lf[:, k] for k in range(3)], lead)  # d + mu lam
         if not jacobian:
             return w, None
         I = np.eye(3)
@@ -380,21 +397,27 @@ class CameraModel:
         uv = np.asarray(uv, dtype=float)
         if uv.shape[-1] != 2:
             raise ValueError(f"uv: expected shape (..., 2), got {uv.shape}")
-        x = uv[..., 0:1]
-        y = uv[..., 1:2]
-        # (V - y A) x (H - x A) = V x H - x (V x A) - y (A x H): linear in (u, v)
-        rr = _cross3(self.V, self.H) - x * _cross3(self.V, self.A) - y * _cross3(self.A, self.H)
-        rr = rr / np.sqrt(_dot(rr, rr))[..., None]
-        sgn = np.sign(_dot(rr, self.A))
+        lead = uv.shape[:-1]
+        flat = uv.reshape(-1, 2)
+        x, y = flat[:, 0], flat[:, 1]
+        # (V - y A) x (H - x A) = V x H - x (V x A) - y (A x H): linear in (u, v); per component (_columns)
+        c_vh, c_va, c_ah = _cross3(self.V, self.H), _cross3(self.V, self.A), _cross3(self.A, self.H)
+        rr = _columns([(c_vh[k] - x * c_va[k]) - y * c_ah[k] for k in range(3)], lead)
+        n = np.sqrt(_dot(rr, rr)).reshape(-1)
+        rf = rr.reshape(-1, 3)
+        rr = _columns([rf[:, k] / n for k in range(3)], lead)  # rr / |rr|
+        sgn = np.sign(_dot(rr, self.A)).reshape(-1)
         sgn = np.where(sgn == 0, 1.0, sgn)
-        rr = rr * sgn[..., None]
+        rf = rr.reshape(-1, 3)
+        rr = _columns([rf[:, k] * sgn for k in range(3)], lead)
         origin = np.broadcast_to(self.C, rr.shape).copy()
         if self.kind == "CAHV":
             return origin, rr
         O = self.O
         r0, r1, r2 = self.R
         omega = _dot(rr, O)
-        lam_v = rr - omega[..., None] * O
+        om, rf = omega.reshape(-1), rr.reshape(-1, 3)
+        lam_v = _columns([rf[:, k] - om * O[k] for k in range(3)], lead)  # rr - omega O
         tau = _dot(lam_v, lam_v) / (omega * omega)  # distorted chi^2
         # solve s (1 + r0 + r1 s^2 tau + r2 s^4 tau^2) = 1 for the undistortion factor s
         k1 = 1 + r0
@@ -409,23 +432,29 @@ class CameraModel:
             s = s - step
             if np.all(np.abs(step) < 1e-15):
                 break
+        lf = lam_v.reshape(-1, 3)
         if self.kind == "CAHVOR":
-            d = omega[..., None] * O + s[..., None] * lam_v
-            return origin, d / np.linalg.norm(d, axis=-1, keepdims=True)
+            sf = s.reshape(-1)
+            d = _columns([om * O[k] + sf * lf[:, k] for k in range(3)], lead)  # omega O + s lam_v
+            nf, df = np.linalg.norm(d, axis=-1, keepdims=True).reshape(-1), d.reshape(-1, 3)
+            return origin, _columns([df[:, k] / nf for k in range(3)], lead)
         # CAHVORE: ideal chi -> theta -> ray and entrance-pupil shift
         lam_d = np.sqrt(_dot(lam_v, lam_v))
         chi = s * lam_d / omega
         theta = self._theta_of_chi(chi)
+        ldf = lam_d.reshape(-1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lam_hat = np.where((lam_d > 1e-15)[..., None], lam_v / lam_d[..., None], 0.0)
+            lam_hat = _columns([np.where(ldf > 1e-15, lf[:, k] / ldf, 0.0) for k in range(3)], lead)
         st, ct = np.sin(theta), np.cos(theta)
-        d = ct[..., None] * O + st[..., None] * lam_hat
+        stf, ctf, lhf = st.reshape(-1), ct.reshape(-1), lam_hat.reshape(-1, 3)
+        d = _columns([ctf * O[k] + stf * lhf[:, k] for k in range(3)], lead)  # cos O + sin lam_hat
         e0, e1, e2 = self.E
         t2 = theta * theta
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(np.abs(theta) > 1e-4, theta / st - 1.0, t2 / 6.0 + 7.0 * t2 * t2 / 360.0)
         shift = ratio * (e0 + (e1 + e2 * t2) * t2)
-        origin = origin + shift[..., None] * O
+        shf = shift.reshape(-1)
+        origin = _columns([self.C[k] + shf * O[k] for k in range(3)], lead)  # C + shift O
         return origin, d
 
     # -------------------------------------------------------------- helpers

@@ -220,7 +220,8 @@ class Terrain:
         og, dg = (o, d) if all_good else (o[good], d[good])
         # cast relative to a local origin (float32 precision in the caster): the float64 difference, rounded
         rays = np.empty((len(og), 6), np.float32)
-        rays[:, :3] = og - self._ref
+        for k in range(3):  # per component: the same numbers, without broadcasting (3,) against (N, 3)
+            rays[:, k] = og[:, k] - self._ref[k]
         rays[:, 3:] = dg
         res = self._raycaster().cast_rays(o3d.core.Tensor(rays))
         t = res["t_hit"].numpy().astype(float)
@@ -229,8 +230,10 @@ class Terrain:
             prim = res["primitive_ids"].numpy()
             src = np.full(n, -1, np.int32)
             src[ok] = self.triangle_source[prim[ok].astype(np.int64)]
+            pts = np.empty((n, 3))
             with np.errstate(invalid="ignore"):
-                pts = o + t[:, None] * d
+                for k in range(3):  # o + t d, per component
+                    pts[:, k] = o[:, k] + t * d[:, k]
             pts[~ok] = np.nan
             if normals:
                 nrm = res["primitive_normals"].numpy().astype(float)
