@@ -12,11 +12,11 @@ Each timed run is a child process (``python -c 'from scipctl.cli import app; app
 time and its CPU time (user + system from ``getrusage(RUSAGE_CHILDREN)``, threads included). On a shared
 2-core machine wall time is noise; the load average (``os.getloadavg``) is printed beside it.
 
-``--stages``: one more child per case runs the command in-process with timers (``time.process_time``, this
-process's CPU, threads included; and wall) around the stages: imports, reading the source, the designation
+``--stages``: ``--stage-runs N`` (default 1) more children per case run the command in-process with timers
+(``time.process_time``, this process's CPU, threads included; and wall) around the stages: imports, reading the source, the designation
 of a marked target, terrain (dense stereo + mesh), the approach plan, the nominal views, the Monte Carlo, the
 chain simulation (and, inside it, rendering, NCC tracking, draped templates, occlusion casts, mast pointing),
-the rules and the document.
+the rules and the document; per stage the median over the N runs.
 
 ``--snapshot DIR``: the child also writes, per case, everything the command answers at full precision (the
 prediction's ``to_dict()`` without its timings, a hash of every reduced-size expected view the report shows
@@ -288,7 +288,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--stages", action="store_true", help="per-stage CPU and wall (one more in-process run per case)")
+    ap.add_argument("--stages", action="store_true", help="per-stage CPU and wall (more in-process runs per case)")
+    ap.add_argument("--stage-runs", type=int, default=1, help="in-process runs per case for --stages (median per stage)")
     ap.add_argument("--snapshot", type=Path, help="write each case's full-precision answers to DIR/<case>.json")
     ap.add_argument("--code", type=Path, default=ROOT, help="the scipctl checkout to run (default: this one)")
     ap.add_argument("--workdir", type=Path, help="where the workspace and outputs go (default: a temporary directory);"
@@ -324,17 +325,22 @@ def main(argv=None) -> int:
                 res["versus"] = _summary(vs_runs)
                 res["versus"]["code"] = str(a.versus.resolve())
             if a.stages or a.snapshot:
-                out = Path(f"{case}-stages-out.json")
-                if (tmp / out).exists():
-                    (tmp / out).unlink()
-                st = tmp / f"{case}-stages.json"
-                snap = str((a.snapshot / f"{case}.json").resolve()) if a.snapshot else "-"
-                r = _run([sys.executable, str(Path(__file__).resolve()), "--child", case, str(st), snap,
-                          *_sequence_args(case, ws, out)], code, tmp)
-                if r["rc"] != 0:
-                    raise SystemExit(f"stage run of {case} failed:\n{r['stderr'][-3000:]}")
-                res["stages"] = json.loads(st.read_text())
-                res["stages_child"] = {"wall_s": r["wall_s"], "cpu_s": r["cpu_s"]}
+                runs_st = []
+                for j in range(max(1, a.stage_runs)):
+                    out = Path(f"{case}-stages-out.json")
+                    if (tmp / out).exists():
+                        (tmp / out).unlink()
+                    st = tmp / f"{case}-stages.json"
+                    snap = str((a.snapshot / f"{case}.json").resolve()) if a.snapshot and j == 0 else "-"
+                    r = _run([sys.executable, str(Path(__file__).resolve()), "--child", case, str(st), snap,
+                              *_sequence_args(case, ws, out)], code, tmp)
+                    if r["rc"] != 0:
+                        raise SystemExit(f"stage run of {case} failed:\n{r['stderr'][-3000:]}")
+                    runs_st.append(json.loads(st.read_text()))
+                # per stage, the median over the runs
+                res["stages"] = {k: {f: statistics.median(x[k][f] for x in runs_st) for f in ("cpu_s", "wall_s", "calls")}
+                                 for k in runs_st[0]}
+                res["stage_runs"] = len(runs_st)
             results["cases"][case] = res
             _print_case(case, res) if not a.json else None
     results["load_after"] = os.getloadavg()
@@ -367,7 +373,7 @@ def _print_case(case, res):
         _print_runs(f"{case} versus {res['versus']['code']}", res["versus"])
     if "stages" in res:
         for k, v in res["stages"].items():
-            print(f"    {k:34s} CPU {v['cpu_s']:6.2f} s  wall {v['wall_s']:6.2f} s  ({v['calls']} calls)")
+            print(f"    {k:34s} CPU {v['cpu_s']:6.2f} s  wall {v['wall_s']:6.2f} s  ({v['calls']:g} calls)")
     sys.stdout.flush()
 
 
