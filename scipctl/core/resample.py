@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "cubic_weights"]
+__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "cubic_axis", "cubic_weights"]
 
 #: the cubic kernel's parameter (OpenCV's INTER_CUBIC uses -0.75)
 CUBIC_A = -0.75
@@ -100,7 +100,6 @@ def sample_bicubic(image, u, v) -> np.ndarray:
     else:
         g = img[jv[..., :, None], iu[..., None, :]].astype(np.float64)
     return np.einsum("...r,...rc,...c->...", wv, g, wu)
-
 
 
 def cubic_axis(x, n: int) -> tuple:
