@@ -122,7 +122,7 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
     rows = res.table1 if options.handoff else None
     for t in dl.targets:
         try:
-            doc, checks, pred, record = sequence_for(dl, t.id, None, rows or None, params=params)
+            doc, checks, pred, record = sequence_for(dl, t.id, None, rows or None, params=params, render_views=False)
         except (CommandFailed, InputError) as e:
             payload = getattr(e, "payload", None) or {}
             res.predictions.append({"target": t.id, "error": str(e), "sequence_written": False,

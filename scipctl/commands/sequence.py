@@ -28,7 +28,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     rule_set = load_rule_set(rules_path, rule_options, sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
-                                              rules_used=rule_set.to_dict())
+                                              rules_used=rule_set.to_dict(), render_views=False)
     summary = {
         "target": target, "designated_now": record.designated_from == "mark",
         "confidence": pred.confidence, "rules": [c.to_dict() for c in checks],

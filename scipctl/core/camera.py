@@ -44,6 +44,27 @@ def _v3(x, name):
     return a
 
 
+def _cross3(a, b) -> np.ndarray:
+    """``np.cross`` of two ``(3,)`` vectors, bit for bit (the same products and differences, each rounded once;
+    numpy's general version costs ~20x more per call, and models are built thousands of times per sequence)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
+
+
+def _columns(cols, lead: tuple) -> np.ndarray:
+    """A C-ordered ``lead + (3,)`` array from its three components ``(M,)`` (``M = prod(lead)``).
+
+    The per-point arithmetic of this module is written per component (``x_k = a_k - b * c_k``): the same
+    operations on the same numbers as on ``(..., 3)`` arrays, but numpy's broadcasting of ``(N, 1)`` or ``(3,)``
+    against ``(N, 3)`` costs 4-10x more (an inner loop of 3 per point). The arrays are packed back in the
+    layout the ``(..., 3)`` expressions gave, so that :func:`_dot` sums exactly as before."""
+    out = np.empty((len(cols[0]), 3))
+    for k in range(3):
+        out[:, k] = cols[k]
+    return out.reshape(lead + (3,))
+
+
 def _dot(a, b):
     """Row-wise dot product over the last axis (einsum: no temporary product array)."""
     a, b = np.broadcast_arrays(a, b)
@@ -144,8 +165,8 @@ class CameraModel:
                     raise CameraModelError("O", f"must be a unit vector (|O| = {no:.6g})")
                 if not np.dot(self.O, self.A) >= 0.5:
                     raise CameraModelError("O", "optical axis is more than 60 deg from A")
-            hp = np.cross(self.A, self.H)
-            vp = np.cross(self.A, self.V)
+            hp = _cross3(self.A, self.H)
+            vp = _cross3(self.A, self.V)
             nh, nv = np.linalg.norm(hp), np.linalg.norm(vp)
             for name, n in (("H", nh), ("V", nv)):
                 if not np.isfinite(n):
@@ -154,14 +175,14 @@ class CameraModel:
                 raise CameraModelError("H", "parallel to A (no horizontal scale)")
             if not nv >= 1e-9:
                 raise CameraModelError("V", "parallel to A (no vertical scale)")
-            s = np.linalg.norm(np.cross(hp / nh, vp / nv))
+            s = np.linalg.norm(_cross3(hp / nh, vp / nv))
             if not s >= 1e-3:
                 raise CameraModelError("V", "H and V are parallel (degenerate image plane)")
 
     # ------------------------------------------------------------ derived terms
     @property
     def hs(self) -> float:
-        return float(np.linalg.norm(np.cross(self.A, self.H)))
+        return float(np.linalg.norm(_cross3(self.A, self.H)))
 
     @property
     def hc(self) -> float:
@@ -169,7 +190,7 @@ class CameraModel:
 
     @property
     def vs(self) -> float:
-        return float(np.linalg.norm(np.cross(self.A, self.V)))
+        return float(np.linalg.norm(_cross3(self.A, self.V)))
 
     @property
     def vc(self) -> float:
@@ -189,7 +210,7 @@ class CameraModel:
     def theta_rad(self) -> float:
         """Angle between the image axes as JPL reports it (``-pi/2`` for an orthogonal, right-handed model)."""
         hp, vp = self.h_axis, self.v_axis
-        cr = np.cross(vp, hp)
+        cr = _cross3(vp, hp)
         sn = np.linalg.norm(cr) * (1.0 if np.dot(cr, self.A) >= 0 else -1.0)
         return float(np.arctan2(sn, np.dot(vp, hp)))
 
@@ -232,7 +253,9 @@ class CameraModel:
         P = np.asarray(P, dtype=float)
         if P.shape[-1] != 3:
             raise ValueError(f"P: expected shape (..., 3), got {P.shape}")
-        d = P - self.C
+        lead = P.shape[:-1]
+        Pf = P.reshape(-1, 3)
+        d = _columns([Pf[:, k] - self.C[k] for k in range(3)], lead)  # P - C
         if self.kind == "CAHV":
             w, J_w = d, None
         elif self.kind == "CAHVOR":
@@ -265,11 +288,13 @@ class CameraModel:
         O = self.O
         r0, r1, r2 = self.R
         zeta = _dot(d, O)
-        lam = d - zeta[..., None] * O
+        lead, df, zf = d.shape[:-1], d.reshape(-1, 3), zeta.reshape(-1)
+        lam = _columns([df[:, k] - zf * O[k] for k in range(3)], lead)  # d - zeta O
         with np.errstate(divide="ignore", invalid="ignore"):
             tau = _dot(lam, lam) / (zeta * zeta)
         mu = r0 + (r1 + r2 * tau) * tau
-        w = d + mu[..., None] * lam
+        lf, mf = lam.reshape(-1, 3), mu.reshape(-1)
+        w = _columns([df[:, k] + mf * lf[:, k] for k in range(3)], lead)  # d + mu lam
         if not jacobian:
             return w, None
         I = np.eye(3)
@@ -372,21 +397,27 @@ class CameraModel:
         uv = np.asarray(uv, dtype=float)
         if uv.shape[-1] != 2:
             raise ValueError(f"uv: expected shape (..., 2), got {uv.shape}")
-        x = uv[..., 0:1]
-        y = uv[..., 1:2]
-        # (V - y A) x (H - x A) = V x H - x (V x A) - y (A x H): linear in (u, v)
-        rr = np.cross(self.V, self.H) - x * np.cross(self.V, self.A) - y * np.cross(self.A, self.H)
-        rr = rr / np.sqrt(_dot(rr, rr))[..., None]
-        sgn = np.sign(_dot(rr, self.A))
+        lead = uv.shape[:-1]
+        flat = uv.reshape(-1, 2)
+        x, y = flat[:, 0], flat[:, 1]
+        # (V - y A) x (H - x A) = V x H - x (V x A) - y (A x H): linear in (u, v); per component (_columns)
+        c_vh, c_va, c_ah = _cross3(self.V, self.H), _cross3(self.V, self.A), _cross3(self.A, self.H)
+        rr = _columns([(c_vh[k] - x * c_va[k]) - y * c_ah[k] for k in range(3)], lead)
+        n = np.sqrt(_dot(rr, rr)).reshape(-1)
+        rf = rr.reshape(-1, 3)
+        rr = _columns([rf[:, k] / n for k in range(3)], lead)  # rr / |rr|
+        sgn = np.sign(_dot(rr, self.A)).reshape(-1)
         sgn = np.where(sgn == 0, 1.0, sgn)
-        rr = rr * sgn[..., None]
+        rf = rr.reshape(-1, 3)
+        rr = _columns([rf[:, k] * sgn for k in range(3)], lead)
         origin = np.broadcast_to(self.C, rr.shape).copy()
         if self.kind == "CAHV":
             return origin, rr
         O = self.O
         r0, r1, r2 = self.R
         omega = _dot(rr, O)
-        lam_v = rr - omega[..., None] * O
+        om, rf = omega.reshape(-1), rr.reshape(-1, 3)
+        lam_v = _columns([rf[:, k] - om * O[k] for k in range(3)], lead)  # rr - omega O
         tau = _dot(lam_v, lam_v) / (omega * omega)  # distorted chi^2
         # solve s (1 + r0 + r1 s^2 tau + r2 s^4 tau^2) = 1 for the undistortion factor s
         k1 = 1 + r0
@@ -401,23 +432,29 @@ class CameraModel:
             s = s - step
             if np.all(np.abs(step) < 1e-15):
                 break
+        lf = lam_v.reshape(-1, 3)
         if self.kind == "CAHVOR":
-            d = omega[..., None] * O + s[..., None] * lam_v
-            return origin, d / np.linalg.norm(d, axis=-1, keepdims=True)
+            sf = s.reshape(-1)
+            d = _columns([om * O[k] + sf * lf[:, k] for k in range(3)], lead)  # omega O + s lam_v
+            nf, df = np.linalg.norm(d, axis=-1, keepdims=True).reshape(-1), d.reshape(-1, 3)
+            return origin, _columns([df[:, k] / nf for k in range(3)], lead)
         # CAHVORE: ideal chi -> theta -> ray and entrance-pupil shift
         lam_d = np.sqrt(_dot(lam_v, lam_v))
         chi = s * lam_d / omega
         theta = self._theta_of_chi(chi)
+        ldf = lam_d.reshape(-1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            lam_hat = np.where((lam_d > 1e-15)[..., None], lam_v / lam_d[..., None], 0.0)
+            lam_hat = _columns([np.where(ldf > 1e-15, lf[:, k] / ldf, 0.0) for k in range(3)], lead)
         st, ct = np.sin(theta), np.cos(theta)
-        d = ct[..., None] * O + st[..., None] * lam_hat
+        stf, ctf, lhf = st.reshape(-1), ct.reshape(-1), lam_hat.reshape(-1, 3)
+        d = _columns([ctf * O[k] + stf * lhf[:, k] for k in range(3)], lead)  # cos O + sin lam_hat
         e0, e1, e2 = self.E
         t2 = theta * theta
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = np.where(np.abs(theta) > 1e-4, theta / st - 1.0, t2 / 6.0 + 7.0 * t2 * t2 / 360.0)
         shift = ratio * (e0 + (e1 + e2 * t2) * t2)
-        origin = origin + shift[..., None] * O
+        shf = shift.reshape(-1)
+        origin = _columns([self.C[k] + shf * O[k] for k in range(3)], lead)  # C + shift O
         return origin, d
 
     # -------------------------------------------------------------- helpers

@@ -100,7 +100,9 @@ class GlobalRegistrationResult:
 def fpfh_features(points_m: np.ndarray, origin_m: np.ndarray, params: GlobalRegistrationParams):
     """Voxel-gridded points ``(N, 3)`` and their FPFH features ``(N, 33)`` (normals towards ``origin_m`` (3,),
     the sensor)."""
-    import open3d as o3d
+    from .open3d_import import open3d
+
+    o3d = open3d()
 
     v = params.voxel_m
     pc = o3d.geometry.PointCloud()

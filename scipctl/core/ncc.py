@@ -29,7 +29,7 @@ from typing import Optional
 import numpy as np
 
 from .image import as_float_image
-from .resample import sample_bicubic
+from .resample import cubic_axis, sample_bicubic_grid
 
 __all__ = [
     "default_min_std",
@@ -143,10 +143,17 @@ def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iteratio
         )
     crop = crop - np.float32(crop.mean())
     # exact sampling positions (scipctl.core.resample): OpenCV 4.x would round them to 1/32 px
-    gy, gx = np.mgrid[0:th, 0:tw].astype(np.float64)
+    # the patch shifted by (du, dv) is sample_bicubic(crop, gx + pad + du, gy + pad + dv) on the (th, tw) grid;
+    # a 3x3 step shares its three column and three row shifts: their taps are computed once (bit for bit the same)
+    gx, gy = np.arange(tw, dtype=np.float64), np.arange(th, dtype=np.float64)
+    cols, rows = {}, {}
 
     def shifted(du, dv):
-        return sample_bicubic(crop, gx + pad + du, gy + pad + dv).astype(np.float32)
+        if du not in cols:
+            cols[du] = cubic_axis(gx + pad + du, crop.shape[1])
+        if dv not in rows:
+            rows[dv] = cubic_axis(gy + pad + dv, crop.shape[0])
+        return sample_bicubic_grid(crop, cols[du], rows[dv]).astype(np.float32)
 
     d = np.array(d0, dtype=float)
     sharp = 0.0

@@ -23,7 +23,9 @@ class RegistrationResult:
 
 
 def _to_o3d(points: np.ndarray):
-    import open3d as o3d
+    from .open3d_import import open3d
+
+    o3d = open3d()
 
     pc = o3d.geometry.PointCloud()
     pc.points = o3d.utility.Vector3dVector(np.ascontiguousarray(points, dtype=np.float64))
@@ -121,7 +123,9 @@ def prepare_clouds(
     target_noise: Optional[tuple] = None,
 ) -> PreparedClouds:
     """Crop and grid the clouds as :func:`register_clouds` does (its arguments of the same names)."""
-    import open3d as o3d  # noqa: F401  (the grids are Open3D clouds)
+    from .open3d_import import open3d
+
+    open3d()  # the grids are Open3D clouds
 
     noise_origin = noise_k = None
     if target_noise is not None:
@@ -179,7 +183,9 @@ def icp_from(prep: PreparedClouds, M_target_seeded_init: np.ndarray, scales_m: O
              method: str = "point-to-plane", max_iterations: int = 25) -> IcpRun:
     """Coarse-to-fine ICP on ``prep``'s grids from the alignment ``M_target_seeded_init`` ``(4, 4)`` (identity:
     the seed itself), over ``scales_m`` (default: all of ``prep``'s, in its order)."""
-    import open3d as o3d
+    from .open3d_import import open3d
+
+    o3d = open3d()
 
     M_target_seeded = np.array(M_target_seeded_init, dtype=float)
     reg = s = t = None
@@ -251,7 +257,9 @@ def register_clouds(
     ``prepared``: the clouds already cropped and gridded by :func:`prepare_clouds` with these arguments and
     ``T_target_source_init`` (the clouds and crop arguments are then not used again).
     """
-    import open3d as o3d
+    from .open3d_import import open3d
+
+    o3d = open3d()
 
     if prepared is None:
         prepared = prepare_clouds(source_m, target_m, T_target_source_init, scales_m, crop_center_m, crop_radius_m,

@@ -222,7 +222,9 @@ def checked_registration(prepared: PreparedClouds, sigma: SeedSigma, params: Reg
 
     Raises ``ValueError`` like :func:`register_clouds` when the prior's registration has too few points.
     """
-    import open3d as o3d
+    from .open3d_import import open3d
+
+    o3d = open3d()
 
     p = params
     T_prior = prepared.T_target_source_init

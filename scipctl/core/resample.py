@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "cubic_weights"]
+__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "cubic_axis", "cubic_weights"]
 
 #: the cubic kernel's parameter (OpenCV's INTER_CUBIC uses -0.75)
 CUBIC_A = -0.75
@@ -99,4 +99,39 @@ def sample_bicubic(image, u, v) -> np.ndarray:
         g = img.take(jv[..., :, None] * W + iu[..., None, :]).astype(np.float64)  # (..., 4 rows, 4 columns)
     else:
         g = img[jv[..., :, None], iu[..., None, :]].astype(np.float64)
+    return np.einsum("...r,...rc,...c->...", wv, g, wu)
+
+
+def cubic_axis(x, n: int) -> tuple:
+    """The cubic-convolution taps of positions ``x`` ``(m,)`` along an axis of ``n`` samples: weights ``(m, 4)``
+    (:func:`cubic_weights`) and tap indices ``(m, 4)`` clipped to ``[0, n - 1]``, computed as
+    :func:`sample_bicubic` computes them."""
+    x = np.asarray(x, dtype=np.float64).reshape(-1)
+    if not np.isfinite(x).all():
+        raise ValueError("u, v: sampling positions must be finite")
+    xf = np.floor(x)
+    return cubic_weights(x - xf), _clip(xf.astype(np.int64)[:, None] + _OFFSETS, 0, n - 1)
+
+
+def sample_bicubic_grid(image, u, v) -> np.ndarray:
+    """``image`` ``(H, W)`` sampled by cubic convolution on the grid of columns ``u`` and rows ``v``: ``(h, w)``
+    float64, bit for bit :func:`sample_bicubic` ``(image, U, V)`` with ``U, V = np.meshgrid(u, v)``.
+
+    ``u`` is the columns' positions ``(w,)`` or their taps ``cubic_axis(u, W)``, ``v`` the rows' ``(h,)`` or
+    ``cubic_axis(v, H)`` (a caller sampling several grids that share columns or rows computes them once).
+    A grid's weights and indices depend on its column or its row only: they are computed per column and per
+    row (the same operations on the same numbers) and then laid out as :func:`sample_bicubic` lays them out,
+    so that its final sum runs on identical arrays.
+    """
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"image: expected a non-empty (H, W) array, got shape {img.shape}")
+    H, W = img.shape
+    wu1, iu = u if isinstance(u, tuple) else cubic_axis(u, W)
+    wv1, jv = v if isinstance(v, tuple) else cubic_axis(v, H)
+    h, w = len(wv1), len(wu1)
+    wu = np.ascontiguousarray(np.broadcast_to(wu1, (h, w, 4)))
+    wv = np.ascontiguousarray(np.broadcast_to(wv1[:, None, :], (h, w, 4)))
+    # the pixels (h, w, 4 rows, 4 columns): the tap rows, then their tap columns (a C-ordered float64 copy)
+    g = img[jv.reshape(-1)][:, iu.reshape(-1)].reshape(h, 4, w, 4).transpose(0, 2, 1, 3).astype(np.float64, order="C")
     return np.einsum("...r,...rc,...c->...", wv, g, wu)

@@ -6,7 +6,8 @@ from __future__ import annotations
 from ..errors import CommandFailed
 
 
-def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None):
+def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None,
+                  render_views: bool = True):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
     :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
     :func:`sequence_for` on its downlink."""
@@ -19,11 +20,11 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
     handoff_doc = source.load_json("handoff.json")
     rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
     return sequence_for(source.downlink, target, designations, rows, params=params, rules=rules, pred=pred,
-                        record=record, rules_used=rules_used)
+                        record=record, rules_used=rules_used, render_views=render_views)
 
 
 def sequence_for(dl, target: str, designations=None, table1_rows=None, params=None, rules=None, pred=None,
-                 record=None, rules_used=None):
+                 record=None, rules_used=None, render_views: bool = True):
     """The prediction and sequence for ``target`` of the downlink ``dl``: returns
     ``(doc or None, checks, prediction, record)`` (``record``: the target's
     :class:`~scipctl.pipeline.designate.Designation`).
@@ -33,6 +34,8 @@ def sequence_for(dl, target: str, designations=None, table1_rows=None, params=No
     ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method.
     ``rules_used``: :meth:`scipctl.pipeline.rules.RuleSet.to_dict` of the rule set, recorded in the document.
     ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
+    ``render_views``: render the prediction's reduced-size expected views (only the report shows them; the
+    sequence, its rules and its figures do not depend on them).
     :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
     """
     from .predict import predict_target, resolve_target
@@ -43,7 +46,7 @@ def sequence_for(dl, target: str, designations=None, table1_rows=None, params=No
             raise CommandFailed(f"{target}: no reliable 3-D position for the target "
                                 f"({record.reason or 'no stereo match'}); no sequence",
                                 payload={"target": target, "designation": record.to_dict()})
-        pred = predict_target(dl, record, params, designated_now=now)
+        pred = predict_target(dl, record, params, designated_now=now, render_views=render_views)
     doc, checks = document_for(dl, record, pred, table1_rows, rules,
                                chain_params=None if params is None else params.chain, rules_used=rules_used)
     return doc, checks, pred, record

@@ -115,7 +115,9 @@ class Scene:
         return len(self.terrain_tris) + len(self.rock_mesh()[1]) + len(self.pebble_tris)
 
     def _mesh(self, V, F):
-        import open3d as o3d
+        from ..core.open3d_import import open3d
+
+        o3d = open3d()
 
         m = o3d.t.geometry.TriangleMesh()
         m.vertex.positions = o3d.core.Tensor(np.ascontiguousarray(V, np.float32))
@@ -125,7 +127,9 @@ class Scene:
     def raycaster(self):
         """The Open3D ``RaycastingScene`` (built once): terrain, rocks, pebbles."""
         if self._rc is None:
-            import open3d as o3d
+            from ..core.open3d_import import open3d
+
+            o3d = open3d()
 
             rc = o3d.t.geometry.RaycastingScene()
             ids = [
@@ -141,7 +145,9 @@ class Scene:
 
     @staticmethod
     def _rays(origins, dirs):
-        import open3d as o3d
+        from ..core.open3d_import import open3d
+
+        o3d = open3d()
 
         r = np.empty((len(origins), 6), np.float32)
         r[:, :3] = origins

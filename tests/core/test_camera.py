@@ -156,3 +156,91 @@ def test_single_pixel_and_point_shapes(name):
     uv = m.project(o + 2.0 * d)
     assert uv.shape == (2,)
     assert np.allclose(uv, [300.0, 400.0], atol=1e-6)
+
+
+def test_the_small_cross_product_is_numpys_bit_for_bit():
+    """camera._cross3 (the models' 3-vector cross products, on the hot path of building and unprojecting
+    models) gives np.cross's very numbers, overflow included."""
+    from scipctl.core.camera import _cross3
+
+    rng = np.random.default_rng(5)
+    for scale in (1e-9, 1.0, 1e9, 1e160):
+        a, b = rng.normal(size=(2000, 3)) * scale, rng.normal(size=(2000, 3)) * scale  # 1e160: products overflow
+        with np.errstate(over="ignore", invalid="ignore"):
+            want = np.cross(a, b)
+        with np.errstate(over="ignore", invalid="ignore"):
+            got = np.array([_cross3(x, y) for x, y in zip(a, b)])
+        assert np.array_equal(got, want, equal_nan=True)
+
+
+def _reference_unproject(m, uv):
+    """camera.unproject as it was written on (..., 3) arrays (before the per-component rewrite), for exactness."""
+    from scipctl.core.camera import _NEWTON_MAX, _dot
+
+    x, y = uv[..., 0:1], uv[..., 1:2]
+    rr = np.cross(m.V, m.H) - x * np.cross(m.V, m.A) - y * np.cross(m.A, m.H)
+    rr = rr / np.sqrt(_dot(rr, rr))[..., None]
+    sgn = np.sign(_dot(rr, m.A))
+    rr = rr * np.where(sgn == 0, 1.0, sgn)[..., None]
+    origin = np.broadcast_to(m.C, rr.shape).copy()
+    if m.kind == "CAHV":
+        return origin, rr
+    O, (r0, r1, r2) = m.O, m.R
+    omega = _dot(rr, O)
+    lam_v = rr - omega[..., None] * O
+    tau = _dot(lam_v, lam_v) / (omega * omega)
+    k1, k3, k5 = 1 + r0, r1 * tau, r2 * tau * tau
+    s = np.ones_like(tau)
+    for _ in range(_NEWTON_MAX):
+        s2 = s * s
+        step = (((k5 * s2 + k3) * s2 + k1) * s - 1) / ((5 * k5 * s2 + 3 * k3) * s2 + k1)
+        s = s - step
+        if np.all(np.abs(step) < 1e-15):
+            break
+    if m.kind == "CAHVOR":
+        d = omega[..., None] * O + s[..., None] * lam_v
+        return origin, d / np.linalg.norm(d, axis=-1, keepdims=True)
+    lam_d = np.sqrt(_dot(lam_v, lam_v))
+    theta = m._theta_of_chi(s * lam_d / omega)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam_hat = np.where((lam_d > 1e-15)[..., None], lam_v / lam_d[..., None], 0.0)
+    st, ct = np.sin(theta), np.cos(theta)
+    d = ct[..., None] * O + st[..., None] * lam_hat
+    e0, e1, e2 = m.E
+    t2 = theta * theta
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(np.abs(theta) > 1e-4, theta / st - 1.0, t2 / 6.0 + 7.0 * t2 * t2 / 360.0)
+    return origin + (ratio * (e0 + (e1 + e2 * t2) * t2))[..., None] * O, d
+
+
+def _reference_project_cahvor(m, P):
+    from scipctl.core.camera import _dot
+
+    d = P - m.C
+    zeta = _dot(d, m.O)
+    lam = d - zeta[..., None] * m.O
+    tau = _dot(lam, lam) / (zeta * zeta)
+    w = d + (m.R[0] + (m.R[1] + m.R[2] * tau) * tau)[..., None] * lam
+    a = _dot(w, m.A)
+    uv = np.stack([_dot(w, m.H) / a, _dot(w, m.V) / a], axis=-1)
+    uv[~(_dot(d, m.A) > 0) | ~(a > 0)] = np.nan
+    return uv
+
+
+@pytest.mark.parametrize("name", sorted(MODELS))
+@pytest.mark.parametrize("lead", [(), (7,), (5, 9)])
+def test_per_component_arithmetic_is_bit_for_bit_the_array_expressions(name, lead):
+    """unproject and project compute per component (camera._columns, for speed): exactly the numbers the
+    (..., 3) array expressions gave, in every shape (docs/sequence.md, "Speed")."""
+    m = MODELS[name]
+    rng = np.random.default_rng(11)
+    uv = rng.uniform(-50, 1100, size=lead + (2,))
+    o, d = m.unproject(uv)
+    ro, rd = _reference_unproject(m, uv)
+    assert o.shape == ro.shape == d.shape == rd.shape == lead + (3,)
+    assert np.array_equal(o, ro, equal_nan=True) and np.array_equal(d, rd, equal_nan=True)
+    if m.kind == "CAHVOR":
+        P = m.C + rng.normal(size=lead + (3,)) + 3.0 * m.A
+        with np.errstate(divide="ignore", invalid="ignore"):
+            want = _reference_project_cahvor(m, P)
+        assert np.array_equal(m.project(P), want, equal_nan=True)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from scipctl.core.resample import cubic_weights, sample_bicubic, sample_bilinear
+from scipctl.core.resample import cubic_axis, cubic_weights, sample_bicubic, sample_bicubic_grid, sample_bilinear
 
 cv2 = pytest.importorskip("cv2")
 
@@ -64,3 +64,25 @@ def test_border_repeats_the_edge_and_bad_input():
         sample_bilinear(img, np.array([np.nan]), np.array([1.0]))
     with pytest.raises(ValueError):
         sample_bicubic(img[None], np.zeros(1), np.zeros(1))
+
+
+@pytest.mark.parametrize("contiguous", [True, False])
+def test_grid_sampling_is_bit_for_bit_the_pointwise_sampling(contiguous):
+    """sample_bicubic_grid (taps per column and per row) gives exactly sample_bicubic on the meshgrid: the NCC
+    refinement's patches must not move by a bit (docs/sequence.md, "Speed")."""
+    rng = np.random.default_rng(7)
+    img = rng.random((23, 31)).astype(np.float32)
+    if not contiguous:
+        img = np.asfortranarray(img)
+    for du, dv in [(0.0, 0.0), (0.3, -0.2), (-1.75, 0.125), (1e-9, 0.999999)]:
+        # columns and rows inside, on and beyond the border (the taps repeat the edge pixels there)
+        u = np.arange(-3, 34, dtype=np.float64) + du
+        v = np.arange(-2, 26, 1.5, dtype=np.float64) + dv
+        U, V = np.meshgrid(u, v)
+        want = sample_bicubic(img, U, V)
+        got = sample_bicubic_grid(img, u, v)
+        assert got.dtype == want.dtype and got.shape == want.shape
+        assert np.array_equal(got, want)
+        assert np.array_equal(sample_bicubic_grid(img, cubic_axis(u, img.shape[1]), cubic_axis(v, img.shape[0])), want)
+    with pytest.raises(ValueError):
+        sample_bicubic_grid(img, np.array([np.nan]), np.zeros(2))

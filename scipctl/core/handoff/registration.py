@@ -145,7 +145,9 @@ def _haz_surface(case: HandoffCase, X: np.ndarray, radius_m: float):
     """The hazcam dense points within ``radius_m`` of ``X`` (3,) (hazcam rover frame) on a 5 mm grid: a k-d tree
     of them, the points ``(N, 3)`` and unit normals ``(N, 3)`` towards the hazcam (positive distances: in front
     of the surface); None with fewer than 20 points."""
-    import open3d as o3d
+    from ..open3d_import import open3d
+
+    o3d = open3d()
     from scipy.spatial import cKDTree
 
     C = case.haz.left_model.C

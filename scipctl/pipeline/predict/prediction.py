@@ -75,13 +75,14 @@ class PoseSigmas:
 
 def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig, designation: Designation,
                    image: np.ndarray, model_site: CameraModel, sigmas: PoseSigmas,
-                   params: Optional[PredictParams] = None) -> Prediction:
+                   params: Optional[PredictParams] = None, render_views: bool = True) -> Prediction:
     """Views, Monte Carlo, chain simulation and risks for a planned approach (pure: arrays in, results out).
 
     ``designation``: today's designation (its pixel, its 3-D point ``xyz_site_m`` and ``range_sigma_m``, the
     1-sigma error of its range along its line of sight; None counts as 0); ``image`` ``(H, W)`` float32: the
     left image it was designated in; ``model_site``: that image's camera model in the site frame.
-    ``params`` (default :class:`PredictParams`) is checked first.
+    ``params`` (default :class:`PredictParams`) is checked first. ``render_views``: render the reduced-size
+    expected views (``Prediction.views``, for the report); no figure of the prediction depends on them.
     """
     import time
 
@@ -97,7 +98,7 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
         notes.append("the designation ray misses today's stereo surface near the target; using the designated point")
         Xs = X_T
     t0 = time.perf_counter()
-    views = check_views(plan, terrain, rover_config, Xs, params)
+    views = check_views(plan, terrain, rover_config, Xs, params, render=render_views)
     secs["views"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigmas.position_m, sigmas.yaw_rad,
@@ -132,8 +133,10 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
 
 
 def predict_target(dl, record: Designation, params: Optional[PredictParams] = None, designated_now: bool = False,
-                   terrain: Optional[Terrain] = None) -> Prediction:
-    """Plan and predict tomorrow's approach to a designated target from today's downlink (the designation's position)."""
+                   terrain: Optional[Terrain] = None, render_views: bool = True) -> Prediction:
+    """Plan and predict tomorrow's approach to a designated target from today's downlink (the designation's position).
+
+    ``render_views``: as in :func:`run_prediction` (False: ``Prediction.views`` is empty)."""
     import time
 
     params = (params or PredictParams()).check()
@@ -150,6 +153,7 @@ def predict_target(dl, record: Designation, params: Optional[PredictParams] = No
     t_plan = time.perf_counter() - t0
     sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
     pred = run_prediction(plan, terrain, dl.rover_config, record, ctx.product.pixels_float(),
-                          ctx.product.camera_model.transformed(ctx.start.T_site_rover), PoseSigmas(sp, sy, src), params)
+                          ctx.product.camera_model.transformed(ctx.start.T_site_rover), PoseSigmas(sp, sy, src), params,
+                          render_views=render_views)
     pred.seconds.update({"terrain": t_terrain, "plan": t_plan})
     return pred

@@ -62,7 +62,9 @@ def grid_mesh(xyz: np.ndarray, centre_m, max_edge_ratio: float = 20.0, min_edge_
     tri1 = np.stack([idx[s00][t1], idx[s10][t1], idx[s01][t1]], axis=1)
     tri2 = np.stack([idx[s01][t2], idx[s10][t2], idx[s11][t2]], axis=1)
     tris = np.concatenate([tri1, tri2], axis=0)
-    used = np.unique(tris)
+    mark = np.zeros(h * w, bool)  # np.unique(tris) (sorted vertex indices), without sorting millions of them
+    mark[tris.reshape(-1)] = True
+    used = np.flatnonzero(mark)
     remap = np.full(h * w, -1, np.int64)
     remap[used] = np.arange(len(used))
     verts = P.reshape(-1, 3)[used]
@@ -186,7 +188,9 @@ class Terrain:
     # ------------------------------------------------------------------ casting
     def _raycaster(self):
         if self._scene is None:
-            import open3d as o3d
+            from ...core.open3d_import import open3d
+
+            o3d = open3d()
 
             sc = o3d.t.geometry.RaycastingScene()
             sc.add_triangles(o3d.core.Tensor((self.vertices - self._ref).astype(np.float32)),
@@ -194,33 +198,59 @@ class Terrain:
             self._scene = sc
         return self._scene
 
-    def cast(self, origins, directions) -> RayHits:
-        """Cast rays ``origins`` (N, 3), unit ``directions`` (N, 3) (site frame) into the mesh."""
-        import open3d as o3d
+    def cast(self, origins, directions, normals: bool = True) -> RayHits:
+        """Cast rays ``origins`` (N, 3), unit ``directions`` (N, 3) (site frame) into the mesh.
+
+        ``normals=False`` leaves ``RayHits.normals`` NaN (a rendered view does not need them).
+        """
+        from ...core.open3d_import import open3d
+
+        o3d = open3d()
 
         o = np.asarray(origins, float).reshape(-1, 3)
         d = np.asarray(directions, float).reshape(-1, 3)
         if o.shape != d.shape:
             raise ValueError(f"origins {o.shape} and directions {d.shape} differ")
         n = len(o)
-        hits = RayHits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int32),
-                       np.full((n, 3), np.nan), np.full((n, 3), np.nan))
-        good = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(d), axis=1)
+        good = np.isfinite(o).all(axis=1) & np.isfinite(d).all(axis=1)
         if not np.any(good):
-            return hits
-        # cast relative to a local origin (float32 precision in the caster)
-        rays = np.concatenate([o[good] - self._ref, d[good]], axis=1).astype(np.float32)
+            return RayHits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int32),
+                           np.full((n, 3), np.nan), np.full((n, 3), np.nan))
+        all_good = bool(good.all())
+        og, dg = (o, d) if all_good else (o[good], d[good])
+        # cast relative to a local origin (float32 precision in the caster): the float64 difference, rounded
+        rays = np.empty((len(og), 6), np.float32)
+        for k in range(3):  # per component: the same numbers, without broadcasting (3,) against (N, 3)
+            rays[:, k] = og[:, k] - self._ref[k]
+        rays[:, 3:] = dg
         res = self._raycaster().cast_rays(o3d.core.Tensor(rays))
         t = res["t_hit"].numpy().astype(float)
-        prim = res["primitive_ids"].numpy().astype(np.int64)
-        nrm = res["primitive_normals"].numpy().astype(float)
         ok = np.isfinite(t)
+        if all_good:  # the same values as below, without the scatter through indices
+            prim = res["primitive_ids"].numpy()
+            src = np.full(n, -1, np.int32)
+            src[ok] = self.triangle_source[prim[ok].astype(np.int64)]
+            pts = np.empty((n, 3))
+            with np.errstate(invalid="ignore"):
+                for k in range(3):  # o + t d, per component
+                    pts[:, k] = o[:, k] + t * d[:, k]
+            pts[~ok] = np.nan
+            if normals:
+                nrm = res["primitive_normals"].numpy().astype(float)
+                nrm[~ok] = np.nan
+            else:
+                nrm = np.full((n, 3), np.nan)
+            return RayHits(ok, np.where(ok, t, np.inf), src, pts, nrm)
+        hits = RayHits(np.zeros(n, bool), np.full(n, np.inf), np.full(n, -1, np.int32),
+                       np.full((n, 3), np.nan), np.full((n, 3), np.nan))
+        prim = res["primitive_ids"].numpy().astype(np.int64)
         gi = np.flatnonzero(good)
         hits.hit[gi] = ok
         hits.t_m[gi[ok]] = t[ok]
         hits.source[gi[ok]] = self.triangle_source[prim[ok]]
         hits.points[gi[ok]] = o[gi[ok]] + t[ok, None] * d[gi[ok]]
-        hits.normals[gi[ok]] = nrm[ok]
+        if normals:
+            hits.normals[gi[ok]] = res["primitive_normals"].numpy().astype(float)[ok]
         return hits
 
     def texture(self, hits: RayHits) -> np.ndarray:
@@ -245,7 +275,7 @@ class Terrain:
         us, vs = np.meshgrid(np.arange(u0, u0 + w, dtype=float), np.arange(v0, v0 + h, dtype=float))
         uv = np.stack([us, vs], axis=-1).reshape(-1, 2)
         o, d = model_site.unproject(uv)
-        hits = self.cast(o, d)
+        hits = self.cast(o, d, normals=False)
         img = self.texture(hits).reshape(h, w)
         depth = np.where(hits.hit, hits.t_m, np.nan).reshape(h, w).astype(np.float32)
         return RenderedView(img, depth, (u0, v0), model_site)

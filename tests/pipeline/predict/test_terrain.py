@@ -29,8 +29,12 @@ def test_grid_mesh_keeps_a_surface_and_drops_a_depth_step():
     assert len(t2) == 2 * (h - 1) * (w - 1) - 2 * (h - 1)
     holes = _pinhole_grid(h, w, np.full((h, w), 5.0))
     holes[3, 4] = np.nan  # one invalid vertex removes the 6 triangles that use it
-    _, t3, _ = P.grid_mesh(holes, np.zeros(3))
+    v3, t3, used3 = P.grid_mesh(holes, np.zeros(3))
     assert len(t3) == 2 * (h - 1) * (w - 1) - 6
+    # the kept vertices: each grid vertex some triangle uses, once, in grid order, and nothing else
+    assert np.all(np.diff(used3) > 0) and len(used3) == h * w - 1 and 3 * w + 4 not in used3
+    assert np.array_equal(np.unique(t3), np.arange(len(used3)))
+    assert np.array_equal(v3, holes.reshape(-1, 3)[used3])
 
 
 def test_smooth_grid_reduces_range_noise_and_keeps_steps():
@@ -78,6 +82,37 @@ def test_cast_hits_a_plane_at_the_exact_distance(flat_terrain):
     assert np.allclose(np.abs(hits.normals[:, 2]), 1.0, atol=1e-6)
     miss = flat_terrain.cast(np.array([[0.0, 0.0, -1.0]]), np.array([[0.0, 0.0, -1.0]]))
     assert not miss.hit[0] and not np.isfinite(miss.t_m[0])
+
+
+def _same_hits(a, b, normals=True):
+    fields = ("hit", "t_m", "source", "points") + (("normals",) if normals else ())
+    for f in fields:
+        x, y = getattr(a, f), getattr(b, f)
+        assert x.dtype == y.dtype and x.shape == y.shape, f
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), f
+
+
+def test_cast_of_a_batch_equals_the_cast_of_its_finite_rays(flat_terrain):
+    """A batch with non-finite rays (the scatter path) gives, ray for ray, the very values the all-finite batch of
+    its finite rays gives (the direct path), misses included; ``normals=False`` changes only the normals."""
+    o = np.array([[1.0, 0.5, -2.0], [np.nan, 0.0, -1.0], [3.0, -1.0, -1.5], [0.0, 0.0, -1.0], [7.2, 2.2, -0.3]])
+    d = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.6, 0.0, 0.8], [0.0, 0.0, -1.0], [0.0, np.inf, 0.8]])
+    d = d / np.linalg.norm(np.where(np.isfinite(d), d, 1.0), axis=1, keepdims=True)
+    mixed = flat_terrain.cast(o, d)
+    keep = [0, 2, 3]
+    finite = flat_terrain.cast(o[keep], d[keep])
+    assert finite.hit.tolist() == [True, True, False] and mixed.hit.tolist() == [True, False, True, False, False]
+    for f in ("hit", "t_m", "source", "points", "normals"):
+        x, y = getattr(mixed, f)[keep], getattr(finite, f)
+        assert np.array_equal(x, y, equal_nan=x.dtype.kind == "f"), f
+    assert np.all(np.isnan(mixed.points[[1, 3, 4]])) and np.all(mixed.source[[1, 3, 4]] == -1)
+    assert np.all(np.isinf(mixed.t_m[[1, 3, 4]]))
+    for oo, dd in ((o, d), (o[keep], d[keep])):
+        bare = flat_terrain.cast(oo, dd, normals=False)
+        _same_hits(bare, flat_terrain.cast(oo, dd), normals=False)
+        assert np.all(np.isnan(bare.normals))
+    empty = flat_terrain.cast(np.zeros((0, 3)), np.zeros((0, 3)))
+    assert empty.hit.shape == (0,) and empty.points.shape == (0, 3)
 
 
 def test_rock_cells_find_the_tall_box_and_not_the_low_one():
