@@ -246,6 +246,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         raise ValueError(f"handoff_at must be 'every', 'last' or 'first', got {handoff_at!r}")
     from ..core.tracking import track
     from ..core.windows import extract_window, scale_window, window_scale_for_handoff
+    from ..core.handoff.scip import SCIP
     from .chain_handoff import far_reference, hazcam_handoff
 
     tgt = None
@@ -421,7 +422,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             if prev.position == pos:
                 steps.append(hazcam_handoff(dl, prev, prev_uv, haz, handoff_method, step, hstereo,
                                             far=far, target_id=target_id, setups=setups))
-            elif handoff_method == "scip" and "navcam" in lefts and far is not None:
+            elif handoff_method == SCIP and "navcam" in lefts and far is not None:
                 # this stop's navcam track is not verified: scip hands off from the last verified navcam pixel
                 # (an earlier stop) alone, as simulate-handoff does with a far mark only
                 steps.append(hazcam_handoff(dl, lefts["navcam"], None, haz, handoff_method, step, hstereo,

@@ -25,8 +25,8 @@ def hazcam_handoff(dl, nav, nav_uv, haz, method, step, stereo, far=None, target_
     ``scip`` weighs the near navcam view and, when given, ``far`` = ``(navcam product, pixel)``, the chain's
     last verified navcam track at an earlier stop (as ``simulate-handoff`` weighs the near and far marks); its
     ``p_success`` and ``go`` become the step's. ``nav_uv`` None (this stop's navcam track was not verified):
-    ``scip`` answers from ``far`` alone (``extra["navcam"]`` says which view it used). Other methods answer
-    from the near view alone (unscored).
+    ``scip`` answers from ``far`` alone (``extra["navcam"]`` says which view it used); the chain asks only
+    ``scip`` for that. Other methods answer from the near view alone (unscored).
     """
     from ..core.handoff import run_method
     from ..core.handoff.scip import SCIP
@@ -55,8 +55,7 @@ def hazcam_handoff(dl, nav, nav_uv, haz, method, step, stereo, far=None, target_
         p_success, go = out.p_success, bool(out.go)
     else:
         if nav_uv is None:
-            return step(haz, "handoff", None, None, None, ok=False, reason=f"{method}: no verified near navcam pixel",
-                        extra=extra)
+            raise ValueError(f"hazcam_handoff: {method} needs the near navcam pixel (only scip answers from far alone)")
         key = (haz.product_id, nav.product_id, None)
         if key not in setups:
             setups[key] = build_setup(dl, hazcam=key[0], near=key[1], shared=True)
