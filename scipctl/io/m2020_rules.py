@@ -176,6 +176,14 @@ def ground_reach(joints: dict, limits: dict, instrument: str, n_q2: int = 20001)
     _, o0 = arm_fk(joints, instrument, zero)
     j1, j2, j3, j4 = o0[0, 0], o0[1, 0], o0[2, 0], o0[3, 0]
     l2, l3 = float(np.linalg.norm(j3 - j2)), float(np.linalg.norm(j4 - j3))
+    # the closed form: at zero angles the upper arm and forearm lie along rover x, the pitch axes along y and the
+    # azimuth and turret axes along z (as in the nasa-jpl URDF); anything else is refused, not approximated
+    axes = {j.name: j.T_parent_origin.R @ j.axis for j in chain(joints, ROVER_LINK, instrument) if j.name in ARM_JOINTS}
+    want = {"JOINT1_ENC": 2, "JOINT2_ENC": 1, "JOINT3_ENC": 1, "JOINT4_ENC": 1, "JOINT5_ENC": 2}
+    if (np.abs((j3 - j2)[1:]).max() > 1e-9 or np.abs((j4 - j3)[1:]).max() > 1e-9
+            or any(abs(abs(axes[n][k]) - 1.0) > 1e-9 for n, k in want.items())):
+        raise InputError(URDF_FILE, "arm joints", "not the planar pitch chain of the Mars 2020 arm (links along x, "
+                         "pitch axes along y, azimuth and turret along z at zero angles)")
     yaw_i = _yaw(joints[instrument].T_parent_origin)
     q2 = np.linspace(lim[1][0], lim[1][1], n_q2)
     families = []

@@ -97,3 +97,23 @@ def test_the_closed_form_reach_agrees_with_numerical_ik_on_the_urdf():
         if name == "Frame_PIXL":  # no seed reaches beyond (the closed form says why: too far from the shoulder)
             for xy in outside:
                 assert _nadir_ik(joints, limits, name, xy, seeds) > 1e-2, (name, xy)
+
+
+def test_an_arm_the_closed_form_does_not_fit_is_refused_not_approximated():
+    import dataclasses
+
+    from scipctl.core.transforms import RigidTransform
+    from scipctl.errors import InputError
+
+    folder = real("12_")
+    joints = read_urdf_joints(folder / "m2020.urdf")
+    limits = urdf_joint_limits(folder / "m2020.urdf")
+    j3 = joints["Body_RA_Link3"]
+    assert j3.name == "JOINT3_ENC"
+    bent = dict(joints, Body_RA_Link3=dataclasses.replace(
+        j3, T_parent_origin=RigidTransform(j3.T_parent_origin.R, j3.T_parent_origin.t + [0.0, 0.0, 0.05])))
+    with pytest.raises(InputError) as e:
+        ground_reach(bent, limits, "Frame_PIXL")
+    assert e.value.field == "arm joints"
+    with pytest.raises(InputError):
+        ground_reach(joints, {k: v for k, v in limits.items() if k != "JOINT4_ENC"}, "Frame_PIXL")
