@@ -44,8 +44,9 @@ def _products_dir_option():
 
 def _rules_option():
     return typer.Option(
-        None, "--rules", help="Rules file (YAML): flight-rule limits and approach parameters "
-        "(default: the package's scipctl/data/rules.yaml; docs/sequence.md).")
+        None, "--rules", help="Rules file (YAML): flight-rule limits and approach parameters, or a built-in: "
+        "default, m2020 (default: chosen from the downlink's rover: m2020 for Mars 2020, else the package's "
+        "scipctl/data/rules.yaml; docs/sequence.md).")
 
 
 def _version_cb(value: bool):

@@ -113,16 +113,22 @@ def _plain(x):
 def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
     """The prediction and sequence of every marked target, designated from its mark at the first stop, as
     ``sequence --target`` makes them (the handoff method chosen from this downlink's Table 1, as ``sequence``
-    chooses it from ``handoff.json``)."""
-    from ..pipeline.operator_sigmas import uncertainty_params
+    chooses it from ``handoff.json``; the built-in rules ``sequence`` chooses without ``--rules``: by the
+    downlink's rover)."""
+    from ..pipeline.rules import load_rules, rules_for_downlink
     from ..pipeline.sequence import broken
     from ..pipeline.target_sequence import sequence_for
 
-    params = uncertainty_params(None, None)
+    name, reason = rules_for_downlink(dl)
+    rule_set = load_rules(name, chosen_by=f"not given; {reason}")
+    rules_file = {"file": rule_set.source, "sha256": rule_set.sha256, "overrides": dict(rule_set.overrides),
+                  "chosen_by": rule_set.chosen_by}  # as `sequence --json` reports it
     rows = res.table1 if options.handoff else None
     for t in dl.targets:
         try:
-            doc, checks, pred, record = sequence_for(dl, t.id, None, rows or None, params=params, render_views=False)
+            doc, checks, pred, record = sequence_for(dl, t.id, None, rows or None, params=rule_set.predict,
+                                                     rules=rule_set.flight, rules_used=rule_set.to_dict(),
+                                                     render_views=False)
         except (CommandFailed, InputError) as e:
             payload = getattr(e, "payload", None) or {}
             res.predictions.append({"target": t.id, "error": str(e), "sequence_written": False,
@@ -135,7 +141,7 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
             "broken_rules": [c.rule for c in broken(checks)],
             "commands": None if doc is None else len(doc["commands"]),
             "total_duration_s": None if doc is None else doc["total_duration_s"],
-            "designation": rec, "prediction": pred.to_dict()})
+            "designation": rec, "prediction": pred.to_dict(), "rules_file": rules_file})
 
 
 def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int = 1) -> DownlinkResult:

@@ -61,16 +61,22 @@ def predict_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Opti
 
 
 def rule_set(rules_path=None, rule_options: Optional[dict] = None, sigma_position_m: Optional[float] = None,
-             sigma_yaw_deg: Optional[float] = None):
+             sigma_yaw_deg: Optional[float] = None, dl=None):
     """``scipctl sequence`` / ``report``: the :class:`~scipctl.pipeline.rules.RuleSet` (flight rules and
-    :class:`~scipctl.pipeline.predict.PredictParams`) from the rules file ``--rules`` (None: the package default),
-    overridden by the options ``rule_options`` (``{option: value}``, :data:`scipctl.pipeline.rules.OPTIONS`) and
-    the operator's pose-error sigmas (``--sigma-position-m``, ``--sigma-yaw-deg``; None: from the downlink)."""
-    from ..pipeline.rules import load_rules
+    :class:`~scipctl.pipeline.predict.PredictParams`) from the rules file ``--rules`` (a file or a built-in name;
+    None: the built-in chosen for the downlink ``dl`` by :func:`~scipctl.pipeline.rules.rules_for_downlink`, or
+    the package default without ``dl``), overridden by the options ``rule_options`` (``{option: value}``,
+    :data:`scipctl.pipeline.rules.OPTIONS`) and the operator's pose-error sigmas (``--sigma-position-m``,
+    ``--sigma-yaw-deg``; None: from the downlink)."""
+    from ..pipeline.rules import load_rules, rules_for_downlink
 
     predict_params(sigma_position_m, sigma_yaw_deg)  # the options' own checks (positive numbers)
+    chosen_by = ""
+    if rules_path is None and dl is not None:
+        rules_path, reason = rules_for_downlink(dl)
+        chosen_by = f"not given; {reason}"
     return load_rules(rules_path, {**(rule_options or {}), "--sigma-position-m": sigma_position_m,
-                                   "--sigma-yaw-deg": sigma_yaw_deg})
+                                   "--sigma-yaw-deg": sigma_yaw_deg}, chosen_by=chosen_by)
 
 
 def report_params(sigma_position_m: Optional[float] = None, sigma_yaw_deg: Optional[float] = None, rules=None):

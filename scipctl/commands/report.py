@@ -92,8 +92,10 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     from .params import rule_set as load_rule_set
 
     rule_set = load_rule_set(rules_path, None, sigma_position_m, sigma_yaw_deg)
-    params = report_params(sigma_position_m, sigma_yaw_deg, rule_set)
     source = open_source(src, products_root=products_root)
+    if rules_path is None:  # none named: the built-in chosen from the downlink's rover
+        rule_set = load_rule_set(None, None, sigma_position_m, sigma_yaw_deg, dl=source.downlink)
+    params = report_params(sigma_position_m, sigma_yaw_deg, rule_set)
     con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,

@@ -25,8 +25,11 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
+    # a named file or built-in is read (and refused) before the downlink; none named: chosen from the downlink
     rule_set = load_rule_set(rules_path, rule_options, sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
+    if rules_path is None:
+        rule_set = load_rule_set(None, rule_options, sigma_position_m, sigma_yaw_deg, dl=source.downlink)
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
                                               rules_used=rule_set.to_dict(), render_views=False)
     summary = {
@@ -35,9 +38,12 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
         "risks": [r.to_dict() for r in pred.risks], "path_length_m": pred.plan.path_length_m,
         "stops": len(pred.plan.stops) - 1, "seconds": pred.seconds,
         "products_read": {k: str(v) for k, v in source.read_from.items()},
-        "rules_file": {"file": rule_set.source, "sha256": rule_set.sha256, "overrides": rule_set.overrides},
+        "rules_file": {"file": rule_set.source, "sha256": rule_set.sha256, "overrides": rule_set.overrides,
+                       **({"chosen_by": rule_set.chosen_by} if rule_set.chosen_by else {})},
     }
     bad = broken(checks)
+    stderr_console().print(f"rules: {rule_set.source}" + (f" ({rule_set.chosen_by})" if rule_set.chosen_by else ""),
+                           highlight=False, markup=False)
     _print(checks, pred, target)
     if bad:
         summary["ok"] = False

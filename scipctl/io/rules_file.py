@@ -19,6 +19,13 @@ from pathlib import Path
 from ..errors import InputError
 
 DEFAULT_RULES_PATH = Path(__file__).resolve().parents[1] / "data" / "rules.yaml"
+# built-in rules files, by the name ``--rules NAME`` gives (docs/sequence.md, "Rules file")
+BUILTIN_RULES = {"default": DEFAULT_RULES_PATH, "m2020": DEFAULT_RULES_PATH.with_name("rules-m2020.yaml")}
+
+
+def builtin_label(name: str) -> str:
+    """How the built-in rules file ``name`` is named in messages and in the sequence's ``rules_used``."""
+    return f"{name} (scipctl/data/{BUILTIN_RULES[name].name})"
 KINDS = ("number", "number?", "int", "numbers", "camera_numbers", "camera_ints")
 
 

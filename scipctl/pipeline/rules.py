@@ -53,25 +53,55 @@ class RuleSet:
 
     flight: object  # FlightRules
     predict: object  # PredictParams
-    source: str  # the rules file as given, or "default (scipctl/data/rules.yaml)"
+    source: str  # the rules file as given, or a built-in's label, e.g. "default (scipctl/data/rules.yaml)"
     sha256: str  # of the rules file's bytes
     values: dict  # effective values, {section: {key: value}} in the file's keys and units
     overrides: dict  # {option: value} the operator gave on the command line
+    chosen_by: str = ""  # why this file, when the operator did not name it (rules_for_downlink); "" otherwise
 
     def to_dict(self) -> dict:
         """What the sequence's metadata records (``rules_used``)."""
-        return {"file": self.source, "sha256": self.sha256, "overrides": dict(self.overrides),
-                "values": {s: dict(kv) for s, kv in self.values.items()}}
+        out = {"file": self.source, "sha256": self.sha256, "overrides": dict(self.overrides),
+               "values": {s: dict(kv) for s, kv in self.values.items()}}
+        if self.chosen_by:
+            out["chosen_by"] = self.chosen_by
+        return out
 
 
-def load_rules(path=None, overrides: Optional[dict] = None) -> RuleSet:
-    """The rule set from the rules file ``path`` (None: the package default) with ``overrides``
-    (``{option: value}``, options in :data:`OPTIONS`; a None value is not given). :class:`InputError` for a bad
-    file or value (naming the file or option, and the key)."""
-    from ..io.rules_file import DEFAULT_RULES_PATH, read_rules_file
+# the downlink missions (as the readers spell them, any case) and rover configuration name prefixes of Mars 2020
+M2020_MISSIONS = ("m2020", "mars2020", "mars 2020", "m20", "perseverance")
+M2020_ROVER_PREFIX = "m2020"
 
-    default = read_rules_file(DEFAULT_RULES_PATH, SPEC, label="default (scipctl/data/rules.yaml)")
-    content = default if path is None else read_rules_file(path, SPEC)
+
+def rules_for_downlink(dl) -> tuple:
+    """``(built-in name, reason)``: the built-in rules file for a downlink whose rules the operator did not name:
+    ``m2020`` when the downlink says its rover is Mars 2020 (its rover configuration's name starts with
+    ``m2020``, as the simulator's does, or its mission is Mars 2020, as real M2020 products' labels say), else
+    ``default``."""
+    name = str(getattr(dl.rover_config, "name", "") or "")
+    mission = str(dl.mission or "")
+    if name.lower().startswith(M2020_ROVER_PREFIX):
+        return "m2020", f"the downlink's rover configuration is {name!r}"
+    if mission.strip().lower() in M2020_MISSIONS:
+        return "m2020", f"the downlink's mission is {mission!r}"
+    return "default", f"the downlink's rover ({name!r}, mission {mission!r}) is not Mars 2020"
+
+
+def load_rules(path=None, overrides: Optional[dict] = None, chosen_by: str = "") -> RuleSet:
+    """The rule set from the rules file ``path`` (None: the package default; a name of
+    :data:`~scipctl.io.rules_file.BUILTIN_RULES`, e.g. ``"m2020"``: that built-in file, whose missing keys keep
+    the default's values as a user's file's do) with ``overrides`` (``{option: value}``, options in
+    :data:`OPTIONS`; a None value is not given). ``chosen_by``: recorded in ``rules_used`` (why this file).
+    :class:`InputError` for a bad file or value (naming the file or option, and the key)."""
+    from ..io.rules_file import BUILTIN_RULES, DEFAULT_RULES_PATH, builtin_label, read_rules_file
+
+    default = read_rules_file(DEFAULT_RULES_PATH, SPEC, label=builtin_label("default"))
+    if path is None or str(path) == "default":
+        content = default
+    elif str(path) in BUILTIN_RULES:
+        content = read_rules_file(BUILTIN_RULES[str(path)], SPEC, label=builtin_label(str(path)))
+    else:
+        content = read_rules_file(path, SPEC)
     values = {s: dict(default.values.get(s, {})) for s in SPEC}
     for s, kv in content.values.items():
         values[s].update(kv)
@@ -85,7 +115,7 @@ def load_rules(path=None, overrides: Optional[dict] = None) -> RuleSet:
         given[opt] = v
         origin[(s, k)] = opt
     flight, predict = build(values, content.label, origin)
-    return RuleSet(flight, predict, content.label, content.sha256, values, given)
+    return RuleSet(flight, predict, content.label, content.sha256, values, given, chosen_by)
 
 
 # which (section, key) each dataclass field comes from, for error messages

@@ -36,6 +36,7 @@ def test_predictions_are_those_of_sequence(dask_cluster, tmp_path):
     assert_same(got["rules"], want["rules"], 0.0, "rules")
     assert_same(got["prediction"]["risks"], want["risks"], 0.0, "risks")
     assert got["confidence"] == want["confidence"] and got["designated_now"] == want["designated_now"]
+    assert got["rules_file"] == want["rules_file"]  # the same built-in, chosen for the same reason
     if want["ok"]:
         assert got["commands"] == want["commands"] and got["total_duration_s"] == want["total_duration_s"]
     summary = json.loads((out / "summary.json").read_text())

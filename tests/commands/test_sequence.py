@@ -150,3 +150,26 @@ def test_a_bad_rules_file_is_one_line_and_exit_2(tmp_path):
     assert str(rules) in r.stderr and "flight_rules.rock_keep_out" in r.stderr and "unknown key" in r.stderr
     r = runner.invoke(app, ["sequence", "whatever.mcap", "--target", "t1", "--min-p-success", "2"])
     assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "--min-p-success" in r.stderr
+
+
+def test_rules_not_given_are_chosen_from_the_downlinks_rover_and_a_builtin_by_name(tmp_path, slab_dir):
+    from scipctl.io.provenance import sha256_file
+    from scipctl.io.rules_file import BUILTIN_RULES
+
+    out = tmp_path / "t.seqn"
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.stderr
+    used = json.loads(r.stdout)["rules_file"]
+    assert used["file"] == "default (scipctl/data/rules.yaml)" and "is not Mars 2020" in used["chosen_by"]
+    meta = {ln.split(" ", 2)[1].strip('"'): json.loads(ln.split(" ", 2)[2])
+            for ln in out.read_text().splitlines() if ln.startswith("@METADATA")}
+    assert meta["rules_used"]["chosen_by"] == used["chosen_by"] and meta["rules_used"]["sha256"] == used["sha256"]
+    assert r.stderr.startswith("rules: default (scipctl/data/rules.yaml) (not given;")
+    # the Mars 2020 built-in by name, on this (default rover's) downlink: read, recorded with its hash
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--rules", "m2020", "--json"])
+    assert r.exit_code in (0, 1), r.stderr
+    used = json.loads(r.stdout)["rules_file"]
+    assert used == {"file": "m2020 (scipctl/data/rules-m2020.yaml)", "sha256": sha256_file(BUILTIN_RULES["m2020"]),
+                    "overrides": {}}
+    arm = next(c for c in json.loads(r.stdout)["rules"] if c["rule"] == "arm-workspace")
+    assert "1.80-2.78 m" in arm["message"]

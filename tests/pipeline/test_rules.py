@@ -70,3 +70,62 @@ def test_an_out_of_range_option_names_the_option():
     with pytest.raises(InputError) as e:
         load_rules(None, {"--rock-keep-out-m": -0.1})
     assert (e.value.product, e.value.field) == ("--rock-keep-out-m", "flight_rules.rock_keep_out_m")
+
+
+def test_the_m2020_builtin_loads_checks_and_keeps_the_defaults_it_does_not_give():
+    from scipctl.io.provenance import sha256_file
+    from scipctl.io.rules_file import BUILTIN_RULES
+
+    rs = load_rules("m2020")
+    assert rs.source == "m2020 (scipctl/data/rules-m2020.yaml)"
+    assert rs.to_dict()["sha256"] == sha256_file(BUILTIN_RULES["m2020"]) and "chosen_by" not in rs.to_dict()
+    a = rs.predict.approach
+    assert (a.arm.r_min_m, a.arm.r_max_m, a.arm.half_width_m) == (1.8, 2.78, 0.6)
+    assert rs.flight.min_standoff_m == a.arm.r_min_m
+    assert a.pancam_handoff_m > a.hazcam_handoff_m > max(a.hazcam_stops_m) > a.arm.r_max_m
+    assert a.body.front_m + rs.flight.target_keep_out_m <= a.arm.r_min_m  # the workspace is clear of the footprint
+    # what the file does not give is the default's
+    d = load_rules("default")
+    assert rs.predict.uncertainty == d.predict.uncertainty and rs.predict.chain == d.predict.chain
+    assert rs.flight.min_confidence == d.flight.min_confidence
+    assert d.source == load_rules().source == "default (scipctl/data/rules.yaml)"
+    assert load_rules("m2020", chosen_by="why").to_dict()["chosen_by"] == "why"
+
+
+@pytest.mark.parametrize("rover, mission, want", [
+    ("m2020 (nasa-jpl/m2020-urdf-models static models + URDF)", "scip-sim", "m2020"),  # the simulator's
+    ("from labels", "M2020", "m2020"),  # real Mars 2020 products (the readers' mission name)
+    ("from labels", "Mars 2020", "m2020"),
+    ("rocky8-sim", "scip-sim", "default"),
+    ("from labels", "MSL", "default"),
+])
+def test_the_builtin_is_chosen_from_the_downlinks_rover(rover, mission, want):
+    from types import SimpleNamespace
+
+    from scipctl.pipeline.rules import rules_for_downlink
+
+    name, reason = rules_for_downlink(SimpleNamespace(rover_config=SimpleNamespace(name=rover), mission=mission))
+    assert name == want and (rover in reason or mission in reason)
+
+
+def test_on_the_m2020_rover_the_final_pose_sees_the_target_with_the_m2020_rules_only():
+    """The refusal the default rules gave on every Mars 2020 approach (hazcam-fov-final at every standoff) is the
+    rules', not the planner's: on flat ground, with the Mars 2020 hazcams, the m2020 rules' first standoff sees
+    the target, the default rules' standoffs never do."""
+    import numpy as np
+
+    from scipctl.io.m2020_geometry import m2020_rover_config
+    from scipctl.pipeline import predict as P
+    from scipctl.pipeline.predict.approach_search import FOV
+    from tests.io.real_data import real
+    from tests.pipeline.predict.helpers import start_pose
+
+    rc = m2020_rover_config(real("12_"))
+    target = np.array([8.0, 0.0, 0.0])  # on the ground, 8 m ahead
+    base = P.plan_approach(start_pose(), target, None, rc, load_rules("default").predict.approach)
+    assert base.search.tried and all(FOV in t["bound_by"] for t in base.search.tried)
+    m2020 = load_rules("m2020")
+    plan = P.plan_approach(start_pose(), target, None, rc, m2020.predict.approach)
+    first = plan.search.tried[0]
+    assert first["bound_by"] == [] and first["standoff_m"] == m2020.predict.approach.arm.centre_m
+    assert first["hazcam_margin_px"] >= m2020.flight.hazcam_fov_margin_px

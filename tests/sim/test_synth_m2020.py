@@ -101,3 +101,20 @@ def test_scale_hook_checked_against_the_m2020_sizes(tmp_path):
     r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), "--rover", "m2020", "--rover-dir", str(folder)],
                       env={"SCIPCTL_SYNTH_IMAGE_SCALE": "0.3"})
     assert r.exit_code == 2 and "SCIPCTL_SYNTH_IMAGE_SCALE" in r.stderr and not (tmp_path / "o").exists()
+
+
+def test_an_m2020_downlinks_sequence_uses_the_m2020_rules_and_its_final_pose_sees_the_target(m2020_run):
+    """Issue #15: with the default rover's rules every Mars 2020 approach was refused (`hazcam-fov-final`: the
+    target under the M2020 hazcams' view); without --rules the m2020 built-in is chosen from the downlink."""
+    _, out, _ = m2020_run
+    src = str(out / "paper-s1-straight.mcap")
+    by_rules = {}
+    for extra in ([], ["--rules", "default"]):
+        r = runner.invoke(app, ["sequence", src, "--target", "t1", "--json", *extra])
+        assert r.exit_code in (0, 1), r.stderr
+        summary = json.loads(r.stdout)
+        by_rules[summary["rules_file"]["file"]] = {c["rule"]: c["ok"] for c in summary["rules"]}
+        if not extra:
+            assert "rover configuration is 'm2020" in summary["rules_file"]["chosen_by"]
+    assert by_rules["m2020 (scipctl/data/rules-m2020.yaml)"]["hazcam-fov-final"]
+    assert not by_rules["default (scipctl/data/rules.yaml)"]["hazcam-fov-final"]
