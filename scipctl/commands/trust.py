@@ -23,7 +23,7 @@ def _sim_record(src: Path) -> dict:
 
 
 def family_of_record(rec: dict) -> str:
-    """The family name of a ``.sim.json`` record: its ``family`` (a name, as ``scripts/trust_render.py`` writes
+    """The family name of a ``.sim.json`` record: its ``family`` (a name, as ``docs/scripts/trust_render.py`` writes
     it, or a realised scene family, as ``synth --family`` writes it: its ``name``), else its scenario."""
     fam = rec.get("family")
     if isinstance(fam, dict):

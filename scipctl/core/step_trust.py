@@ -14,7 +14,7 @@ chain carries each step's pixel to the next stop unchanged, so an error of that 
 the same few mm: ``success_mm`` is the hazcam's success radius (4 px) at the arm's working range
 (docs/stereo-and-tracking.md, "Trust along the chain"). The packaged model is
 ``scipctl/data/step_trust_model.json`` (read by ``scipctl.io.step_trust_model``, refitted by
-``scripts/fit_step_trust.py``). Evaluating it needs numpy only.
+``docs/scripts/fit_step_trust.py``). Evaluating it needs numpy only.
 """
 
 from __future__ import annotations

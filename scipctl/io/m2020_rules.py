@@ -1,7 +1,7 @@
 """The rover-specific values of the Mars 2020 rules file (``scipctl/data/rules-m2020.yaml``), derived from the
 rover URDF and the static camera models (``nasa-jpl/m2020-urdf-models``, read by :mod:`.m2020_geometry`).
 
-What is derived here (docs/sequence.md, "Rules file"; ``scripts/derive_m2020_rules.py`` prints it):
+What is derived here (docs/sequence.md, "Rules file"; ``docs/scripts/derive_m2020_rules.py`` prints it):
 
 * **Arm reach on the ground.** The robotic arm is the URDF chain ``Body_Chassis -> Body_RA_Base -[JOINT1_ENC
   (azimuth, about z)]-> -[JOINT2_ENC, JOINT3_ENC, JOINT4_ENC (pitch, about -y)]-> -[JOINT5_ENC (turret, about

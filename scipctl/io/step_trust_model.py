@@ -1,7 +1,7 @@
 """Reading and writing the chain's step trust model (JSON <-> :class:`~scipctl.core.step_trust.StepTrustModel`).
 
 The packaged model is ``scipctl/data/step_trust_model.json`` (package data; made by
-``scripts/fit_step_trust.py``, docs/stereo-and-tracking.md "Trust along the chain"): data with its provenance,
+``docs/scripts/fit_step_trust.py``, docs/stereo-and-tracking.md "Trust along the chain"): data with its provenance,
 read without executing anything, as ``trust_model.json`` is for ``scip``.
 """
 

@@ -8,7 +8,7 @@ evidence (:class:`DesignationEvidence`), of the same form as ``scip``'s (:class:
 trust_model.TrustModel`, evaluated in numpy): its radii are in **percent of the range** (0.5, 1, 2 %), not
 pixels. The tolerance an operator needs is ``DEFAULT_TOLERANCE_PCT`` (1 % of the range: 10 cm at 10 m).
 
-Fitted by ``scripts/fit_designation_trust.py`` on ``tests/data/designation/`` (leave one family out for the
+Fitted by ``docs/scripts/fit_designation_trust.py`` on ``tests/data/designation/`` (leave one family out for the
 GO threshold); packaged as ``scipctl/data/designation_model.json``.
 """
 

@@ -96,6 +96,6 @@ def test_family_of_a_sim_record():
     from scipctl.commands.trust import family_of_record
     from scipctl.sim.families import FAMILIES
 
-    assert family_of_record({"family": "err2", "scenario": "paper"}) == "err2"  # scripts/trust_render.py
+    assert family_of_record({"family": "err2", "scenario": "paper"}) == "err2"  # docs/scripts/trust_render.py
     assert family_of_record({"family": FAMILIES["low-sun"].to_dict(), "scenario": "paper"}) == "low-sun"  # synth --family
     assert family_of_record({"scenario": "paper"}) == "paper" and family_of_record({}) == "unknown"

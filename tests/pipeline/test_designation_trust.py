@@ -30,7 +30,7 @@ def model():
 
 def test_the_packaged_model_is_reproduced_bit_for_bit_by_its_command(tmp_path, model):
     out = tmp_path / "m.json"
-    subprocess.run([sys.executable, str(ROOT / "scripts" / "fit_designation_trust.py"), str(TABLE), "-o", str(out)],
+    subprocess.run([sys.executable, str(ROOT / "docs" / "scripts" / "fit_designation_trust.py"), str(TABLE), "-o", str(out)],
                    check=True, cwd=ROOT)
     packaged = (ROOT / "scipctl" / "data" / PACKAGED_DESIGNATION).read_bytes()
     assert out.read_bytes() == packaged

@@ -18,7 +18,7 @@ MODEL = Path("scipctl/data/step_trust_model.json")
 
 @pytest.fixture(scope="module")
 def chains():
-    sys.path.insert(0, str(ROOT / "scripts"))
+    sys.path.insert(0, str(ROOT / "docs" / "scripts"))
     try:
         from fit_step_trust import read_table
     finally:
@@ -33,7 +33,7 @@ def test_packaged_model_is_reproduced_bit_for_bit_by_its_command(tmp_path):
     shutil.copy(ROOT / TABLE, tmp_path / TABLE)
     (tmp_path / MODEL.parent).mkdir(parents=True)
     env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"}
-    r = subprocess.run([sys.executable, str(ROOT / "scripts/fit_step_trust.py"), "fit", str(TABLE), "-o", str(MODEL)],
+    r = subprocess.run([sys.executable, str(ROOT / "docs/scripts/fit_step_trust.py"), "fit", str(TABLE), "-o", str(MODEL)],
                        cwd=tmp_path, env=env, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert (tmp_path / MODEL).read_bytes() == (ROOT / MODEL).read_bytes()

@@ -42,6 +42,9 @@ class McResult:
     p_success_geometry: float  # every view ok and the target in the arm workspace
     samples_ok: np.ndarray = field(repr=False, default=None)  # (n,) bool
     errors: dict = field(repr=False, default_factory=dict)  # per stop: (dxy (n, 2), dyaw (n,))
+    # (n, 2) the true target's horizontal position (x forward, y right) in the true final rover frame: what the arm
+    # workspace is checked on
+    final_xy_rover_m: np.ndarray = field(repr=False, default=None)
 
     def to_dict(self) -> dict:
         return {"n_samples": self.n_samples, "sigma_position_m": self.sigma_position_m,
@@ -122,8 +125,14 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     ``plan.params.fov_margin``), within the tracker's search radius of ``uv_pred``
     (square region), and the line of sight is not occluded by the terrain.
     Each view reports :func:`pointing_offset_p90` over the samples that see the target.
-    At the final pose the rover drives so that its estimate sits at the
-    workspace centre; the true target must be inside the arm workspace.
+    At the final pose the rover drives (closed loop on its estimate, the
+    sequence's ``DRV_APPROACH_TARGET``) so that its estimate sits where the
+    plan put the plan's target ``plan.target_site_m`` (the designated point
+    the standoff was planned to); the true target must then be inside the
+    arm workspace (its rover-frame position per sample: ``final_xy_rover_m``).
+    ``target_true_site`` is the truth of the views, the occlusion and the
+    re-estimates (the prediction passes the designation ray's point on
+    today's terrain); it is not the reference of the final drive.
     """
     n = int(up.n_samples)
     rng = np.random.default_rng(up.seed)
@@ -179,18 +188,21 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
             last_est = st.T_site_rover.apply(X_meas_rover)
         if last_est is not None:
             X_est = last_est
-    # final pose: the rover puts its estimate at the workspace centre; truth relative to the true final pose
+    # final pose: the rover drives its estimate to where the plan put its target; truth relative to the true final pose
     fin_st = plan.stops[-1]
     dxy, dyaw = errors[fin_st.index]
     R_true, t_true = _true_pose_arrays(fin_st.T_site_rover, dxy, dyaw)
-    # the believed final pose is shifted so that the estimate lands where the truth was planned
+    # the believed final pose is shifted so that the estimate lands where the plan's target (the designated point
+    # the standoff was planned to, as the flight rules check it) sits in the planned final rover frame -- not the
+    # truth X_T: the rover knows only its estimate and the plan (issue #15: X_T 0.12 m beyond the designated point
+    # put every sample 0.12 m beyond the planned standoff)
     est_rover = fin_st.T_site_rover.inverse().apply(X_est)
-    planned_rover = fin_st.T_site_rover.inverse().apply(X_T)
-    corr = est_rover - planned_rover[None]  # the rover moves by this (its own frame) to centre the estimate
+    planned_rover = fin_st.T_site_rover.inverse().apply(np.asarray(plan.target_site_m, float).reshape(3))
+    corr = est_rover - planned_rover[None]  # the rover moves by this (its own frame) to put the estimate there
     t_true = t_true + corr @ fin_st.T_site_rover.R.T
     X_final = np.einsum("nji,nj->ni", R_true, X_T[None] - t_true)
     in_arm = plan.params.arm.contains(X_final[:, :2])
     p_arm = float(in_arm.mean())
     ok_all &= in_arm
     return McResult(n, float(sigma_position_m), float(sigma_yaw_rad), views, p_arm, float(ok_all.mean()),
-                    ok_all, errors)
+                    ok_all, errors, X_final[:, :2].copy())

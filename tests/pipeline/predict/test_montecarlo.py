@@ -73,3 +73,27 @@ def test_the_pointing_offset_counts_only_samples_that_see_the_target():
     in_view = np.r_[np.ones(10, bool), False, False, True]
     assert P.pointing_offset_p90(uv_true, uv_pred, in_view) == pytest.approx(8.1, abs=1e-12)  # 9th of 0..9: 8.1
     assert np.isnan(P.pointing_offset_p90(uv_true, uv_pred, np.zeros(13, bool)))
+
+
+@pytest.mark.parametrize("sigma_position_m, drive_error_frac", [(0.0, 0.0), (0.05, 0.05)])
+def test_the_arm_check_places_the_rover_against_the_designated_point_not_the_truth(rc, flat_terrain, sigma_position_m,
+                                                                                  drive_error_frac):
+    # issue #15: the plan drives to the designated point D at a 0.95 m standoff (workspace 0.6-1.0 m); the truth the
+    # views are judged on (the designation ray's terrain point) lies 0.12 m beyond D. The rover's final drive puts
+    # its estimate where the plan put D, so with exact re-estimates (no stereo noise) and no yaw error the true
+    # target ends exactly at D's planned position (0.95 m, inside), whatever the position errors; measuring the
+    # drive against the truth put it at 1.07 m, outside, in every sample
+    D = np.array([9.0, 0.3, 0.0])
+    u = D[:2] / np.linalg.norm(D[:2])
+    X_true = D + np.r_[0.12 * u, 0.0]
+    plan = P.plan_approach(start_pose(), D, flat_terrain, rc, P.ApproachParams(standoff_m=0.95))
+    T_rover_site_final = plan.final.T_site_rover.inverse()
+    D_final = T_rover_site_final.apply(D)[:2]
+    assert np.hypot(*D_final) == pytest.approx(0.95, abs=1e-12)
+    assert not plan.params.arm.contains(T_rover_site_final.apply(X_true)[None, :2])[0]  # the truth's planned place
+    up = P.UncertaintyParams(n_samples=200, drive_error_frac=drive_error_frac, yaw_error_rad_per_m=0.0,
+                             disparity_sigma_px=0.0)
+    mc = P.monte_carlo(plan, flat_terrain, rc, X_true, up, sigma_position_m, 0.0)
+    # exact up to float rounding of a few rigid transforms of ~10 m coordinates (measured 1.9e-15 m)
+    np.testing.assert_allclose(mc.final_xy_rover_m, np.broadcast_to(D_final, (200, 2)), rtol=0, atol=1e-9)
+    assert mc.p_arm_workspace == 1.0

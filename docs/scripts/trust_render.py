@@ -1,6 +1,6 @@
 """Render simulated downlinks for the trust model of ``scip`` (docs/handoff.md, "Trust: scip").
 
-    python scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N]
+    python docs/scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N]
 
 One run of the ``paper`` scenario, of one scene family, written as ``OUT_DIR/<family>-<seed>-<run>.mcap``
 with ``N`` extra targets (random true surface points near the rock, seen by the near hazcam pair and the near
@@ -147,7 +147,7 @@ def main(argv=None):
     rec = dict(sim.record, family=a.family, extra_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist()} for t in extra],
                rendered_stops=["near", "far"],
                written_by={"tool": "scipctl", "version": __version__,
-                           "regenerate": f"python scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"})
+                           "regenerate": f"python docs/scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"})
     if scene_family is not None:
         rec["scene_family"] = scene_family.to_dict()
     atomic_write_text(a.out / f"{name}.sim.json", json.dumps(rec, indent=1, sort_keys=True, default=str) + "\n")

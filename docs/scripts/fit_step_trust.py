@@ -2,9 +2,9 @@
 (docs/stereo-and-tracking.md, "Trust along the chain").
 
     # 1. the table: every chain record of campaign folders, each with its scene family
-    python scripts/fit_step_trust.py table OUT1 OUT2 ... -o chains.jsonl.gz [--family-dir DIR=FAMILY ...]
+    python docs/scripts/fit_step_trust.py table OUT1 OUT2 ... -o chains.jsonl.gz [--family-dir DIR=FAMILY ...]
     # 2. the model (scipctl/data/step_trust_model.json) and the report (held out by family)
-    python scripts/fit_step_trust.py fit chains.jsonl.gz -o scipctl/data/step_trust_model.json --report report.json
+    python docs/scripts/fit_step_trust.py fit chains.jsonl.gz -o scipctl/data/step_trust_model.json --report report.json
 
 A chain's family is the campaign header's ``family``, or for a downlink file the first ``--family-dir`` whose
 DIR is a component of the file's path (``scenes/m2020_4/paper-s1-arc.mcap`` with ``m2020_4=m2020``). The fit
@@ -132,7 +132,7 @@ def cmd_fit(args) -> None:
     prov.update({"C": C_REG, "go_rule": "smallest p in 0.50..0.99 at which every held-out missing chain is NO-GO "
                                         "at or before the step where it went wrong", "n_steps": int(len(y)), "n_chains": len(chains),
                  "per_family_steps": counts, "training_families": sorted(counts), "scikit_learn": sklearn.__version__,
-                 "success_mm": success_mm, "command": "python scripts/fit_step_trust.py fit " + " ".join(
+                 "success_mm": success_mm, "command": "python docs/scripts/fit_step_trust.py fit " + " ".join(
                      [str(args.table), "-o", str(args.out)])})
     model = fit_logistic(ev, y, success_mm, go_min_p=go_min_p, provenance=prov)
     Path(args.out).write_text(step_trust_model_json(model), encoding="utf-8")

@@ -1,7 +1,7 @@
 """The numbers behind ``tests/pipeline/test_handoff_broken.py``: ``scip`` on each deliberately broken copy of the
 sample sol (issue #14 item 6), the same breaks and code path as the tests, as a markdown table.
 
-    PYTHONPATH=. python scripts/scip_broken_report.py [CASE ...]      (from the repository root; default: all)
+    PYTHONPATH=. python docs/scripts/scip_broken_report.py [CASE ...]      (from the repository root; default: all)
 
 Per case and target: scip's p_success, GO, error (px), the navcam its answer used, the highest probability of a
 candidate more than 4 px off, whether the geometry veto fired, and the CPU seconds of the case (it reuses what

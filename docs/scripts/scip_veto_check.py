@@ -1,6 +1,6 @@
 """``scip``'s geometry veto (``ScipParams.geometry_veto_px``) on an evidence table, leave one family out.
 
-    python scripts/scip_veto_check.py [TABLE.jsonl[.gz] ...]     (default: tests/data/trust/evidence-24dl.jsonl.gz)
+    python docs/scripts/scip_veto_check.py [TABLE.jsonl[.gz] ...]     (default: tests/data/trust/evidence-20dl-11fam.jsonl.gz)
 
 Per family held out, a model with the packaged feature set is fitted on the other families (as ``fit-trust``'s
 held-out tables are); each target's answer is the most probable candidate; GO at the packaged model's 4 px
@@ -36,7 +36,7 @@ def read(paths):
 
 
 def main(argv):
-    paths = argv or [str(Path(__file__).resolve().parents[1] / "tests/data/trust/evidence-24dl.jsonl.gz")]
+    paths = argv or [str(Path(__file__).resolve().parents[2] / "tests/data/trust/evidence-20dl-11fam.jsonl.gz")]
     rows = read(paths)
     veto = ScipParams().geometry_veto_px
     go_min = load_packaged_trust_model().go_threshold(R_PX)

@@ -1,11 +1,11 @@
 """Fit the designation trust model (scipctl/pipeline/designation_trust.py) and report it held out.
 
-    python scripts/fit_designation_trust.py tests/data/designation/designations.jsonl.gz \\
+    python docs/scripts/fit_designation_trust.py tests/data/designation/designations.jsonl.gz \\
         -o scipctl/data/designation_model.json [--report report.json]
 
 The packaged model is exactly this command's output on the committed table (tests/pipeline/
 test_designation_trust.py re-runs it and compares the bytes). The table is made by
-scripts/designation_population.py.
+docs/scripts/designation_population.py.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-COMMAND = "python scripts/fit_designation_trust.py tests/data/designation/designations.jsonl.gz -o scipctl/data/designation_model.json"
+COMMAND = "python docs/scripts/fit_designation_trust.py tests/data/designation/designations.jsonl.gz -o scipctl/data/designation_model.json"
 
 
 def read_rows(path: Path):

@@ -1,6 +1,6 @@
 """Print the derivation of the Mars 2020 rules file's rover-specific values (scipctl/data/rules-m2020.yaml).
 
-    python scripts/derive_m2020_rules.py [FOLDER]
+    python docs/scripts/derive_m2020_rules.py [FOLDER]
 
 FOLDER: the nasa-jpl/m2020-urdf-models files (m2020.urdf, m2020-camera-models.json); default shared/real/12_*
 (``$SCIPCTL_SHARED_REAL`` or beside the checkout). Prints JSON: the arm workspace, the footprint, the arm's reach
@@ -21,7 +21,7 @@ from pathlib import Path
 def _folder(argv) -> Path:
     if len(argv) > 1:
         return Path(argv[1])
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     cands = [Path(os.environ["SCIPCTL_SHARED_REAL"])] if os.environ.get("SCIPCTL_SHARED_REAL") else []
     cands += [root / ".." / "shared" / "real", root / ".." / ".." / "shared" / "real"]
     for c in cands:

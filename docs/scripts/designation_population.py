@@ -1,6 +1,6 @@
 """Designation population for the designation trust model (scipctl/pipeline/designation_trust.py).
 
-    python scripts/designation_population.py OUT.jsonl FAMILY=DOWNLINK.mcap [FAMILY=DOWNLINK.mcap ...]
+    python docs/scripts/designation_population.py OUT.jsonl FAMILY=DOWNLINK.mcap [FAMILY=DOWNLINK.mcap ...]
 
 For every marked target of every downlink, designates at its mark in the first two left pancam and navcam images
 whose right image is marked too (``scipctl designate`` without the normal), and compares the point with ideal
