@@ -206,6 +206,22 @@ def stereo_at(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
                         window_px=params.stereo_window(left.camera))
 
 
+def on_left_ray(model, uv, xyz_rover) -> np.ndarray:
+    """The point of the left-image ray of pixel ``uv`` (2,) nearest to the stereo point ``xyz_rover`` (3,), both in
+    the model's (rover) frame; returns (3,).
+
+    Point stereo returns the midpoint of the left and right rays' closest approach. When the right eye's
+    calibration is off (the unsynchronised right exposure of a rocking mast), the rays miss each other and the
+    midpoint lies off the left ray: it projects back into the left image a few tenths of a pixel from the tracked
+    pixel (0.1-0.3 px, always the same sign, on the simulated navcams). The chain renders the next template around
+    the point's projection, so that offset would move every stop's reference by the same amount, times the
+    next stop's zoom. The tracked pixel is the measurement of the target's direction; stereo gives its range.
+    """
+    o, d = model.unproject(np.asarray(uv, float)[None])
+    xyz = np.asarray(xyz_rover, float)
+    return o[0] + float((xyz - o[0]) @ d[0]) * d[0]
+
+
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
               handoff_method: str = "scip", template_mode: str = "plane", handoff_at: str = "every",
               params: Optional[ChainParams] = None, step_model=None, setups: Optional[dict] = None) -> list:
@@ -298,7 +314,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         reason = "no right eye" if ps is None else ps.reason
         raise InputError(start.product_id, "pixel", f"designation has no stereo: {reason}")
     steps.append(step(start, "designate", None, uv, ps))
-    X_site = start.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
+    X_site = start.pose.T_site_rover.apply(on_left_ray(start.camera_model, uv, ps.xyz))
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
     normal, ground, normal_from = None, None, None
@@ -406,7 +422,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             if weak:  # not a reference for the next stop: the next one is tracked from the last good one
                 continue
             if ok:
-                X_site = prod.pose.T_site_rover.apply(np.asarray(ps.xyz, float))
+                X_site = prod.pose.T_site_rover.apply(on_left_ray(prod.camera_model, tr.uv, ps.xyz))
                 prev_range = float(ps.range_m)
             else:
                 # no stereo: the tracked pixel's ray at the predicted range keeps the estimate consistent with the
