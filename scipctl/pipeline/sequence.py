@@ -158,6 +158,15 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
     out.append(RuleCheck("arm-workspace", in_arm, float(np.hypot(*xy)), None, "m",
                          f"target at ({xy[0]:.2f}, {xy[1]:.2f}) m in the final rover frame; workspace "
                          f"{a.r_min_m:.2f}-{a.r_max_m:.2f} m ahead, |y| <= {a.half_width_m:.2f} m"))
+    am = plan.arm_margin
+    if am is not None:
+        room = min(float(np.hypot(*xy)) - a.r_min_m, a.r_max_m - float(np.hypot(*xy)))
+        kept = room >= am.margin_m
+        msg = (f"designated point {room:.3f} m inside the arm workspace's radial limits; the final drive's error "
+               f"needs {am.margin_m:.3f} m ({am.n_sigma:g} x {am.sigma_m:.3f} m + {am.bias_m:.3f} m)")
+        if not kept and plan.search is not None and plan.search.found and plan.search.kept is not None:
+            msg = plan.search.describe_margin()
+        out.append(RuleCheck("arm-margin", kept, room, am.margin_m, "m", msg, blocking=False))
     tilt_ok = fin.terrain_known and fin.tilt_rad <= r.max_tilt_rad
     out.append(RuleCheck("final-tilt", tilt_ok, fin.tilt_rad, r.max_tilt_rad, "rad",
                          (f"terrain tilt at the final pose {math.degrees(fin.tilt_rad):.1f} deg "
@@ -404,7 +413,10 @@ def sequence_document(pred: Prediction, record: Designation, checks: list, comma
                  "standoff_m": plan.params.final_distance_m,
                  "clearance": {k: v for k, v in plan.clearance.items()},
                  "search": None if plan.search is None else {"tried": len(plan.search.tried),
-                                                             "found": plan.search.found}},
+                                                             "found": plan.search.found,
+                                                             "found_with_margin": plan.search.found_with_margin,
+                                                             "margin_binding": plan.search.margin_binding()},
+                 "arm_margin": None if plan.arm_margin is None else plan.arm_margin.to_dict()},
         "handoff": handoff,
         "prediction": {"confidence": pred.confidence, "sigma_source": pred.sigma_source,
                        "p_arm_workspace": None if pred.mc is None else pred.mc.p_arm_workspace,

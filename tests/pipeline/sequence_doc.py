@@ -13,8 +13,8 @@ RECORD = Designation(id="t1", product_id="pancam_left_1_0", camera="pancam", pix
                      xyz_site_m=tuple(TARGET.tolist()), range_m=9.1)
 
 
-def prediction(rc, terrain, target=TARGET, confidence=0.95, approach=None):
-    plan = P.plan_approach(start_pose(), target, terrain, rc, approach or P.ApproachParams())
+def prediction(rc, terrain, target=TARGET, confidence=0.95, approach=None, uncertainty=None):
+    plan = P.plan_approach(start_pose(), target, terrain, rc, approach or P.ApproachParams(), uncertainty=uncertainty)
     return P.Prediction("t1", plan, None, None, [], {}, np.asarray(target, float), confidence, "test")
 
 

@@ -36,6 +36,15 @@ def test_a_user_file_overrides_only_its_keys(tmp_path):
     assert rs.source == str(p) and rs.values["flight_rules"]["max_tilt_deg"] == 20
 
 
+def test_the_arm_margin_key_reaches_the_planner_and_is_recorded(tmp_path):
+    p = tmp_path / "mine.yaml"
+    p.write_text("approach:\n  arm_margin_sigmas: 3.0\n")
+    rs = load_rules(p)
+    assert rs.predict.approach.arm_margin_sigmas == 3.0
+    assert rs.to_dict()["values"]["approach"]["arm_margin_sigmas"] == 3.0
+    assert load_rules().to_dict()["values"]["approach"]["arm_margin_sigmas"] == PredictParams().approach.arm_margin_sigmas
+
+
 def test_options_override_the_file_and_are_recorded(tmp_path):
     p = tmp_path / "mine.yaml"
     p.write_text("flight_rules:\n  min_p_success: 0.9\n")
@@ -51,6 +60,7 @@ def test_options_override_the_file_and_are_recorded(tmp_path):
     ("flight_rules:\n  max_tilt_deg: -1\n", "flight_rules.max_tilt_deg"),
     ("approach:\n  detour_bearings_deg: [15, 0]\n", "approach.detour_bearings_deg"),
     ("approach:\n  hazcam_stops_m: [1.4, -1]\n", "approach.hazcam_stops_m"),
+    ("approach:\n  arm_margin_sigmas: -1\n", "approach.arm_margin_sigmas"),
     ("arm_workspace:\n  r_max_m: 0.5\n", "arm_workspace.r_max_m"),
     ("rover_body:\n  rear_m: 0.6\n", "rover_body.rear_m"),
     ("uncertainty:\n  n_samples: 0\n", "uncertainty.n_samples"),

@@ -211,3 +211,19 @@ def test_a_low_confidence_refusal_names_the_weakest_stop_and_what_would_raise_it
     fine = next(c for c in Q.check_rules(replace(pred, confidence=0.9, risks=risks), rc)
                 if c.rule == "prediction-confidence")
     assert fine.ok and "weakest" not in fine.message
+
+
+def test_the_arm_margin_rule_is_advisory_and_names_what_the_candidates_with_the_margin_broke(rc, flat_terrain):
+    # a 0.3 m rock beside the direct line just before the target: only the workspace's edge clears rock-keep-out
+    ter = P.Terrain([heightfield_source(box_fn([(8.65, 0.25, 8.8, 0.5, 0.3)]))], smooth_sigma_px=0)
+    up = P.UncertaintyParams()
+    pred = prediction(rc, ter, approach=P.ApproachParams(detour_bearings_rad=(0.0,)), uncertainty=up)
+    checks = {c.rule: c for c in Q.check_rules(pred, rc)}
+    c = checks["arm-margin"]
+    assert not c.ok and not c.blocking and c.value < c.limit == pred.plan.arm_margin.margin_m
+    assert "the candidates with that room break rock-keep-out" in c.message
+    assert all(x.ok for x in checks.values() if x.blocking)  # the edge plan itself breaks no flight rule
+    ok = {c.rule: c for c in Q.check_rules(prediction(rc, flat_terrain, uncertainty=up), rc)}["arm-margin"]
+    assert ok.ok and ok.value >= ok.limit
+    # without the error model (a pinned standoff, or no uncertainty) there is no such rule
+    assert "arm-margin" not in {c.rule for c in Q.check_rules(prediction(rc, flat_terrain), rc)}

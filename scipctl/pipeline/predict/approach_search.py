@@ -9,6 +9,8 @@ from typing import Optional
 
 # the planner's constraints, by the flight-rule names of pipeline/sequence.py
 ROCK, TARGET, FOV = "rock-keep-out", "target-keep-out", "hazcam-fov-final"
+# the preference the planner keeps when it can: the final drive's error margin inside the arm workspace
+ARM_MARGIN = "arm-margin"
 
 
 def _num(x) -> Optional[float]:
@@ -21,15 +23,18 @@ class ApproachSearch:
 
     Each entry of ``tried``: ``detour_deg``, ``standoff_m``, ``min_rock_m``, ``min_target_m``
     (footprint clearances over the swept path), ``hazcam_margin_px`` (target from the hazcam images' edges at
-    the final pose) and ``bound_by`` (the constraints it breaks; empty for a clear plan).
+    the final pose), ``bound_by`` (the constraints it breaks; empty for a clear plan), ``arm_room_m`` (the
+    designated point's distance inside the arm workspace's radial limits), ``arm_margin_m`` (the room the final
+    drive's error needs, :mod:`~.arm_margin`; None when not asked) and ``short_of_margin`` (room < margin).
     """
 
     rock_keep_out_m: float
     target_keep_out_m: float
     tried: list = field(default_factory=list)
+    kept: Optional[int] = None  # the index in ``tried`` of the plan kept
 
     def add(self, detour_deg: float, standoff_m: float, clearance: dict, hazcam_margin_px: float,
-            fov_margin_px: float) -> None:
+            fov_margin_px: float, arm_room_m: Optional[float] = None, arm_margin_m: Optional[float] = None) -> None:
         bound = []
         if not clearance["min_rock_m"] >= self.rock_keep_out_m:
             bound.append(ROCK)
@@ -39,11 +44,42 @@ class ApproachSearch:
             bound.append(FOV)
         self.tried.append({"detour_deg": float(detour_deg), "standoff_m": float(standoff_m),
                            "min_rock_m": _num(clearance["min_rock_m"]), "min_target_m": _num(clearance["min_target_m"]),
-                           "hazcam_margin_px": _num(hazcam_margin_px), "bound_by": bound})
+                           "hazcam_margin_px": _num(hazcam_margin_px), "bound_by": bound,
+                           "arm_room_m": _num(arm_room_m), "arm_margin_m": _num(arm_margin_m),
+                           "short_of_margin": bool(arm_margin_m is not None
+                                                  and (arm_room_m is None or not arm_room_m >= arm_margin_m))})
 
     @property
     def found(self) -> bool:
         return any(not t["bound_by"] for t in self.tried)
+
+    @property
+    def found_with_margin(self) -> bool:
+        return any(not t["bound_by"] and not t["short_of_margin"] for t in self.tried)
+
+    def margin_binding(self) -> list:
+        """When a plan cleared but none with the arm margin: the constraints the candidates with the margin broke
+        (as :meth:`binding` over them; ``[arm-margin]`` alone when no candidate had the room). Else empty."""
+        if self.found_with_margin or not self.found:
+            return []
+        roomy = [t for t in self.tried if not t["short_of_margin"]]
+        if not roomy:
+            return [ARM_MARGIN]
+        sub = ApproachSearch(self.rock_keep_out_m, self.target_keep_out_m, roomy)
+        return sub.binding()
+
+    def describe_margin(self) -> str:
+        """One sentence for a kept plan short of the arm margin: its room, what was searched and the binding
+        constraint."""
+        kept = self.tried[self.kept]
+        span = f"{len(self.tried)} approaches tried"
+        head = (f"the designated point is {kept['arm_room_m']:.3f} m inside the arm workspace's edge, the final "
+                f"drive's error needs {kept['arm_margin_m']:.3f} m (approach.arm_margin_sigmas)")
+        b = self.margin_binding()
+        if b == [ARM_MARGIN]:
+            return f"{head}; {span} and no standoff inside the workspace has that room"
+        return (f"{head}; {span}: the candidates with that room break {', '.join(b)}, so the plan kept is "
+                f"the first that clears the flight rules")
 
     def binding(self) -> list:
         """The constraints no candidate met (each alone); when every one was met by some candidate but never all
@@ -96,4 +132,5 @@ class ApproachSearch:
 
     def to_dict(self) -> dict:
         return {"tried": [dict(t, bound_by=list(t["bound_by"])) for t in self.tried], "found": self.found,
-                "binding": self.binding()}
+                "binding": self.binding(), "found_with_margin": self.found_with_margin,
+                "margin_binding": self.margin_binding(), "kept": self.kept}

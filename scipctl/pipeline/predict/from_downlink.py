@@ -97,11 +97,9 @@ def sigmas_for(product, params: UncertaintyParams) -> tuple:
     increment they made every view of the approach look hundreds of pixels off (issue #15). The source text
     quotes them for the record.
     """
-    sp, sy = params.sigma_position_m, params.sigma_yaw_rad
-    src = [f"position: {'parameter' if sp is not None else 'per-stop default'}",
-           f"yaw: {'parameter' if sy is not None else 'per-stop default'}"]
-    sp = params.default_sigma_position_m if sp is None else sp
-    sy = params.default_sigma_yaw_rad if sy is None else sy
+    src = [f"position: {'parameter' if params.sigma_position_m is not None else 'per-stop default'}",
+           f"yaw: {'parameter' if params.sigma_yaw_rad is not None else 'per-stop default'}"]
+    sp, sy = params.per_stop_sigmas()
     dp, dy = product.pose.sigma_position_m, product.pose.sigma_yaw_rad
     if dp is not None or dy is not None:
         src.append("downlink pose sigma (absolute, not used per stop): "

@@ -11,6 +11,7 @@ import numpy as np
 
 from ...core.kinematics import RoverConfig
 from ...core.transforms import RigidTransform
+from .arm_margin import stereo_range_sigma_m
 from .params import UncertaintyParams
 from .planning import ApproachPlan
 from .terrain import Terrain
@@ -50,15 +51,6 @@ class McResult:
         return {"n_samples": self.n_samples, "sigma_position_m": self.sigma_position_m,
                 "sigma_yaw_rad": self.sigma_yaw_rad, "views": [v.to_dict() for v in self.views],
                 "p_arm_workspace": self.p_arm_workspace, "p_success_geometry": self.p_success_geometry}
-
-
-def _stereo_sigma_range(rover_config: RoverConfig, camera: str, range_m: float, sigma_d_px: float) -> float:
-    cam = rover_config.cameras[camera]
-    b = float(np.linalg.norm(cam.right.model.C - cam.left.model.C))
-    f = cam.left.model.hs
-    if b <= 0:
-        return 0.0
-    return float(range_m * range_m * sigma_d_px / (f * b))
 
 
 def sample_pose_errors(plan: ApproachPlan, up: UncertaintyParams, sigma_position_m: float, sigma_yaw_rad: float,
@@ -180,7 +172,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
             views.append(McView(st.index, sh.camera, float(in_fov.mean()), float(in_search.mean()), float(vis.mean()),
                                 float(ok.mean()), float(ok_all.mean()), pointing_offset_p90(uv_true, uv_pred, in_fov)))
             # stereo re-estimate from this camera: truth + range noise along its line of sight, into the believed frame
-            sig_r = _stereo_sigma_range(rover_config, sh.camera, float(sh.range_m or 0.0), up.disparity_sigma_px)
+            sig_r = stereo_range_sigma_m(rover_config, sh.camera, float(sh.range_m or 0.0), up.disparity_sigma_px)
             los_t = X_T[None] - C_true
             los_t /= np.linalg.norm(los_t, axis=1, keepdims=True)
             X_meas_true = X_T[None] + rng.standard_normal(n)[:, None] * sig_r * los_t

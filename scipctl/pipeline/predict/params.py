@@ -109,6 +109,9 @@ class ApproachParams:
     hazcam_stops_m: tuple = (1.4,)
     standoff_m: Optional[float] = None  # final distance; None: searched in the arm workspace, its centre first
     standoff_step_m: float = 0.05  # the standoff search's step (plan_approach), when standoff_m is None
+    # the searched standoff keeps the designated point this many sigmas of the final drive's error (arm_margin.py)
+    # inside the arm workspace when a candidate can; 0: the workspace's own edges
+    arm_margin_sigmas: float = 2.0
     detour_bearings_rad: tuple = tuple(np.deg2rad([0.0, 15.0, -15.0, 30.0, -30.0, 45.0, -45.0]).tolist())
     path_step_m: float = 0.05
     turn_step_rad: float = math.radians(10.0)
@@ -137,6 +140,7 @@ class ApproachParams:
             _check_number(c, "hazcam_stops_m[]", d, 0.0, lo_open=True)
         _check_number(c, "standoff_m", self.standoff_m, 0.0, lo_open=True, none_ok=True)
         _check_number(c, "standoff_step_m", self.standoff_step_m, 0.01)  # finer: hundreds of plans per bearing
+        _check_number(c, "arm_margin_sigmas", self.arm_margin_sigmas, 0.0)
         if not self.detour_bearings_rad or self.detour_bearings_rad[0] != 0.0:
             raise ValueError(f"{c}.detour_bearings_rad: must start with 0.0 (the direct approach), "
                              f"got {self.detour_bearings_rad!r}")
@@ -204,6 +208,12 @@ class UncertaintyParams:
         _check_number(c, "n_track_samples", self.n_track_samples, 0, integer=True)
         _check_number(c, "seed", self.seed, 0, integer=True)
         return self
+
+    def per_stop_sigmas(self) -> tuple:
+        """``(sigma_position_m, sigma_yaw_rad)`` the Monte Carlo runs with: the parameters, else the defaults."""
+        sp = self.default_sigma_position_m if self.sigma_position_m is None else self.sigma_position_m
+        sy = self.default_sigma_yaw_rad if self.sigma_yaw_rad is None else self.sigma_yaw_rad
+        return float(sp), float(sy)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,8 @@ from ...core.transforms import RigidTransform
 from ..chain import ChainParams
 from .geometry import _wrap, pose_on_plane, tilt_of, yaw_of
 from .approach_search import ApproachSearch
-from .params import ApproachParams, RoverBody
+from .arm_margin import ArmMargin, arm_margin
+from .params import ApproachParams, RoverBody, UncertaintyParams
 from .terrain import Terrain
 
 
@@ -83,6 +84,7 @@ class ApproachPlan:
     params: ApproachParams  # the plan's own: standoff_m is the standoff it was planned to
     designation_camera: str = "pancam"
     search: Optional[ApproachSearch] = None  # what plan_approach tried before keeping this plan
+    arm_margin: Optional[ArmMargin] = None  # the final drive's error margin the search asked of this plan
 
     @property
     def final(self) -> PlannedStop:
@@ -94,6 +96,7 @@ class ApproachPlan:
             "path_length_m": self.path_length_m, "clearance": self.clearance,
             "standoff_m": self.params.final_distance_m,
             "search": None if self.search is None else self.search.to_dict(),
+            "arm_margin": None if self.arm_margin is None else self.arm_margin.to_dict(),
             "stops": [s.to_dict() for s in self.stops],
         }
 
@@ -239,9 +242,17 @@ def standoff_candidates(p: ApproachParams) -> list:
     return [round(float(x), 9) for x in out if a.r_min_m - 1e-9 <= x <= a.r_max_m + 1e-9]
 
 
+def arm_room_m(arm, xy_rover) -> float:
+    """How far (m) the horizontal rover-frame point ``xy_rover`` (2,) lies inside the arm workspace's radial limits
+    (negative: outside)."""
+    r = float(np.hypot(xy_rover[0], xy_rover[1]))
+    return min(r - arm.r_min_m, arm.r_max_m - r)
+
+
 def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], rover_config: RoverConfig,
                   params: Optional[ApproachParams] = None, designation_camera: str = "pancam",
-                  chain_params: Optional[ChainParams] = None) -> ApproachPlan:
+                  chain_params: Optional[ChainParams] = None,
+                  uncertainty: Optional[UncertaintyParams] = None) -> ApproachPlan:
     """Plan the stops from ``start`` to the final pose in front of ``target_site_m`` (3,) (site frame).
 
     Searches (approach bearing, final standoff): the bearings in the order of
@@ -250,7 +261,13 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
     target stays reachable), and keeps the first plan whose swept footprint
     clears the rocks (``rock_keep_out_m``) and the target
     (``target_keep_out_m``) and whose final pose sees the target in the
-    hazcams. If none does, the plan closest to clearing them (largest worst
+    hazcams. With ``uncertainty`` (the Monte Carlo's error model) and a
+    searched standoff, the plan kept must also leave the designated point
+    ``params.arm_margin_sigmas`` sigmas of the final drive's error inside the
+    arm workspace's radial limits (:func:`~.arm_margin.arm_margin`); every
+    bearing is searched for one before the first plan that clears only the
+    constraints above (the workspace's edge) is kept, and ``plan.search``
+    names what the candidates with the margin broke. If none clears, the plan closest to clearing them (largest worst
     margin) is returned with its failing clearance figures. ``clearance["search"]``
     ``plan.search`` records what was tried and, for a blocked plan, which constraint bound
     (:class:`~.approach_search.ApproachSearch`). Without a ``terrain`` the ground is taken as the
@@ -269,7 +286,9 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
              if terrain is not None else np.zeros((0, 2)))
     search = ApproachSearch(rock_keep_out_m=p.rock_keep_out_m, target_keep_out_m=p.target_keep_out_m)
     best, best_margin = None, -np.inf
-    chosen = None
+    chosen = first_clear = None
+    want_margin = uncertainty is not None and p.standoff_m is None and p.arm_margin_sigmas > 0
+    sp, sy = uncertainty.per_stop_sigmas() if want_margin else (0.0, 0.0)
     for db in p.detour_bearings_rad:
         if d_start <= p.pancam_handoff_m and abs(db) > 1e-9:
             continue  # too close for a detour leg
@@ -278,18 +297,26 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
             plan = _plan_bearing(start, X_target_site, terrain, rover_config, pp, direct + db, db, rocks,
                                  designation_camera)
             fov_px = _final_hazcam_margin_px(rover_config, plan)
-            search.add(math.degrees(db), sd, plan.clearance, fov_px, p.fov_margin("hazcam"))
+            X_rover = plan.final.T_site_rover.inverse().apply(X_target_site)
+            if want_margin:
+                plan.arm_margin = arm_margin([st.leg_m for st in plan.stops[1:]], X_rover, rover_config,
+                                             uncertainty, p.arm_margin_sigmas, sp, sy)
+            search.add(math.degrees(db), sd, plan.clearance, fov_px, p.fov_margin("hazcam"),
+                       arm_room_m(p.arm, X_rover[:2]), None if plan.arm_margin is None else plan.arm_margin.margin_m)
             margin = min(plan.clearance["min_rock_m"] - p.rock_keep_out_m,
                          plan.clearance["min_target_m"] - p.target_keep_out_m,
                          (fov_px - p.fov_margin("hazcam")) / 1000.0)  # px -> a small margin: geometry first
+            i = len(search.tried) - 1
             if best is None or margin > best_margin:
-                best, best_margin = plan, margin
+                best, best_margin = (plan, i), margin
             if not search.tried[-1]["bound_by"]:
-                chosen = plan
-                break
+                first_clear = first_clear or (plan, i)
+                if not search.tried[-1]["short_of_margin"]:
+                    chosen = (plan, i)
+                    break
         if chosen is not None:
             break
-    plan = chosen if chosen is not None else best
+    plan, search.kept = chosen or first_clear or best
     plan.search = search
     for st in plan.stops[1:]:
         st.cameras = [_shot(rover_config, st, c, X_target_site, plan.params, chain_params) for c in _cameras_for(st.kind)]

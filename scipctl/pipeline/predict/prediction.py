@@ -149,7 +149,8 @@ def predict_target(dl, record: Designation, params: Optional[PredictParams] = No
     t_terrain = time.perf_counter() - t0
     t0 = time.perf_counter()
     plan = plan_approach(ctx.start, ctx.target_site_m, terrain, dl.rover_config, params.approach,
-                         designation_camera=ctx.product.camera, chain_params=params.chain)
+                         designation_camera=ctx.product.camera, chain_params=params.chain,
+                         uncertainty=params.uncertainty)
     t_plan = time.perf_counter() - t0
     sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
     pred = run_prediction(plan, terrain, dl.rover_config, record, ctx.product.pixels_float(),

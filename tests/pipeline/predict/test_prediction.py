@@ -11,7 +11,7 @@ def test_run_prediction_on_a_designation_and_sigmas_is_predict_target(slab_case)
     via_target = P.predict_target(dl, rec, params, terrain=ter)
     ctx = P.target_context(dl, rec)
     plan = P.plan_approach(ctx.start, ctx.target_site_m, ter, dl.rover_config, params.approach,
-                           designation_camera=ctx.product.camera)
+                           designation_camera=ctx.product.camera, uncertainty=params.uncertainty)
     sig = P.PoseSigmas(*P.sigmas_for(ctx.product, params.uncertainty))
     direct = P.run_prediction(plan, ter, dl.rover_config, rec, ctx.product.pixels_float(),
                               ctx.product.camera_model.transformed(ctx.start.T_site_rover), sig, params)

@@ -1,0 +1,89 @@
+"""scipctl.pipeline.predict.arm_margin: the final drive's error at the arm, against the Monte Carlo it models, and
+the standoff search keeping that margin inside the arm workspace."""
+
+import numpy as np
+import pytest
+
+from scipctl.pipeline import predict as P
+from scipctl.pipeline.predict.approach_search import ARM_MARGIN, ROCK
+from scipctl.pipeline.predict.arm_margin import arm_margin
+from tests.pipeline.predict.helpers import box_fn, heightfield_source, start_pose
+
+T = np.array([9.0, 0.0, 0.0])
+# a 0.3 m rock beside the direct approach line, 0.2-0.35 m before the target: on the direct bearing every
+# standoff but the workspace's edge (1.0 m) brings the footprint within rock-keep-out of it
+SIDE_ROCK = (8.65, 0.25, 8.8, 0.5, 0.3)
+
+
+def _margin_of(plan, rc, up):
+    sp, sy = up.per_stop_sigmas()
+    X = plan.final.T_site_rover.inverse().apply(T)
+    return arm_margin([s.leg_m for s in plan.stops[1:]], X, rc, up, 2.0, sp, sy)
+
+
+@pytest.mark.parametrize("standoff_m", [0.8, 1.0])
+def test_the_margin_model_matches_the_monte_carlo_final_arm_point(rc, flat_terrain, standoff_m):
+    up = P.UncertaintyParams(n_samples=20000, seed=3)
+    plan = P.plan_approach(start_pose(), T, flat_terrain, rc, P.ApproachParams(standoff_m=standoff_m))
+    am = _margin_of(plan, rc, up)
+    mc = P.monte_carlo(plan, flat_terrain, rc, T, up, *up.per_stop_sigmas())
+    r = np.hypot(*mc.final_xy_rover_m.T)
+    # linearised spread vs the samples': measured within 0.1-1.9 % at both standoffs (seeds 0 and 3); bound 5 %
+    # (the sample std of 20000 heavy-tailed samples moves by ~1-2 % between seeds)
+    assert r.std() == pytest.approx(am.sigma_m, rel=0.05)
+    # outward bias s sigma_theta^2 vs the sample mean: measured within 1.2-4.5 %; the mean's standard error is
+    # sigma / sqrt(n) ~ 0.07 mm = 2.5 % of the 2.4-3.0 mm bias, bound 4 of them
+    assert r.mean() - standoff_m == pytest.approx(am.bias_m, rel=0.10)
+    # 2 sigma + bias beyond the standoff: measured 4.0-4.5 % of the samples (heavier than a normal's 2.3 %: the
+    # heading terms are a product of normals and a chi-square); bound 6 %; inwards 0.2-0.5 %, bound 2 %
+    assert np.mean(r > standoff_m + am.margin_m) <= 0.06
+    assert np.mean(r < standoff_m - am.margin_m) <= 0.02
+
+
+def test_a_blocked_centre_no_longer_ends_at_the_workspace_edge(rc):
+    ter = P.Terrain([heightfield_source(box_fn([SIDE_ROCK]))], smooth_sigma_px=0)
+    old = P.plan_approach(start_pose(), T, ter, rc)  # no error model: the search as before
+    arm = old.params.arm
+    assert old.detour_rad == 0.0 and old.params.final_distance_m == pytest.approx(arm.r_max_m)
+    up = P.UncertaintyParams()
+    new = P.plan_approach(start_pose(), T, ter, rc, uncertainty=up)
+    s = new.search
+    assert s.found_with_margin and s.margin_binding() == []
+    assert s.tried[s.kept]["bound_by"] == [] and not s.tried[s.kept]["short_of_margin"]
+    # the edge plan was tried, cleared the flight rules and was passed over for its missing room
+    edge = [t for t in s.tried if t["detour_deg"] == 0.0 and t["standoff_m"] == pytest.approx(arm.r_max_m)]
+    assert edge and edge[0]["bound_by"] == [] and edge[0]["short_of_margin"]
+    xy = new.final.T_site_rover.inverse().apply(T)[:2]
+    room = min(np.hypot(*xy) - arm.r_min_m, arm.r_max_m - np.hypot(*xy))
+    assert new.arm_margin is not None and room >= new.arm_margin.margin_m > 0
+    assert not new.clearance["blocked"]
+    d = new.to_dict()
+    assert d["arm_margin"]["margin_m"] == new.arm_margin.margin_m and d["search"]["found_with_margin"]
+
+
+def test_when_no_candidate_has_the_margin_the_edge_plan_is_kept_and_the_binding_rule_named(rc, flat_terrain):
+    ter = P.Terrain([heightfield_source(box_fn([SIDE_ROCK]))], smooth_sigma_px=0)
+    up = P.UncertaintyParams()
+    direct_only = P.ApproachParams(detour_bearings_rad=(0.0,))
+    plan = P.plan_approach(start_pose(), T, ter, rc, direct_only, uncertainty=up)
+    s = plan.search
+    assert s.found and not s.found_with_margin
+    assert plan.params.final_distance_m == pytest.approx(plan.params.arm.r_max_m)  # the first clear plan
+    assert s.margin_binding() == [ROCK]
+    msg = s.describe_margin()
+    assert "the candidates with that room break rock-keep-out" in msg and "approach.arm_margin_sigmas" in msg
+    # a workspace narrower than the margin: no standoff has the room; the centre is kept and the message says so
+    narrow = P.ApproachParams(arm=P.ArmWorkspace(r_min_m=0.79, r_max_m=0.81))
+    plan2 = P.plan_approach(start_pose(), T, flat_terrain, rc, narrow, uncertainty=up)
+    assert plan2.search.margin_binding() == [ARM_MARGIN]
+    assert plan2.params.final_distance_m == pytest.approx(0.8)
+    assert "no standoff inside the workspace has that room" in plan2.search.describe_margin()
+
+
+def test_a_pinned_standoff_or_zero_sigmas_asks_no_margin(rc, flat_terrain):
+    up = P.UncertaintyParams()
+    pinned = P.plan_approach(start_pose(), T, flat_terrain, rc, P.ApproachParams(standoff_m=1.0), uncertainty=up)
+    assert pinned.arm_margin is None and pinned.params.final_distance_m == 1.0
+    off = P.plan_approach(start_pose(), T, flat_terrain, rc, P.ApproachParams(arm_margin_sigmas=0.0),
+                          uncertainty=up)
+    assert off.arm_margin is None and not off.search.tried[off.search.kept]["short_of_margin"]
