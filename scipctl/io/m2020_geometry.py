@@ -50,13 +50,18 @@ class UrdfJoint:
         return self.T_parent_origin
 
 
-def read_urdf_joints(path) -> dict:
-    """``child link -> UrdfJoint`` for every joint of a URDF file."""
+def urdf_root(path):
+    """The parsed root element of a URDF file; InputError naming the file when it cannot be read."""
     p = Path(path)
     try:
-        root = ET.parse(p).getroot()
+        return ET.parse(p).getroot()
     except (ET.ParseError, OSError) as e:
         raise InputError(p.name, "urdf", f"unreadable URDF ({e})") from None
+
+
+def read_urdf_joints(path) -> dict:
+    """``child link -> UrdfJoint`` for every joint of a URDF file."""
+    root = urdf_root(path)
     out = {}
     for j in root.findall("joint"):
         o = j.find("origin")

@@ -29,14 +29,13 @@ What is derived here (docs/sequence.md, "Rules file"; ``docs/scripts/derive_m202
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..model import InputError
-from .m2020_geometry import ROVER_LINK, URDF_FILE, chain, read_urdf_joints, wheels_xy_from_urdf
+from .m2020_geometry import ROVER_LINK, URDF_FILE, chain, read_urdf_joints, urdf_root, wheels_xy_from_urdf
 
 ARM_JOINTS = ("JOINT1_ENC", "JOINT2_ENC", "JOINT3_ENC", "JOINT4_ENC", "JOINT5_ENC")
 ARM_TIP_LINK = "Body_RA_Link5"
@@ -48,11 +47,7 @@ PUBLISHED_WIDTH_M = 2.7
 
 def urdf_joint_limits(path) -> dict:
     """``joint name -> (lower, upper)`` (radians or metres) of every joint of a URDF file with a ``<limit>``."""
-    p = Path(path)
-    try:
-        root = ET.parse(p).getroot()
-    except (ET.ParseError, OSError) as e:
-        raise InputError(p.name, "urdf", f"unreadable URDF ({e})") from None
+    root = urdf_root(path)
     out = {}
     for j in root.findall("joint"):
         lim = j.find("limit")
