@@ -163,7 +163,7 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
         room = min(float(np.hypot(*xy)) - a.r_min_m, a.r_max_m - float(np.hypot(*xy)))
         kept = room >= am.margin_m
         msg = (f"designated point {room:.3f} m inside the arm workspace's radial limits; the final drive's error "
-               f"needs {am.margin_m:.3f} m ({am.n_sigma:g} x {am.sigma_m:.3f} m + {am.bias_m:.3f} m)")
+               f"needs {am.margin_m:.3f} m ({am.n_sigma:g} x {am.sigma_m:.3f} m)")
         if not kept and plan.search is not None and plan.search.found and plan.search.kept is not None:
             msg = plan.search.describe_margin()
         out.append(RuleCheck("arm-margin", kept, room, am.margin_m, "m", msg, blocking=False))

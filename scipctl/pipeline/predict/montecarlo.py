@@ -191,7 +191,10 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     est_rover = fin_st.T_site_rover.inverse().apply(X_est)
     planned_rover = fin_st.T_site_rover.inverse().apply(np.asarray(plan.target_site_m, float).reshape(3))
     corr = est_rover - planned_rover[None]  # the rover moves by this (its own frame) to put the estimate there
-    t_true = t_true + corr @ fin_st.T_site_rover.R.T
+    # the correction is commanded in the rover's body frame, so in truth it moves along its TRUE final heading
+    # (R_true, per sample), not the believed one: the planned rotation added ~ dyaw x |corr| of spurious error
+    # (issue #15). With the estimate re-measured at this stop, X_final = planned_rover - (its stereo error)
+    t_true = t_true + np.einsum("nij,nj->ni", R_true, corr)
     X_final = np.einsum("nji,nj->ni", R_true, X_T[None] - t_true)
     in_arm = plan.params.arm.contains(X_final[:, :2])
     p_arm = float(in_arm.mean())

@@ -97,3 +97,22 @@ def test_the_arm_check_places_the_rover_against_the_designated_point_not_the_tru
     # exact up to float rounding of a few rigid transforms of ~10 m coordinates (measured 1.9e-15 m)
     np.testing.assert_allclose(mc.final_xy_rover_m, np.broadcast_to(D_final, (200, 2)), rtol=0, atol=1e-9)
     assert mc.p_arm_workspace == 1.0
+
+
+def test_the_final_correction_is_driven_along_the_true_heading(rc, flat_terrain):
+    # issue #15: the rover commands its final correction in its own body frame, so in truth it moves along its TRUE
+    # final heading. A large heading error (0.1 rad per stop) and position error (0.1 m per stop) give a nonzero
+    # correction; with exact re-estimates (no stereo noise, the final hazcam re-measures the target) the true target
+    # then lands exactly where the plan put the designated point D in the true final rover frame. Driving the
+    # correction along the believed heading instead left it off by ~ dyaw x |corr| (measured: up to 0.76 m here)
+    D = np.array([9.0, 0.3, 0.0])
+    u = D[:2] / np.linalg.norm(D[:2])
+    X_true = D + np.r_[0.12 * u, 0.0]  # the truth off the designated point: the correction is nonzero even at dxy = 0
+    plan = P.plan_approach(start_pose(), D, flat_terrain, rc, P.ApproachParams(standoff_m=0.9))
+    D_final = plan.final.T_site_rover.inverse().apply(D)[:2]
+    up = P.UncertaintyParams(n_samples=300, seed=5, drive_error_frac=0.0, yaw_error_rad_per_m=0.0,
+                             disparity_sigma_px=0.0)
+    mc = P.monte_carlo(plan, flat_terrain, rc, X_true, up, 0.1, 0.1)
+    assert np.abs(mc.errors[plan.final.index][1]).max() > 0.3  # the accumulated heading error is large
+    # exact up to float rounding of a few rigid transforms of ~10 m coordinates
+    np.testing.assert_allclose(mc.final_xy_rover_m, np.broadcast_to(D_final, (300, 2)), rtol=0, atol=1e-9)
