@@ -121,8 +121,7 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
 
     name, reason = rules_for_downlink(dl)
     rule_set = load_rules(name, chosen_by=f"not given; {reason}")
-    rules_file = {"file": rule_set.source, "sha256": rule_set.sha256, "overrides": dict(rule_set.overrides),
-                  "chosen_by": rule_set.chosen_by}  # as `sequence --json` reports it
+    rules_file = rule_set.summary()  # as `sequence --json` reports it
     rows = res.table1 if options.handoff else None
     for t in dl.targets:
         try:

@@ -38,8 +38,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
         "risks": [r.to_dict() for r in pred.risks], "path_length_m": pred.plan.path_length_m,
         "stops": len(pred.plan.stops) - 1, "seconds": pred.seconds,
         "products_read": {k: str(v) for k, v in source.read_from.items()},
-        "rules_file": {"file": rule_set.source, "sha256": rule_set.sha256, "overrides": rule_set.overrides,
-                       **({"chosen_by": rule_set.chosen_by} if rule_set.chosen_by else {})},
+        "rules_file": rule_set.summary(),
     }
     bad = broken(checks)
     stderr_console().print(f"rules: {rule_set.source}" + (f" ({rule_set.chosen_by})" if rule_set.chosen_by else ""),

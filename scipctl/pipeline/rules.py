@@ -60,6 +60,13 @@ class RuleSet:
     overrides: dict  # {option: value} the operator gave on the command line
     chosen_by: str = ""  # why this file, when the operator did not name it (rules_for_downlink); "" otherwise
 
+    def summary(self) -> dict:
+        """Which rules file, as ``sequence --json`` and a campaign's prediction records report it (``rules_file``)."""
+        out = {"file": self.source, "sha256": self.sha256, "overrides": dict(self.overrides)}
+        if self.chosen_by:
+            out["chosen_by"] = self.chosen_by
+        return out
+
     def to_dict(self) -> dict:
         """What the sequence's metadata records (``rules_used``)."""
         out = {"file": self.source, "sha256": self.sha256, "overrides": dict(self.overrides),
