@@ -265,6 +265,7 @@ def campaign(
     handoff: bool = typer.Option(True, "--handoff/--no-handoff", help="Run the handoff methods."),
     chain: bool = typer.Option(True, "--chain/--no-chain", help="Run the chain from the pancam designation."),
     predict: bool = typer.Option(True, "--predict/--no-predict", help="Run the pre-uplink prediction of each marked target."),
+    predict_route: str = typer.Option("plan", "--predict-route", help="The approach predicted: plan (the planner's, as sequence uplinks it) or downlink (the downlink's own later stops, which its chain ran over: for scoring the prediction against the chain)."),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: all)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo for the handoff (as simulate-handoff --fast)."),
@@ -280,7 +281,7 @@ def campaign(
     from .commands import campaign as command
 
     command.campaign(srcs, out, synth, seeds, runs, families, no_errors, handoff, chain, predict, methods, success_px,
-        fast, scheduler, workers, memory_limit, summarize, json_out)
+        fast, scheduler, workers, memory_limit, summarize, json_out, predict_route)
 
 
 def main() -> None:

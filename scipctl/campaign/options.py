@@ -18,7 +18,9 @@ class CampaignOptions:
 
     ``methods``: the handoff methods in run order (names from the handoff registry); ``pairs``: the
     (method, navcam) pairs to run (``--methods`` may name ``METHOD-near`` / ``METHOD-far``); ``fast``: the
-    handoff's half-resolution dense stereo (``simulate-handoff --fast``); ``success_px``: a handoff (and a chain's
+    handoff's half-resolution dense stereo (``simulate-handoff --fast``); ``predict_route``: the approach the
+    prediction is made for (``PredictParams.route``: ``plan``, what ``sequence`` uplinks, or ``downlink``, the
+    downlink's own later stops, which its chain ran over); ``success_px``: a handoff (and a chain's
     final answer) within this many hazcam pixels of the mark is a success.
     """
 
@@ -29,12 +31,15 @@ class CampaignOptions:
     pairs: tuple = ()  # ((method, navcam), ...), sorted
     success_px: float = 4.0
     fast: bool = False
+    predict_route: str = "plan"  # PredictParams.route: "plan" (the planner's approach) or "downlink" (its own stops)
 
     def check(self) -> "CampaignOptions":
         if not (self.handoff or self.chain or self.predict):
             raise InputError("campaign", "--no-handoff/--no-chain/--no-predict", "nothing left to run on a downlink")
         if not (isinstance(self.success_px, (int, float)) and math.isfinite(self.success_px) and self.success_px > 0):
             raise InputError("campaign", "--success-px", f"must be a positive finite number, got {self.success_px}")
+        if self.predict_route not in ("plan", "downlink"):
+            raise InputError("campaign", "--predict-route", f"must be plan or downlink, got {self.predict_route!r}")
         if self.handoff:
             if not self.methods or not self.pairs:
                 raise InputError("campaign", "--methods", "no handoff method to run")
@@ -51,12 +56,13 @@ class CampaignOptions:
     def to_dict(self) -> dict:
         return {"handoff": self.handoff, "chain": self.chain, "predict": self.predict,
                 "methods": list(self.methods), "pairs": [list(p) for p in self.pairs],
-                "success_px": float(self.success_px), "fast": self.fast}
+                "success_px": float(self.success_px), "fast": self.fast, "predict_route": self.predict_route}
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignOptions":
         return cls(bool(d["handoff"]), bool(d["chain"]), bool(d["predict"]), tuple(d["methods"]),
-                   tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]))
+                   tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]),
+                   str(d.get("predict_route", "plan")))
 
     def key(self) -> str:
         """SHA-256 of everything here that changes an answer, and of the tool's version."""

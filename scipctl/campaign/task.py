@@ -115,6 +115,8 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
     ``sequence --target`` makes them (the handoff method chosen from this downlink's Table 1, as ``sequence``
     chooses it from ``handoff.json``; the built-in rules ``sequence`` chooses without ``--rules``: by the
     downlink's rover)."""
+    from dataclasses import replace
+
     from ..pipeline.rules import load_rules, rules_for_downlink
     from ..pipeline.sequence import broken
     from ..pipeline.target_sequence import sequence_for
@@ -125,7 +127,8 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
     rows = res.table1 if options.handoff else None
     for t in dl.targets:
         try:
-            doc, checks, pred, record = sequence_for(dl, t.id, None, rows or None, params=rule_set.predict,
+            doc, checks, pred, record = sequence_for(dl, t.id, None, rows or None,
+                                                     params=replace(rule_set.predict, route=options.predict_route),
                                                      rules=rule_set.flight, rules_used=rule_set.to_dict(),
                                                      render_views=False)
         except (CommandFailed, InputError) as e:

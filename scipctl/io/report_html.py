@@ -429,7 +429,7 @@ def _prediction_html(pred, chips, palette) -> str:
                f"{_e(pred.sigma_source)} ({pred.mc.sigma_position_m:.3f} m, {math.degrees(pred.mc.sigma_yaw_rad):.2f}°); "
                f"{pred.mc.n_samples} Monte Carlo samples, {len([s for s in pred.chain.samples if s.sample >= 0]) if pred.chain else 0} "
                f"tracked on expected views. <b>P(success) {pred.confidence:.2f}</b>; P(arm reaches) "
-               f"{pred.mc.p_arm_workspace:.2f}; predicted final error (nominal) "
+               f"{_f(pred.mc.p_arm_workspace, 2)}; predicted final error (nominal) "
                f"{_f(None if acc.get('nominal_final_error_m') is None else 100 * acc['nominal_final_error_m'], 1)} cm "
                f"(goal {_f(100 * acc.get('goal_m', 0.01), 1)} cm).</p>")
     mcv = {(v.stop, v.camera): v for v in pred.mc.views} if pred.mc else {}

@@ -39,8 +39,8 @@ class McResult:
     sigma_position_m: float
     sigma_yaw_rad: float
     views: list  # McView
-    p_arm_workspace: float
-    p_success_geometry: float  # every view ok and the target in the arm workspace
+    p_arm_workspace: Optional[float]  # None: the plan ends at no placement pose (``ApproachPlan.placement``)
+    p_success_geometry: float  # every view ok and (at a placement pose) the target in the arm workspace
     samples_ok: np.ndarray = field(repr=False, default=None)  # (n,) bool
     errors: dict = field(repr=False, default_factory=dict)  # per stop: (dxy (n, 2), dyaw (n,))
     # (n, 2) the true target's horizontal position (x forward, y right) in the true final rover frame: what the arm
@@ -180,6 +180,9 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
             last_est = st.T_site_rover.apply(X_meas_rover)
         if last_est is not None:
             X_est = last_est
+    if not plan.placement:  # the route ends at an imaging stop: no final drive, no arm check
+        return McResult(n, float(sigma_position_m), float(sigma_yaw_rad), views, None, float(ok_all.mean()),
+                        ok_all, errors, None)
     # final pose: the rover drives its estimate to where the plan put its target; truth relative to the true final pose
     fin_st = plan.stops[-1]
     dxy, dyaw = errors[fin_st.index]

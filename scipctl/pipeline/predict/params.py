@@ -216,6 +216,9 @@ class UncertaintyParams:
         return float(sp), float(sy)
 
 
+ROUTES = ("plan", "downlink")
+
+
 @dataclass(frozen=True)
 class PredictParams:
     """Everything the prediction is run with (:func:`run_prediction`, :func:`predict_target`)."""
@@ -244,6 +247,10 @@ class PredictParams:
     # the chain simulation runs with the on-board chain's windows and the navcam->hazcam handoff's expected window
     chain: ChainParams = field(default_factory=ChainParams)
     handoff: HandoffParams = field(default_factory=HandoffParams)
+    # which approach is predicted: "plan" (the planner's own, :func:`plan_approach`; what a sequence uplinks) or
+    # "downlink" (the downlink's own later stops, :func:`~.route.route_from_downlink`; for validating the prediction
+    # against the chain run over those stops)
+    route: str = "plan"
 
     def success_of(self, camera: str) -> float:
         """The accuracy goal (m, on the surface) of a tracked pixel in ``camera``."""
@@ -277,4 +284,6 @@ class PredictParams:
         # the two HandoffParams fields the chain simulation uses (HandoffParams lives in core.handoff)
         _check_number(c, "handoff.template_half_px", self.handoff.template_half_px, 1, integer=True)
         _check_number(c, "handoff.search_radius_px", self.handoff.search_radius_px, 0.0, lo_open=True)
+        if self.route not in ROUTES:
+            raise ValueError(f"{c}.route: expected one of {', '.join(ROUTES)}, got {self.route!r}")
         return self

@@ -85,6 +85,9 @@ class ApproachPlan:
     designation_camera: str = "pancam"
     search: Optional[ApproachSearch] = None  # what plan_approach tried before keeping this plan
     arm_margin: Optional[ArmMargin] = None  # the final drive's error margin the search asked of this plan
+    # the final stop is an arm-placement pose (the Monte Carlo checks the arm workspace there); False for a route
+    # that ends at an imaging stop (:func:`~.route.route_from_downlink`)
+    placement: bool = True
 
     @property
     def final(self) -> PlannedStop:
@@ -97,7 +100,7 @@ class ApproachPlan:
             "standoff_m": self.params.final_distance_m,
             "search": None if self.search is None else self.search.to_dict(),
             "arm_margin": None if self.arm_margin is None else self.arm_margin.to_dict(),
-            "stops": [s.to_dict() for s in self.stops],
+            "placement": self.placement, "stops": [s.to_dict() for s in self.stops],
         }
 
 

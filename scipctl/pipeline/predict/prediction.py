@@ -135,6 +135,9 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
 def predict_target(dl, record: Designation, params: Optional[PredictParams] = None, designated_now: bool = False,
                    terrain: Optional[Terrain] = None, render_views: bool = True) -> Prediction:
     """Plan and predict tomorrow's approach to a designated target from today's downlink (the designation's position).
+    With ``params.route == "downlink"`` the approach is the downlink's own later stops instead of a planned one
+    (:func:`~.route.route_from_downlink`; only today's images are read, the later positions' recorded poses give
+    the route).
 
     ``render_views``: as in :func:`run_prediction` (False: ``Prediction.views`` is empty)."""
     import time
@@ -148,9 +151,15 @@ def predict_target(dl, record: Designation, params: Optional[PredictParams] = No
         terrain = Terrain(srcs, params.max_edge_ratio, params.min_edge_m, params.smooth_sigma_px)
     t_terrain = time.perf_counter() - t0
     t0 = time.perf_counter()
-    plan = plan_approach(ctx.start, ctx.target_site_m, terrain, dl.rover_config, params.approach,
-                         designation_camera=ctx.product.camera, chain_params=params.chain,
-                         uncertainty=params.uncertainty)
+    if params.route == "downlink":
+        from .route import route_from_downlink
+
+        plan = route_from_downlink(dl, ctx.start, ctx.product.position, ctx.target_site_m, terrain, params.approach,
+                                   params.chain, designation_camera=ctx.product.camera)
+    else:
+        plan = plan_approach(ctx.start, ctx.target_site_m, terrain, dl.rover_config, params.approach,
+                             designation_camera=ctx.product.camera, chain_params=params.chain,
+                             uncertainty=params.uncertainty)
     t_plan = time.perf_counter() - t0
     sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
     pred = run_prediction(plan, terrain, dl.rover_config, record, ctx.product.pixels_float(),

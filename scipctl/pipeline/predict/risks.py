@@ -76,7 +76,7 @@ def assess_risks(plan: ApproachPlan, mc: Optional[McResult], chain: Optional[Cha
                     prob = prob * c["p_kept_given_visible"]
             if reasons:
                 risks.append(Risk(st.index, sh.camera, what, prob, reasons))
-    if mc is not None and mc.p_arm_workspace < params.risk_probability:
+    if mc is not None and mc.p_arm_workspace is not None and mc.p_arm_workspace < params.risk_probability:
         risks.append(Risk(plan.stops[-1].index, "arm", "arm", mc.p_arm_workspace,
                           [f"target may fall outside the arm workspace (P inside {mc.p_arm_workspace:.2f})"]))
     return risks
