@@ -7,10 +7,12 @@ later stops is what the prediction is scored against (issue #15 item 1). Scoring
 the outcome of another mixes two questions; this module lets the prediction answer for the route that was driven.
 
 What the plan is made of: every position after today's (time order) where a left image of a camera of the chain
-(pancam, navcam, hazcam) was taken becomes a stop, at the rover's recorded (estimated) pose there, with the cameras
-imaged there shot as the planner shoots them (pointed from that pose at today's designated point). The recorded
-poses stand in for the commanded route; they carry the realised path, which a prediction before the drive would
-not know exactly -- the Monte Carlo still adds its own drive error per leg. The route ends at its last hazcam stop,
+(pancam, navcam, hazcam) was taken becomes a stop, at the rover's recorded (estimated) position there, on the
+recorded ground plane, with the recorded heading -- or, at a stop with a body-fixed camera (hazcam), facing
+today's designated point, as the planner's stops do -- and with the cameras imaged there shot as the planner
+shoots them (pointed from that pose at the designated point). The recorded poses stand in for the commanded
+route; they carry the drive's odometry error, which a prediction before the drive would not know -- the Monte
+Carlo adds its own drive error per leg. The route ends at its last hazcam stop,
 which is an imaging stop, not an arm standoff: ``ApproachPlan.placement`` is False and the Monte Carlo does not
 check the arm workspace there (the chain's final hazcam answer, not the placement, is what is scored).
 """
@@ -23,9 +25,9 @@ from typing import Optional
 import numpy as np
 
 from ...core.kinematics import RoverPose
-from .geometry import tilt_of, yaw_of
+from .geometry import pose_on_plane, tilt_of, yaw_of
 from .params import ApproachParams
-from .planning import ApproachPlan, PlannedStop, _shot, clearance_of
+from .planning import ApproachPlan, PlannedStop, _plane_of, _shot, clearance_of
 from .terrain import Terrain
 
 CHAIN_CAMERAS = ("pancam", "navcam", "hazcam")
@@ -66,8 +68,15 @@ def route_from_downlink(dl, start: RoverPose, start_position: tuple, target_site
         lefts = [im for im in dl.images_at(pos, eye="left") if im.camera in CHAIN_CAMERAS]
         if not lefts:
             continue
-        T_site_rover = lefts[0].pose.T_site_rover
-        xy, heading = T_site_rover.t[:2], yaw_of(T_site_rover)
+        recorded = lefts[0].pose.T_site_rover
+        xy, heading = recorded.t[:2], yaw_of(recorded)
+        names = sorted({im.camera for im in lefts}, key=CHAIN_CAMERAS.index)
+        if any(dl.rover_config.cameras[c].mount != "mast" for c in names if c in dl.rover_config.cameras):
+            # a body-fixed camera's stop faces the target, as the planner's do: the recorded heading carries the
+            # drive's odometry error, which the Monte Carlo adds itself (and which would put the designated
+            # point outside a hazcam the rover in fact pointed at the target)
+            heading = math.atan2(X[1] - xy[1], X[0] - xy[0])
+        T_site_rover = pose_on_plane(xy, heading, _plane_of(recorded))
         leg = float(np.linalg.norm(xy - prev.t[:2]))
         drive_yaw = math.atan2(xy[1] - prev.t[1], xy[0] - prev.t[0]) if leg > 1e-9 else yaw_of(prev)
         turn = math.remainder(heading - drive_yaw, math.tau)
@@ -75,7 +84,7 @@ def route_from_downlink(dl, start: RoverPose, start_position: tuple, target_site
                          T_site_rover, heading, leg, float(turn), tilt_rad=tilt_of(T_site_rover), terrain_known=False,
                          path_from_previous=[prev.t[:2].tolist(), xy.tolist()])
         stops.append(st)
-        cams.append(sorted({im.camera for im in lefts}, key=CHAIN_CAMERAS.index))
+        cams.append(names)
         path.append(xy.copy())
         prev = T_site_rover
     if len(stops) < 2:
