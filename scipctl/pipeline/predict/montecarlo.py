@@ -33,6 +33,12 @@ class McView:
         return dict(self.__dict__)
 
 
+# how far from its pose-estimate prediction the chain's tracker finds the target: anywhere in the image (the
+# feature-guided step, pipeline/chain.py _feature_track, matches against the whole new image) or within the
+# square search region of ChainParams.search_radius_px (NCC alone: the "scale" chain, or the plane chain's fallback)
+TRACKER_REACHES = ("image", "search")
+
+
 @dataclass
 class McResult:
     n_samples: int
@@ -104,7 +110,8 @@ def _true_pose_arrays(T_site_rover_believed: RigidTransform, dxy, dyaw):
 
 def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: RoverConfig, target_true_site,
                 up: UncertaintyParams, sigma_position_m: float, sigma_yaw_rad: float,
-                designation_range_sigma_m: float = 0.0, occlusion_tol_m: float = 0.04) -> McResult:
+                designation_range_sigma_m: float = 0.0, occlusion_tol_m: float = 0.04,
+                tracker_reach: str = "image") -> McResult:
     """Monte Carlo over the pose-estimate error (see :func:`sample_pose_errors`).
 
     Per sample and stop: the rover believes it is at the planned pose; it
@@ -114,8 +121,11 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     ``uv_pred``. Pointing is the nominal one plus the re-pointing shift
     ``uv_pred - uv_nominal`` (first order in the small pointing change).
     A view is ok when the re-pointed true pixel is inside the image (margin
-    ``plan.params.fov_margin``), within the tracker's search radius of ``uv_pred``
-    (square region), and the line of sight is not occluded by the terrain.
+    ``plan.params.fov_margin``), the line of sight is not occluded by the terrain and, with
+    ``tracker_reach="search"``, within the tracker's search radius of ``uv_pred`` (square region).
+    ``tracker_reach="image"`` (default, :data:`TRACKER_REACHES`): the chain's feature-guided step matches the
+    rendered previous view against the whole new image, so the search radius (its NCC fallback's) does not bound
+    it; ``p_in_search`` is still reported.
     Each view reports :func:`pointing_offset_p90` over the samples that see the target.
     At the final pose the rover drives (closed loop on its estimate, the
     sequence's ``DRV_APPROACH_TARGET``) so that its estimate sits where the
@@ -126,6 +136,8 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     re-estimates (the prediction passes the designation ray's point on
     today's terrain); it is not the reference of the final drive.
     """
+    if tracker_reach not in TRACKER_REACHES:
+        raise ValueError(f"monte_carlo: tracker_reach must be one of {TRACKER_REACHES}, got {tracker_reach!r}")
     n = int(up.n_samples)
     rng = np.random.default_rng(up.seed)
     X_T = np.asarray(target_true_site, float).reshape(3)
@@ -167,7 +179,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
                 vis = ~terrain.occluded(C_true, np.broadcast_to(X_T, C_true.shape), occlusion_tol_m)
             else:
                 vis = np.ones(n, bool)
-            ok = in_fov & in_search & vis
+            ok = in_fov & vis & (in_search if tracker_reach == "search" else True)
             ok_all &= ok
             views.append(McView(st.index, sh.camera, float(in_fov.mean()), float(in_search.mean()), float(vis.mean()),
                                 float(ok.mean()), float(ok_all.mean()), pointing_offset_p90(uv_true, uv_pred, in_fov)))

@@ -251,6 +251,12 @@ class PredictParams:
     # "downlink" (the downlink's own later stops, :func:`~.route.route_from_downlink`; for validating the prediction
     # against the chain run over those stops)
     route: str = "plan"
+    # the tracker's reach in the Monte Carlo (montecarlo.TRACKER_REACHES): "image" for the plane chain, whose
+    # feature-guided step matches the whole image (543 chain steps of 49 rendered downlinks: of the steps whose
+    # pointing offset was beyond the search radius, 71 of 142 were still within 4 px, against 292 of 401 inside it;
+    # docs/sequence.md, "The tracker's reach");
+    # "search" bounds each view by ChainParams.search_radius_px (the NCC-only chain)
+    tracker_reach: str = "image"
 
     def success_of(self, camera: str) -> float:
         """The accuracy goal (m, on the surface) of a tracked pixel in ``camera``."""
@@ -284,6 +290,8 @@ class PredictParams:
         # the two HandoffParams fields the chain simulation uses (HandoffParams lives in core.handoff)
         _check_number(c, "handoff.template_half_px", self.handoff.template_half_px, 1, integer=True)
         _check_number(c, "handoff.search_radius_px", self.handoff.search_radius_px, 0.0, lo_open=True)
+        if self.tracker_reach not in ("image", "search"):
+            raise ValueError(f"{c}.tracker_reach: expected image or search, got {self.tracker_reach!r}")
         if self.route not in ROUTES:
             raise ValueError(f"{c}.route: expected one of {', '.join(ROUTES)}, got {self.route!r}")
         return self

@@ -102,7 +102,7 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     secs["views"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigmas.position_m, sigmas.yaw_rad,
-                     range_sigma_m, params.occlusion_tol_m)
+                     range_sigma_m, params.occlusion_tol_m, tracker_reach=params.tracker_reach)
     secs["monte_carlo"] = time.perf_counter() - t0
     chain = None
     if params.run_chain:

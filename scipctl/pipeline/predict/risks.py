@@ -55,7 +55,7 @@ def assess_risks(plan: ApproachPlan, mc: Optional[McResult], chain: Optional[Cha
             if v is not None:
                 if v.p_in_fov < params.risk_probability and sh.in_fov:
                     reasons.append(f"out of field of view (P in view {v.p_in_fov:.2f})")
-                if v.p_in_search < params.risk_probability:
+                if params.tracker_reach == "search" and v.p_in_search < params.risk_probability:
                     reasons.append(f"outside the search region (P {v.p_in_search:.2f}, offset {v.offset_px_p90:.0f} px at the 90th percentile of the samples in view)")
                 if v.p_visible < params.risk_probability:
                     reasons.append(f"occlusion (P visible {v.p_visible:.2f})")

@@ -116,3 +116,21 @@ def test_the_final_correction_is_driven_along_the_true_heading(rc, flat_terrain)
     assert np.abs(mc.errors[plan.final.index][1]).max() > 0.3  # the accumulated heading error is large
     # exact up to float rounding of a few rigid transforms of ~10 m coordinates
     np.testing.assert_allclose(mc.final_xy_rover_m, np.broadcast_to(D_final, (300, 2)), rtol=0, atol=1e-9)
+
+
+def test_the_trackers_reach_image_counts_a_view_by_its_field_of_view_and_search_by_its_search_region(rc, flat_terrain):
+    """``tracker_reach="image"`` (the feature-guided chain): on flat open ground (nothing occludes) a view is ok
+    exactly when the target is in the field of view; ``"search"`` also asks for the NCC search region, so it is
+    never more probable, and with large pose errors it is less."""
+    T = np.array([9.0, 0.5, 0.0])
+    plan = P.plan_approach(start_pose(), T, flat_terrain, rc)
+    up = P.UncertaintyParams(n_samples=400)
+    img = P.monte_carlo(plan, flat_terrain, rc, T, up, 0.5, 0.15, tracker_reach="image")
+    srch = P.monte_carlo(plan, flat_terrain, rc, T, up, 0.5, 0.15, tracker_reach="search")
+    for a, b in zip(img.views, srch.views):
+        assert a.p_visible == 1.0 and a.p_ok == a.p_in_fov
+        assert b.p_ok <= min(b.p_in_fov, b.p_in_search)
+        assert (a.p_in_fov, a.p_in_search) == (b.p_in_fov, b.p_in_search)  # the same samples
+    assert srch.p_success_geometry < img.p_success_geometry
+    with pytest.raises(ValueError, match="tracker_reach"):
+        P.monte_carlo(plan, flat_terrain, rc, T, up, 0.5, 0.15, tracker_reach="anywhere")

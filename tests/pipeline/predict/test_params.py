@@ -111,3 +111,14 @@ def test_success_tolerance_follows_the_prediction_params():
     loose = P.PredictParams(success_m={"hazcam": 0.04})
     assert P.success_px(m, 2.0, "hazcam", loose) == pytest.approx(4 * P.success_px(m, 2.0, "hazcam", p), rel=1e-12)
     assert p.success_of("chemcam") == p.other_success_m
+
+
+def test_tracker_reach_and_route_are_checked():
+    from dataclasses import replace
+
+    from scipctl.pipeline.predict.params import PredictParams
+
+    assert PredictParams().tracker_reach == "image" and PredictParams().route == "plan"
+    for field, bad in (("tracker_reach", "anywhere"), ("route", "truth")):
+        with pytest.raises(ValueError, match=field):
+            replace(PredictParams(), **{field: bad}).check()
