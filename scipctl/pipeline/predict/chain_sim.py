@@ -63,7 +63,10 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     from the rover's estimate (exact ``point_at``), the previous window is
     scaled by the range / IFOV ratio and NCC-tracked around the predicted
     pixel; the search region rendered is the part that holds the true target
-    plus ``search_margin_px`` (clipped to the chain's search radius). The
+    plus ``search_margin_px`` (clipped to the chain's search radius). With
+    ``params.tracker_reach == "image"`` (the plane chain, whose feature step
+    removes the pose error over the whole image) the track is searched within
+    ``chain.feature_fine_radius_px`` of the true pixel instead. The
     navcam->hazcam handoff takes the tracked navcam pixel to 3-D on the
     terrain, projects it into the hazcam, and refines it by tracking an
     expected window draped from the navcam view. A step succeeds when the
@@ -135,9 +138,14 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                 if kind == "handoff navcam->hazcam" and nav_view is not None:
                     res = _hazcam_handoff(terrain, nav_view, m_true, uv_true, params)
                 else:
-                    rng_new = float(np.linalg.norm(Xr_est - m_bel.C))
-                    radius = float(params.chain.search_radius(sh.camera))
-                    res = _track_step(terrain, prev, m_true, uv_pred, uv_true, radius,
+                    if params.tracker_reach == "image":
+                        # the feature-guided step finds the pose error over the whole image; its coarse answer is
+                        # taken as exact and NCC decides within the fine radius around it (what is left to fail
+                        # is the appearance: a draped window that matches elsewhere, or nothing)
+                        search_uv, radius = uv_true, float(params.chain.feature_fine_radius_px)
+                    else:
+                        search_uv, radius = uv_pred, float(params.chain.search_radius(sh.camera))
+                    res = _track_step(terrain, prev, m_true, search_uv, uv_true, radius,
                                       params.chain.template_half(sh.camera), params, track)
                 uv_tr, ncc, reason, view = res
                 rec["ncc"] = None if ncc is None or not np.isfinite(ncc) else float(ncc)

@@ -34,3 +34,23 @@ def test_chain_on_exact_terrain_keeps_the_slab_target(slab_case):
     kinds = [s["kind"] for s in nominal.steps]
     assert "handoff pancam->navcam" in kinds and "handoff navcam->hazcam" in kinds
     assert set(pred.views) == {(st.index, sh.camera) for st in pred.plan.stops[1:] for sh in st.cameras}
+
+
+def test_a_pointing_offset_beyond_the_search_radius_is_lost_by_ncc_alone_and_kept_by_the_image_reach(slab_case):
+    """A search square of 5 px (every camera) against pose errors of 5 cm and 0.5 deg per stop: the rendered
+    samples' pointing offsets exceed it while the target stays in view. With ``tracker_reach="search"`` such steps
+    are lost ("outside the search region"); with ``"image"`` (the feature step's reach: the offset is removed over
+    the whole image) none is, and the chain keeps more of its samples."""
+    world, dl, ter = slab_case
+    rec = S.designation_record(dl, "t_slab")
+    up = P.UncertaintyParams(sigma_position_m=0.05, sigma_yaw_rad=np.radians(0.5), n_samples=200, n_track_samples=4)
+    small = replace(P.PredictParams().chain, search_radius_px={"pancam": 5.0, "navcam": 5.0, "hazcam": 5.0})
+    reasons, kept = {}, {}
+    for reach in ("search", "image"):
+        pred = P.predict_target(dl, rec, P.PredictParams(uncertainty=up, tracker_reach=reach, chain=small),
+                                terrain=ter, render_views=False)
+        reasons[reach] = [s["reason"] for c in pred.chain.samples for s in c.steps]
+        kept[reach] = sum(c.ok for c in pred.chain.samples)
+    assert "outside the search region" in reasons["search"]
+    assert "outside the search region" not in reasons["image"]
+    assert kept["image"] > kept["search"]
