@@ -149,6 +149,14 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                                       params.chain.template_half(sh.camera), params, track)
                 uv_tr, ncc, reason, view = res
                 rec["ncc"] = None if ncc is None or not np.isfinite(ncc) else float(ncc)
+                if uv_tr is None and reason in NO_DATA:
+                    # today's terrain holds too little around the target to render this view: no evidence either
+                    # way, so the step is not simulated (neither lost nor accurate); the next view is tracked from
+                    # the last rendered one, re-aimed at the target
+                    rec.update(reason=f"{NOT_SIMULATED}: {reason}", kept=True, ok=True, simulated=False)
+                    X_est = st.T_site_rover.apply(T_site_rover_true.inverse().apply(Xs))
+                    prev = dict(prev, X=Xs)
+                    continue
                 if uv_tr is None:
                     rec["reason"] = reason
                     lost = True
@@ -183,15 +191,23 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
         for i, s0 in enumerate(samples[0].steps):
             vals = [s.steps[i] for s in samples if s.sample >= 0]
             errs = [v["error_m"] for v in vals if v["error_m"] is not None and v["kept"]]
+            sim = [v for v in vals if v.get("simulated", True)]
             per_view.append({"stop": s0["stop"], "camera": s0["camera"], "kind": s0["kind"],
                              "nominal_ok": s0["ok"], "nominal_kept": s0["kept"], "nominal_error_px": s0["error_px"],
                              "nominal_error_m": s0["error_m"], "nominal_reason": s0["reason"],
-                             "p_kept": (float(np.mean([v["kept"] for v in vals])) if vals else None),
+                             "p_kept": (float(np.mean([v["kept"] for v in sim])) if sim else None),
+                             "n_simulated": len(sim),
                              "p_kept_given_visible": _p_given_visible(vals, "kept"),
                              "p_accurate_given_visible": _p_given_visible(vals, "ok"),
                              "mean_error_m": float(np.mean(errs)) if errs else None, "n": len(vals),
                              "reasons": sorted({v["reason"] for v in vals if v["reason"] and not v["ok"]})})
     return ChainResult(samples, per_view)
+
+
+# a step whose view cannot be rendered from today's terrain (too little stereo around the target) is not simulated
+NOT_SIMULATED = "not simulated"
+NO_DATA = ("expected window mostly empty", "expected hazcam window mostly empty", "no terrain data in the search region",
+           "no terrain at the navcam pixel")
 
 
 def success_px(model: CameraModel, range_m: float, camera: str, params: PredictParams) -> float:
@@ -202,7 +218,7 @@ def success_px(model: CameraModel, range_m: float, camera: str, params: PredictP
 
 def _p_given_visible(vals, key):
     geo = ("out of the field of view", "occluded", "target behind the camera", "target lost earlier", "cannot point")
-    vis = [v for v in vals if not (v["reason"] in geo)]
+    vis = [v for v in vals if not (v["reason"] in geo) and v.get("simulated", True)]
     return float(np.mean([v[key] for v in vis])) if vis else None
 
 

@@ -54,3 +54,25 @@ def test_a_pointing_offset_beyond_the_search_radius_is_lost_by_ncc_alone_and_kep
     assert "outside the search region" in reasons["search"]
     assert "outside the search region" not in reasons["image"]
     assert kept["image"] > kept["search"]
+
+
+def test_a_view_todays_terrain_cannot_render_is_not_simulated_rather_than_lost(slab_case):
+    """Today's terrain covering only the first 4 m of the approach: no expected window around the target can be
+    rendered, so no step is simulated; none counts as lost, and the confidence is the Monte Carlo's geometry
+    alone (the rendered chain says nothing either way). With the full terrain, steps are simulated."""
+    from tests.pipeline.predict.helpers import flat, heightfield_source
+
+    world, dl, ter = slab_case
+    rec = S.designation_record(dl, "t_slab")
+    near_only = P.Terrain([heightfield_source(flat, x=(-2.0, 4.0))])
+    up = P.UncertaintyParams(n_samples=100, n_track_samples=2)
+    pred = P.predict_target(dl, rec, P.PredictParams(uncertainty=up), terrain=near_only, render_views=False)
+    steps = [s for c in pred.chain.samples for s in c.steps]
+    assert steps and all(s["reason"].startswith("not simulated") and s["simulated"] is False for s in steps
+                         if s["reason"] not in ("out of the field of view", "occluded", "target lost earlier"))
+    assert all(v["n_simulated"] == 0 for v in pred.chain.per_view)
+    runs = [c for c in pred.chain.samples if c.sample >= 0 and pred.mc.samples_ok[c.sample]]
+    assert all(c.ok for c in runs)
+    assert pred.confidence == pytest.approx(pred.mc.p_success_geometry, abs=0)
+    full = P.predict_target(dl, rec, P.PredictParams(uncertainty=up), terrain=ter, render_views=False)
+    assert any(v["n_simulated"] > 0 for v in full.chain.per_view)
