@@ -248,15 +248,11 @@ def footprint_from_urdf(joints: dict) -> Footprint:
 
 def hazcam_margin_px(rover_config, xyz_rover: np.ndarray) -> np.ndarray:
     """(N,) the smaller distance (px) of rover-frame points ``(N, 3)`` from the edges of the two hazcam images
-    (-inf where a point does not project), as the ``hazcam-fov-final`` rule measures it."""
-    P = np.asarray(xyz_rover, float)
-    out = np.full(len(P), np.inf)
-    for eye in ("left", "right"):
-        spec = rover_config.spec("hazcam", eye)
-        uv = rover_config.camera_model("hazcam", eye, 0.0, 0.0).project(P)
-        m = np.minimum.reduce([uv[:, 0], uv[:, 1], spec.width - 1 - uv[:, 0], spec.height - 1 - uv[:, 1]])
-        out = np.minimum(out, np.where(np.all(np.isfinite(uv), axis=1), m, -np.inf))
-    return out
+    (-inf where a point does not project), as the ``hazcam-fov-final`` rule measures it
+    (:func:`scipctl.core.image_margin.pair_margin_px`)."""
+    from ..core.image_margin import pair_margin_px
+
+    return pair_margin_px(rover_config, "hazcam", xyz_rover)
 
 
 @dataclass(frozen=True)

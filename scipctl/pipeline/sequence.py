@@ -30,7 +30,7 @@ from typing import Optional
 import numpy as np
 
 from .designate import Designation
-from .predict import Prediction, camera_model_at
+from .predict import Prediction
 
 FORMAT = "scipctl-sequence/1"
 NOTIONAL = "NOTIONAL command stems (scipctl planning vocabulary, not a flight command dictionary)"
@@ -134,19 +134,9 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
                           else "no rocks in the stereo terrain") + f" (keep-out {r.rock_keep_out_m:.2f} m)"
                          + _searched(plan, "rock-keep-out", mr >= r.rock_keep_out_m)))
     # hazcams and arm at the final pose
-    worst_margin = float("inf")
-    for eye in ("left", "right"):
-        if "hazcam" not in rover_config.cameras:
-            worst_margin = -float("inf")
-            break
-        spec = rover_config.spec("hazcam", eye)
-        m = camera_model_at(rover_config, "hazcam", eye, None, None, fin.T_site_rover)
-        uv = m.project(X[None])[0]
-        if not np.all(np.isfinite(uv)):
-            worst_margin = -float("inf")
-            break
-        margin = min(uv[0], uv[1], spec.width - 1 - uv[0], spec.height - 1 - uv[1])
-        worst_margin = min(worst_margin, float(margin))
+    from ..core.image_margin import pair_margin_px
+
+    worst_margin = float(pair_margin_px(rover_config, "hazcam", fin.T_site_rover.inverse().apply(X)[None])[0])
     out.append(RuleCheck("hazcam-fov-final", worst_margin >= r.hazcam_fov_margin_px, _fin(worst_margin),
                          r.hazcam_fov_margin_px, "px",
                          "target inside both hazcam images at the final pose" + (

@@ -329,17 +329,10 @@ def plan_approach(start: RoverPose, target_site_m, terrain: Optional[Terrain], r
 def _final_hazcam_margin_px(rover_config: RoverConfig, plan: "ApproachPlan") -> float:
     """Smallest distance (px) of the target from the edges of the two hazcam images at the final pose
     (-inf when it is behind a camera or there is no hazcam)."""
-    if "hazcam" not in rover_config.cameras:
-        return -np.inf
-    out = np.inf
-    for eye in ("left", "right"):
-        spec = rover_config.spec("hazcam", eye)
-        m = camera_model_at(rover_config, "hazcam", eye, None, None, plan.final.T_site_rover)
-        uv = m.project(plan.target_site_m[None])[0]
-        if not np.all(np.isfinite(uv)):
-            return -np.inf
-        out = min(out, float(min(uv[0], uv[1], spec.width - 1 - uv[0], spec.height - 1 - uv[1])))
-    return out
+    from ...core.image_margin import pair_margin_px
+
+    X_rover = plan.final.T_site_rover.inverse().apply(np.asarray(plan.target_site_m, float))
+    return float(pair_margin_px(rover_config, "hazcam", X_rover[None])[0])
 
 
 def _plan_bearing(start, X_target_site, terrain, rover_config, p, bearing, detour, rocks,
