@@ -127,6 +127,22 @@ def _band_mask(curve_pl: np.ndarray, shape: tuple, band_px: float) -> np.ndarray
     return dist <= band_px
 
 
+def on_left_ray(model, uv, xyz) -> np.ndarray:
+    """The point of the left-image ray of pixel ``uv`` (2,) nearest to the stereo point ``xyz`` (3,), both in the
+    model's frame; returns (3,).
+
+    :func:`point_stereo` returns the midpoint of the left and right rays' closest approach. When the right eye's
+    calibration is off (the unsynchronised right exposure of a rocking mast), the rays miss each other and the
+    midpoint lies off the left ray: it projects back into the left image a few tenths of a pixel from the measured
+    pixel (0.1-0.3 px, always the same sign, on the simulated navcams; docs/stereo-and-tracking.md, "The drift's
+    cause"). The left pixel is the measurement of the target's direction; stereo gives its range. The chain
+    (every stop's estimate) and the handoff methods (the navcam target point, ``HandoffCase.point_stereo``) use it.
+    """
+    o, d = model.unproject(np.asarray(uv, float).reshape(1, 2))
+    X = np.asarray(xyz, float).reshape(3)
+    return o[0] + float((X - o[0]) @ d[0]) * d[0]
+
+
 def point_stereo(
     left_img,
     right_img,

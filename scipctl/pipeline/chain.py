@@ -26,7 +26,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..core.point_stereo import PointStereoParams
+from ..core.point_stereo import PointStereoParams, on_left_ray
 from ..model import Downlink, ImageProduct, InputError
 from .plane_warp import local_normals_site, plane_warped_template, plane_warped_view, render_through_plane
 from ..jsonutil import finite_or_none
@@ -204,22 +204,6 @@ def stereo_at(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
     return point_stereo(left.pixels_float(), right.pixels_float(), left.camera_model, right.camera_model,
                         np.asarray(uv, float), band_px=params.band(left.camera),
                         window_px=params.stereo_window(left.camera))
-
-
-def on_left_ray(model, uv, xyz_rover) -> np.ndarray:
-    """The point of the left-image ray of pixel ``uv`` (2,) nearest to the stereo point ``xyz_rover`` (3,), both in
-    the model's (rover) frame; returns (3,).
-
-    Point stereo returns the midpoint of the left and right rays' closest approach. When the right eye's
-    calibration is off (the unsynchronised right exposure of a rocking mast), the rays miss each other and the
-    midpoint lies off the left ray: it projects back into the left image a few tenths of a pixel from the tracked
-    pixel (0.1-0.3 px, always the same sign, on the simulated navcams). The chain renders the next template around
-    the point's projection, so that offset would move every stop's reference by the same amount, times the
-    next stop's zoom. The tracked pixel is the measurement of the target's direction; stereo gives its range.
-    """
-    o, d = model.unproject(np.asarray(uv, float)[None])
-    xyz = np.asarray(xyz_rover, float)
-    return o[0] + float((xyz - o[0]) @ d[0]) * d[0]
 
 
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from scipctl.core.camera import T_model_cam
-from scipctl.core.point_stereo import DEFAULT_BAND_PX, PointStereoParams, point_stereo
+from scipctl.core.point_stereo import DEFAULT_BAND_PX, PointStereoParams, on_left_ray, point_stereo
 from scipctl.core.transforms import RigidTransform
 from tests.core.stereo_scenes import BASELINE_M, F_PX, H, W, rendered, to_uint8
+from tests.models import all_models, pixel_grid
 
 
 def test_default_band_and_window_per_camera():
@@ -156,3 +157,22 @@ def test_point_stereo_bad_inputs_raise():
         point_stereo(L, R, left, right, (10.0, 20.0), min_range_m=5.0, max_range_m=1.0)
     with pytest.raises(ValueError):
         point_stereo(L, R, left, "not a model", (10.0, 20.0))
+
+
+@pytest.mark.parametrize("name", sorted(all_models()))
+def test_on_left_ray_keeps_the_stereo_point_on_the_measured_pixels_ray(name):
+    """A stereo midpoint off the left ray (the right eye's rays miss) is moved to the ray's nearest point: it
+    projects back onto the tracked pixel (round trip), the move is perpendicular to the ray, and a point already on
+    the ray stays where it is. Exact geometry: the bounds are float round-off of a 1-10 m point."""
+    model = all_models()[name]
+    rng = np.random.default_rng(7)
+    uv = pixel_grid(9, margin=20.0)
+    o, d = model.unproject(uv)
+    for k in range(len(uv)):
+        on = o[k] + rng.uniform(1.0, 10.0) * d[k]
+        side = np.cross(d[k], rng.normal(size=3))
+        off = on + 0.01 * side / np.linalg.norm(side)  # 1 cm off the ray
+        got = on_left_ray(model, uv[k], off)
+        assert np.allclose(got, on, rtol=0, atol=1e-9), (name, uv[k])
+        assert np.allclose(model.project(got[None])[0], uv[k], rtol=0, atol=1e-6), (name, uv[k])
+        assert np.allclose(on_left_ray(model, uv[k], on), on, rtol=0, atol=1e-9)

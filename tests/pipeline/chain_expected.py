@@ -10,7 +10,7 @@
 # (-0.007, +0.007) px, and +-1 DN of seeded noise -- by a probe calling run_chain with its
 # defaults (docs/scripts/chain_perturb.py), with the same x1.25 and rounding.
 # Re-measured in session 9, when the chain began to keep each stop's stereo point on the tracked pixel's ray
-# (pipeline/chain.py on_left_ray; docs/stereo-and-tracking.md, "The drift's cause"): every step, four runs on
+# (core/point_stereo.py on_left_ray, used by the chain; docs/stereo-and-tracking.md, "The drift's cause"): every step, four runs on
 # OpenCV 5.0.0 (as they are, designation +(0.01, 0) and (-0.007, +0.007) px, +-1 DN seeded noise) by
 # docs/scripts/chain_perturb.py, the same x1.25 and rounding. The ranges before that change are kept beside them.
 # None: that step is not checked (flagged unverified; see the flags test).

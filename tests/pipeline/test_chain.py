@@ -8,9 +8,8 @@ import pytest
 from scipctl.core.tracking import track
 from scipctl.core.windows import extract_window, scale_window, window_scale_for_handoff
 from scipctl.io.downlink import read_downlink
-from scipctl.pipeline.chain import ChainParams, ChainStep, on_left_ray, run_chain
+from scipctl.pipeline.chain import ChainParams, ChainStep, run_chain
 from scipctl.pipeline.plane_warp import plane_warped_template
-from tests.models import all_models, pixel_grid
 from tests.pipeline.chain_expected import EXPECTED_ERROR_PX  # the measured bounds and how they were measured
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -26,25 +25,6 @@ def _handoff_stop(dl):
     pos = [p for p in dl.positions() if dl.images_at(p, "pancam", "left") and dl.images_at(p, "navcam", "left")]
     assert pos, "a stop with both pancam and navcam images"
     return dl.images_at(pos[0], "pancam", "left")[0], dl.images_at(pos[0], "navcam", "left")[0]
-
-
-@pytest.mark.parametrize("name", sorted(all_models()))
-def test_the_chain_keeps_the_stereo_point_on_the_tracked_pixels_ray(name):
-    """A stereo midpoint off the left ray (the right eye's rays miss) is moved to the ray's nearest point: it
-    projects back onto the tracked pixel (round trip), the move is perpendicular to the ray, and a point already on
-    the ray stays where it is. Exact geometry: the bounds are float round-off of a 1-10 m point."""
-    model = all_models()[name]
-    rng = np.random.default_rng(7)
-    uv = pixel_grid(9, margin=20.0)
-    o, d = model.unproject(uv)
-    for k in range(len(uv)):
-        on = o[k] + rng.uniform(1.0, 10.0) * d[k]
-        side = np.cross(d[k], rng.normal(size=3))
-        off = on + 0.01 * side / np.linalg.norm(side)  # 1 cm off the ray
-        got = on_left_ray(model, uv[k], off)
-        assert np.allclose(got, on, rtol=0, atol=1e-9), (name, uv[k])
-        assert np.allclose(model.project(got[None])[0], uv[k], rtol=0, atol=1e-6), (name, uv[k])
-        assert np.allclose(on_left_ray(model, uv[k], on), on, rtol=0, atol=1e-9)
 
 
 def test_pancam_to_navcam_handoff_by_fov_scaling(dl):

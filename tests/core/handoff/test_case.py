@@ -68,3 +68,4 @@ def test_params_defaults_and_fast_pass_and_a_case_checks_them(handoff_scene):
         HandoffCase("near", case.nav, case.haz, case.T_haz_nav, HandoffParams(geometric_iterations=0))
     with pytest.raises(ValueError, match="label"):
         HandoffCase("middle", case.nav, case.haz, case.T_haz_nav)
+
