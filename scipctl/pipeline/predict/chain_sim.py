@@ -54,7 +54,7 @@ def _fill(img: np.ndarray) -> np.ndarray:
 
 def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig, designation_img: np.ndarray,
                    designation_model_site: CameraModel, designation_uv, surface_point_site, mc: Optional[McResult],
-                   params: PredictParams, n_samples: Optional[int] = None) -> ChainResult:
+                   params: PredictParams, n_samples: Optional[int] = None, target_normal_site=None) -> ChainResult:
     """Run the tracking chain and the handoffs on rendered views, nominal and for ``n_samples`` MC samples.
 
     The first window comes from today's real image (``designation_img``, its
@@ -131,7 +131,7 @@ def simulate_chain(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                     rec["reason"] = "out of the field of view"
                     lost = True
                     continue
-                if terrain.occluded(m_true.C[None], Xs[None], params.occlusion_tol_m)[0]:
+                if terrain.occluded(m_true.C[None], Xs[None], params.occlusion_tol_m, target_normal_site)[0]:
                     rec["reason"] = "occluded"
                     lost = True
                     continue

@@ -111,7 +111,7 @@ def _true_pose_arrays(T_site_rover_believed: RigidTransform, dxy, dyaw):
 def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: RoverConfig, target_true_site,
                 up: UncertaintyParams, sigma_position_m: float, sigma_yaw_rad: float,
                 designation_range_sigma_m: float = 0.0, occlusion_tol_m: float = 0.04,
-                tracker_reach: str = "image") -> McResult:
+                tracker_reach: str = "image", target_normal_site=None) -> McResult:
     """Monte Carlo over the pose-estimate error (see :func:`sample_pose_errors`).
 
     Per sample and stop: the rover believes it is at the planned pose; it
@@ -125,7 +125,9 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
     ``tracker_reach="search"``, within the tracker's search radius of ``uv_pred`` (square region).
     ``tracker_reach="image"`` (default, :data:`TRACKER_REACHES`): the chain's feature-guided step matches the
     rendered previous view against the whole new image, so the search radius (its NCC fallback's) does not bound
-    it; ``p_in_search`` is still reported.
+    it; ``p_in_search`` is still reported. ``target_normal_site`` (3,) or None: the terrain's normal at the
+    target, so that the target's own surface met at grazing incidence does not count as an occluder
+    (:meth:`~.terrain.Terrain.occluded`).
     Each view reports :func:`pointing_offset_p90` over the samples that see the target.
     At the final pose the rover drives (closed loop on its estimate, the
     sequence's ``DRV_APPROACH_TARGET``) so that its estimate sits where the
@@ -176,7 +178,7 @@ def monte_carlo(plan: ApproachPlan, terrain: Optional[Terrain], rover_config: Ro
                 in_search = fin & (off <= sh.search_radius_px)
             C_true = np.einsum("nij,j->ni", R_true, m.C) + t_true
             if terrain is not None:
-                vis = ~terrain.occluded(C_true, np.broadcast_to(X_T, C_true.shape), occlusion_tol_m)
+                vis = ~terrain.occluded(C_true, np.broadcast_to(X_T, C_true.shape), occlusion_tol_m, target_normal_site)
             else:
                 vis = np.ones(n, bool)
             ok = in_fov & vis & (in_search if tracker_reach == "search" else True)

@@ -93,21 +93,25 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     range_sigma_m = float(designation.range_sigma_m or 0.0)
     # the target's point on the terrain surface: today's designation ray cast into the mesh
     o, d = model_site.unproject(uv[None])
-    Xs = terrain.surface_point(o[0], d[0])
+    hit = terrain.cast(o, d)
+    Xs = hit.points[0] if hit.hit[0] else None
+    n_target = hit.normals[0] if hit.hit[0] else None  # the target's surface normal (occlusion by itself)
     if Xs is None or np.linalg.norm(Xs - X_T) > max(0.1, 0.05 * np.linalg.norm(X_T - o[0])):
         notes.append("the designation ray misses today's stereo surface near the target; using the designated point")
-        Xs = X_T
+        Xs, n_target = X_T, None
     t0 = time.perf_counter()
-    views = check_views(plan, terrain, rover_config, Xs, params, render=render_views)
+    views = check_views(plan, terrain, rover_config, Xs, params, render=render_views, target_normal_site=n_target)
     secs["views"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     mc = monte_carlo(plan, terrain, rover_config, Xs, params.uncertainty, sigmas.position_m, sigmas.yaw_rad,
-                     range_sigma_m, params.occlusion_tol_m, tracker_reach=params.tracker_reach)
+                     range_sigma_m, params.occlusion_tol_m, tracker_reach=params.tracker_reach,
+                     target_normal_site=n_target)
     secs["monte_carlo"] = time.perf_counter() - t0
     chain = None
     if params.run_chain:
         t0 = time.perf_counter()
-        chain = simulate_chain(plan, terrain, rover_config, image, model_site, uv, Xs, mc, params)
+        chain = simulate_chain(plan, terrain, rover_config, image, model_site, uv, Xs, mc, params,
+                               target_normal_site=n_target)
         secs["chain"] = time.perf_counter() - t0
     risks = assess_risks(plan, mc, chain, params)
     for (si, cam), ratio in sorted(foreshortening_changes(plan).items()):

@@ -15,10 +15,11 @@ from .terrain import Terrain
 
 
 def check_views(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig, surface_point_site,
-                params: PredictParams, render: bool = True) -> dict:
+                params: PredictParams, render: bool = True, target_normal_site=None) -> dict:
     """Fill each stop's shots with occlusion, incidence, texture and coverage figures; render nominal views.
 
-    ``surface_point_site`` (3,): the target's point on the terrain surface.
+    ``surface_point_site`` (3,): the target's point on the terrain surface; ``target_normal_site`` (3,) or None:
+    the terrain's normal there (:meth:`Terrain.occluded`).
     Returns ``{(stop index, camera): RenderedView}`` of reduced-size views
     (``render_width_px`` wide) when ``render``.
     """
@@ -30,7 +31,7 @@ def check_views(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig,
                 continue
             m_full = camera_model_at(rover_config, sh.camera, "left", sh.pan_rad, sh.tilt_rad, st.T_site_rover)
             C = m_full.C
-            sh.occluded = bool(terrain.occluded(C[None], X[None], params.occlusion_tol_m)[0])
+            sh.occluded = bool(terrain.occluded(C[None], X[None], params.occlusion_tol_m, target_normal_site)[0])
             ray = (X - C) / np.linalg.norm(X - C)
             hit = terrain.cast(C[None], ray[None])
             if hit.hit[0]:

@@ -144,3 +144,26 @@ def test_ground_plane_and_pose_on_plane_recover_a_tilted_slope():
     assert abs(math.atan2(T.R[1, 0], T.R[0, 0]) - 0.3) < 0.01  # heading kept
     assert abs(P.tilt_of(T) - math.acos(normal_down[2])) < 1e-12
     assert np.allclose(T.R.T @ T.R, np.eye(3), atol=1e-12) and np.linalg.det(T.R) > 0
+
+
+def test_the_targets_own_surface_at_grazing_incidence_does_not_occlude_it_and_a_wall_does():
+    """Flat ground with a 1 cm bump 10 cm in front of the target, seen from 15 cm above the ground 2 m away
+    (incidence ~86 deg): the ray meets the bump first, so without the target's normal the target counts as
+    occluded; the bump lies within ``tol_m`` of the target's tangent plane, so with the normal it does not. A
+    30 cm mound halfway is an occluder either way (the ray meets it 6 cm or more off the plane)."""
+    def bump(X, Y):
+        return 0.01 * np.exp(-((X - 4.9) ** 2) / (2 * 0.03 ** 2))
+
+    def bump_and_mound(X, Y):
+        return np.maximum(bump(X, Y), 0.3 * np.exp(-((X - 4.1) ** 2) / (2 * 0.1 ** 2)))
+
+    X = np.array([[5.0, 0.0, 0.0]])
+    o = np.array([[3.0, 0.0, -0.15]])  # site z is down: 15 cm above the ground
+    up = np.array([0.0, 0.0, -1.0])
+    ter = P.Terrain([heightfield_source(bump, x=(2.0, 6.0), y=(-1.0, 1.0), step=0.01)], smooth_sigma_px=0)
+    assert ter.occluded(o, X, 0.04)[0]
+    assert not ter.occluded(o, X, 0.04, target_normal=up)[0]
+    assert not ter.occluded(o, X, 0.04, target_normal=-up)[0]  # either sign
+    walled = P.Terrain([heightfield_source(bump_and_mound, x=(2.0, 6.0), y=(-1.0, 1.0), step=0.01)], smooth_sigma_px=0)
+    assert walled.occluded(o, X, 0.04)[0] and walled.occluded(o, X, 0.04, target_normal=up)[0]
+    assert ter.occluded(o, X, 0.04, target_normal=np.full(3, np.nan))[0]  # no normal known: as before
