@@ -81,6 +81,9 @@ class ChainParams:
     other_template_half_px: int = 15
     other_search_radius_px: float = 60.0
     other_context_half_px: int = 100
+    # the closure check (pipeline/chain_closure.py): the final hazcam answer re-found straight from the last
+    # trusted pancam track, recorded on the final step's extra["closure"]
+    closure: bool = True
 
     def check(self) -> "ChainParams":
         """Raise ValueError naming the first bad field; return self."""
@@ -107,6 +110,8 @@ class ChainParams:
                                  f"'homography', min inliers >= 2), got {cand!r}")
         if not self.feature_candidates:
             raise ValueError("ChainParams.feature_candidates: must not be empty")
+        if not isinstance(self.closure, bool):
+            raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         return self
 
     def template_half(self, camera: str) -> int:
@@ -435,6 +440,10 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     for s in handoffs:
         s.extra["final"] = s is handoffs[-1]
     _mark_after_unverified(steps)
+    if params.closure and handoffs and handoffs[-1].tracked_uv is not None:
+        from .chain_closure import closure_check
+
+        handoffs[-1].extra["closure"] = closure_check(dl, steps, params).to_dict()
     from .chain_trust import score_steps
 
     if step_model is None:

@@ -1,0 +1,109 @@
+"""The chain's closure check: the target re-found in the final hazcam image straight from the chain's last trusted
+pancam track, skipping the navcam steps in between (docs/stereo-and-tracking.md, "Closure").
+
+The chain hands the target from stop to stop; an error at one stop is carried, not corrected, and ``scip`` hands
+the chain's navcam pixel off faithfully, drift included. The closure is a second, shorter path to the same
+hazcam pixel: the pancam image of the approach's imaging stop (~4.5 m; at 0.28 mrad/px its footprint on the
+target, ~1.3 mm, is finer than the hazcam's at ~1 m, ~2 mm) is rendered through the target's local plane into
+the final hazcam view and found there by the chain's own feature-guided step (features remove the pose error of
+the drive between the two stops, NCC refines). Where the two paths agree, the navcam steps did not drift; where
+they disagree, one of them is wrong. The pancam track itself is shared by both paths, so its own trust still
+counts.
+
+The check records, on the final hazcam step's ``extra["closure"]``, a :class:`Closure`'s dict: the status of
+the feature step (``confirmed`` / ``unconfirmed`` / ``failed``, or why there was nothing to check), the
+reference product, the closure pixel and its distance ``closure_px`` to the chain's answer, and the feature
+step's diagnostics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Optional
+
+import numpy as np
+
+from ..jsonutil import finite_or_none
+
+
+@dataclass
+class Closure:
+    """The closure check of one chain. ``status``: ``confirmed`` | ``unconfirmed`` | ``failed`` (the feature step's)
+    or ``no final answer`` | ``no reference`` | ``no stereo`` (nothing to check). ``uv``: the closure's pixel in the
+    final hazcam image (None unless found); ``closure_px``: its distance to the chain's final answer (hazcam px)."""
+
+    status: str
+    reference: Optional[str] = None  # product id of the pancam image the closure started from
+    reference_step: Optional[int] = None  # its index in the chain
+    uv: Optional[list] = None
+    closure_px: Optional[float] = None
+    scale: Optional[float] = None  # hazcam pixels per reference pixel at the target
+    ncc_peak: Optional[float] = None
+    feature_local_inliers: int = 0
+    feature_confirmed: int = 0
+    feature_shift_px: Optional[float] = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        for k in ("closure_px", "scale", "ncc_peak", "feature_shift_px"):
+            d[k] = finite_or_none(d[k])
+        return d
+
+
+def closure_reference(steps: list, final: int) -> Optional[int]:
+    """Index of the chain's last trusted pancam track before step ``final`` (ok, not unverified, with a pixel and a
+    stereo point), or None. The designation itself is not one: from ~10 m to the hazcam the change of scale
+    (~10x) is more than the feature step bridges."""
+    for i in range(final - 1, -1, -1):
+        s = steps[i]
+        if (s.camera == "pancam" and s.kind == "track" and s.ok and not s.extra.get("unverified")
+                and s.tracked_uv is not None and s.xyz_site_m is not None and s.position != steps[final].position):
+            return i
+    return None
+
+
+def closure_check(dl, steps: list, params) -> Closure:
+    """The :class:`Closure` of a chain whose final hazcam handoff is the step with ``extra["final"]``.
+
+    ``dl``: the downlink; ``steps``: the chain's :class:`~scipctl.pipeline.chain.ChainStep` list; ``params``: its
+    :class:`~scipctl.pipeline.chain.ChainParams` (the feature step's settings, the hazcam template size).
+    """
+    from ..core.point_stereo import on_left_ray
+    from ..core.windows import window_scale_for_handoff
+    from .chain import _feature_track
+    from .plane_warp import local_normals_site
+
+    final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
+    if final is None or steps[final].tracked_uv is None:
+        return Closure("no final answer")
+    ref = closure_reference(steps, final)
+    if ref is None:
+        return Closure("no reference")
+    R, H = steps[ref], steps[final]
+    prev, prod = dl.product(R.product_id), dl.product(H.product_id)
+    # the reference's estimate on its tracked pixel's ray, as the chain keeps it (on_left_ray)
+    X_prev = on_left_ray(prev.camera_model, R.tracked_uv, prev.pose.T_site_rover.inverse().apply(np.asarray(R.xyz_site_m)))
+    X_site = prev.pose.T_site_rover.apply(X_prev)
+    rng_prev = float(np.linalg.norm(X_prev - prev.camera_model.C))
+    normal, ground = local_normals_site(dl, prev, X_prev, rng_prev)
+    up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
+    n_view = normal if normal is not None else (ground if ground is not None else up)
+    planes = [n_view]
+    if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > 5.0:
+        planes.append(ground)
+    X_new = prod.pose.T_site_rover.inverse().apply(X_site)
+    pred = prod.camera_model.project(X_new[None])[0]
+    if not np.all(np.isfinite(pred)):
+        return Closure("failed", R.product_id, ref)
+    rng_new = float(np.linalg.norm(X_new - prod.camera_model.C))
+    scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, rng_prev, 1.0 / prod.camera_model.hs, rng_new)
+    tr, info = _feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera), {},
+                              params)
+    out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale),
+                  ncc_peak=info.get("ncc_score"), feature_local_inliers=int(info.get("feature_local_inliers", 0)),
+                  feature_confirmed=int(info.get("feature_confirmed", 0)),
+                  feature_shift_px=info.get("feature_shift_px"))
+    if tr is not None and np.all(np.isfinite(tr.uv)):
+        out.uv = [float(x) for x in tr.uv]
+        out.closure_px = float(np.linalg.norm(np.asarray(tr.uv) - np.asarray(H.tracked_uv, float)))
+    return out
