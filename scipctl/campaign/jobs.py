@@ -151,7 +151,8 @@ def expand_sources(srcs) -> list:
 
 def family_of_file(path: Path) -> str:
     """The scene family of a downlink file: the ``family`` of the simulation record beside it
-    (``NAME.sim.json``, as ``synth`` writes it; ``default`` when the record names none), else ``files``."""
+    (``NAME.sim.json``, as ``synth`` writes it: the realised family's record, whose ``name`` is taken, or a name;
+    ``default`` when the record names none), else ``files``."""
     stem = path.name[: -len(".mcap")] if path.name.endswith(".mcap") else path.name
     rec = path.with_name(stem + ".sim.json")
     try:
@@ -159,6 +160,8 @@ def family_of_file(path: Path) -> str:
     except (OSError, ValueError):
         return FILES_FAMILY
     fam = doc.get("family", DEFAULT_FAMILY) if isinstance(doc, dict) else None
+    if isinstance(fam, dict):  # synth --family writes the realised SceneFamily.to_dict()
+        fam = fam.get("name")
     return fam if isinstance(fam, str) and fam else DEFAULT_FAMILY
 
 

@@ -48,6 +48,11 @@ def test_file_jobs_hash_name_and_family(tmp_path):
     assert file_jobs([renamed])[0].job_id != job.job_id  # another name: another job (the records' downlink field)
     (tmp_path / "paper-s1-arc.sim.json").write_text(json.dumps({"family": "sand-sheet"}))
     assert file_jobs([plain])[0].family == "sand-sheet"
+    # what `synth --family` writes: the realised family's record (its name is the family)
+    from scipctl.sim.families import FAMILIES
+
+    (tmp_path / "paper-s1-arc.sim.json").write_text(json.dumps({"family": FAMILIES["errors-double"].to_dict()}))
+    assert file_jobs([plain])[0].family == "errors-double"
 
 
 @pytest.mark.parametrize("text,seeds", [("0-3", [0, 1, 2, 3]), ("5", [5]), ("1,3-4,1", [1, 3, 4])])
