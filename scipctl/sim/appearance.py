@@ -17,6 +17,30 @@ import numpy as np
 from .noise import FractalNoise, LatticeNoise, lod_weight
 
 MAT_SKY, MAT_TERRAIN, MAT_ROCK, MAT_PEBBLE = -1, 0, 1, 2
+SPECK_MODES = ("lod", "filtered")
+
+
+@dataclass(frozen=True)
+class SpeckThresholds:
+    """Specks of a noise value ``s`` (~[-0.5, 0.5]): one kind where ``s > high_at``, the other where ``-s > low_at``,
+    each ramping in over ``ramp``; ``high_is_dark`` says which kind is dark (soil: yes; rock: the high ones are
+    bright)."""
+
+    high_at: float
+    low_at: float
+    ramp: float
+    high_is_dark: bool
+
+    def apply(self, s: np.ndarray) -> tuple:
+        """``(dark, bright)`` float32 in [0, 1] from ``s`` ``(N,)`` float32."""
+        f32 = np.float32
+        hi = np.clip((s - f32(self.high_at)) / f32(self.ramp), 0, 1)
+        lo = np.clip((-s - f32(self.low_at)) / f32(self.ramp), 0, 1)
+        return (hi, lo) if self.high_is_dark else (lo, hi)
+
+
+SOIL_SPECKS = SpeckThresholds(high_at=0.3, low_at=0.32, ramp=0.06, high_is_dark=True)
+ROCK_SPECKS = SpeckThresholds(high_at=0.19, low_at=0.21, ramp=0.05, high_is_dark=False)
 
 
 @dataclass
@@ -37,6 +61,11 @@ class Appearance:
     bedrock_exposure: Optional[object] = None  # xy (N, 2) -> (N,) in [0, 1]: where 1, the ground is bedrock (sim.terrain.GridValues)
     bedrock_albedo: float = 0.30
     bedrock_cover: float = 0.6  # the plates' rock shows through a dust film: this much rock, the rest soil
+    # how the thresholded specks (soil `spots`, rock `rock_spots`) meet a pixel footprint larger than them:
+    # "lod" (today's): thresholded from the LOD-faded noise, so they vanish once the footprint passes ~7 mm (a
+    # texture that changes with range: docs/simulator.md, "Specks and range"); "filtered": thresholded from the
+    # full-detail noise and faded towards their mean cover as the footprint grows (same mean albedo at any range)
+    specks: str = "lod"
 
     def sand_weight(self, xy: np.ndarray) -> np.ndarray:
         """0 (soil) .. 1 (drift sand) ``(N,)``: irregular patches (radius modulated by the angle) with a soft 4 cm edge."""
@@ -94,9 +123,9 @@ class Appearance:
                 tex[sel] = (1 - ws[sel]) * tex[sel] + ws[sel] * (sand + rip)
             a = base * (f32(1.0) + tex)
             if self.texture is None:  # the real texture carries its own specks
-                s = self.spots.eval_T(PT, f)  # ~[-0.5, 0.5]
-                dark = np.clip((s - f32(0.3)) / f32(0.06), 0, 1) * (1 - ws)
-                bright = np.clip((-s - f32(0.32)) / f32(0.06), 0, 1) * (1 - ws)
+                dark, bright = self._specks(self.spots, SOIL_SPECKS, PT, f)
+                dark = dark * (1 - ws)
+                bright = bright * (1 - ws)
                 a = a * (1 - f32(0.65) * dark) + f32(0.35) * bright
             if self.bedrock_exposure is not None:  # bare plates: rock-like albedo; dust in cracks and under sand stays soil
                 w = f32(self.bedrock_cover) * self.bedrock_exposure(P[ter, :2]) * (1 - ws)
@@ -116,10 +145,31 @@ class Appearance:
         and dark spots."""
         f32 = np.float32
         a = level * (f32(1.0) + self.rock.eval_T(PT, footprint_m))
-        s = self.rock_spots.eval_T(PT, footprint_m)
-        bright = np.clip((s - f32(0.19)) / f32(0.05), 0, 1)
-        dark = np.clip((-s - f32(0.21)) / f32(0.05), 0, 1)
+        dark, bright = self._specks(self.rock_spots, ROCK_SPECKS, PT, footprint_m)
         return a * (1 - f32(0.6) * dark) + f32(0.4) * bright
+
+    def _specks(self, noise: FractalNoise, th: "SpeckThresholds", PT: np.ndarray, footprint_m: Optional[np.ndarray]):
+        """``(dark, bright)`` ``(N,)`` float32 in [0, 1]: the specks of ``noise`` at points ``PT`` ``(3, N)`` (see ``specks``)."""
+        if self.specks == "lod" or footprint_m is None:
+            return th.apply(noise.eval_T(PT, footprint_m))
+        if self.specks != "filtered":
+            raise ValueError(f"Appearance.specks: {self.specks!r} (want 'lod' or 'filtered')")
+        dark, bright = th.apply(noise.eval_T(PT, None))
+        mean_dark, mean_bright = self._speck_cover(noise, th)
+        # the finest octave's cell is the specks' size: lod_weight's fade (1 up to a footprint of 2/3 cell, 0 from
+        # 2 cells on), applied after the threshold rather than to the noise before it
+        w = lod_weight(noise.octaves[0].cell_m, footprint_m)
+        return w * dark + (1 - w) * np.float32(mean_dark), w * bright + (1 - w) * np.float32(mean_bright)
+
+    def _speck_cover(self, noise: FractalNoise, th: "SpeckThresholds") -> tuple:
+        """Mean ``(dark, bright)`` of ``noise``'s specks at full detail, over 2^16 points of a seeded 1 m cube (cached)."""
+        key = id(noise)
+        cache = self.__dict__.setdefault("_cover", {})
+        if key not in cache:
+            P = np.random.default_rng(0x5BEC).uniform(0.0, 1.0, (3, 1 << 16)).astype(np.float32)
+            d, b = th.apply(noise.eval_T(P, None))
+            cache[key] = (float(d.mean()), float(b.mean()))
+        return cache[key]
 
 
 def make_appearance(rng: np.random.Generator, sand_patches: np.ndarray) -> Appearance:

@@ -60,9 +60,10 @@ def scene_for(plan: RunPlan, texture=None, family: Optional[SceneFamily] = None)
             from .texture import build_surface_texture
 
             surface_texture = build_surface_texture(texture, plan.scene_seed)
-        terrain, rocks, sun_range = DEFAULT_SCENE_KEY if scene_key is None else scene_key
+        terrain, rocks, sun_range, specks = DEFAULT_SCENE_KEY if scene_key is None else scene_key
         _SCENES[key] = make_scene(plan.scene_seed, keep_clear=keep, sun_azimuth_rad=plan.sun_azimuth_rad,
-                                  texture=surface_texture, terrain=terrain, rock_shape=rocks, sun_elevation_range_deg=sun_range)
+                                  texture=surface_texture, terrain=terrain, rock_shape=rocks, sun_elevation_range_deg=sun_range,
+                                  specks=specks)
     return _SCENES[key]
 
 

@@ -6,8 +6,10 @@ A :class:`SceneFamily` fixes six dimensions of what :func:`scipctl.sim.build.bui
   ``sand-sheet``, ``pebble-field``, ``rock-strewn``) -- height field, rocks, pebbles and drift sand;
 * ``rocks``: a key of :data:`scipctl.sim.rocks.ROCK_SHAPES` (``faceted`` today's; ``angular``, ``slab``,
   ``rounded``);
-* ``texture``: ``procedural`` (today's) or ``real`` (the pictures of ``shared/real`` draped on the terrain, read at
-  run time through :mod:`scipctl.io.texture_sources`; the repository keeps no copy);
+* ``texture``: ``procedural`` (today's), ``real`` (the pictures of ``shared/real`` draped on the terrain, read at
+  run time through :mod:`scipctl.io.texture_sources`; the repository keeps no copy) or ``procedural-filtered``
+  (today's, with the thresholded specks filtered after the threshold, so the texture does not change with range:
+  :class:`~scipctl.sim.appearance.Appearance` ``specks``; docs/simulator.md, "Specks and range");
 * ``sun_elevation_deg``: the range the sun's elevation is drawn from (today 35-60 deg); shadows are cast by
   shadow rays (:meth:`scipctl.sim.scene.Scene.radiance`), so a low sun makes long shadows;
 * ``error_scale``: in [0, 2], multiplying the scenario's default :class:`~scipctl.sim.errors.ErrorSettings`
@@ -29,7 +31,7 @@ from typing import Optional, Union
 from .rocks import ROCK_SHAPES
 from .terrain import TERRAIN_KINDS
 
-TEXTURES = ("procedural", "real")
+TEXTURES = ("procedural", "real", "procedural-filtered")
 ROVERS = ("default", "m2020")
 DEFAULT_SUN_ELEVATION_DEG = (35.0, 60.0)
 MIXED_SUN_ELEVATION_DEG = (10.0, 80.0)
@@ -76,8 +78,10 @@ class SceneFamily:
 
     @property
     def scene_key(self) -> tuple:
-        """What the scene depends on (besides seed, rover and texture): terrain, rocks, sun range."""
-        return (self.terrain, self.rocks, tuple(float(v) for v in self.sun_elevation_deg))
+        """What the scene depends on (besides seed, rover and real texture): terrain, rocks, sun range, and how the
+        specks meet the footprint (:class:`~scipctl.sim.appearance.Appearance` ``specks``)."""
+        specks = "filtered" if self.texture == "procedural-filtered" else "lod"
+        return (self.terrain, self.rocks, tuple(float(v) for v in self.sun_elevation_deg), specks)
 
     @property
     def needs_shared_real(self) -> bool:
@@ -141,6 +145,9 @@ FAMILIES: dict[str, SceneFamily] = _families(
     SceneFamily("errors-none", error_scale=0.0, description="no injected errors (ErrorSettings.none(); sensor noise stays)"),
     SceneFamily("errors-half", error_scale=0.5, description="every default error at half its magnitude"),
     SceneFamily("errors-double", error_scale=2.0, description="every default error at twice its magnitude"),
+    SceneFamily("filtered-specks", texture="procedural-filtered",
+                description="today's scenes with the specks filtered after their threshold: the texture is the same "
+                            "at any range (docs/simulator.md, 'Specks and range')"),
     SceneFamily("real-texture", texture="real",
                 description="real Mars image texture from shared/real draped on the soil (read at run time)"),
     SceneFamily("m2020", rover="m2020",
@@ -223,7 +230,7 @@ def family_rover(family: SceneFamily):
 def family_texture(family: SceneFamily):
     """The :class:`~scipctl.sim.texture.TextureSources` a (realised) family needs: None for ``procedural``; for
     ``real`` every usable picture under ``shared/real`` (default crop and pixel size; loaded once per process)."""
-    if family.texture == "procedural":
+    if family.texture != "real":
         return None
     from ..io.texture_sources import iter_texture_pictures
     from .texture import texture_sources_from_pictures

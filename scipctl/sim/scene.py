@@ -33,7 +33,7 @@ from typing import Optional
 
 import numpy as np
 
-from .appearance import MAT_PEBBLE, MAT_ROCK, MAT_SKY, MAT_TERRAIN, Appearance, make_appearance
+from .appearance import MAT_PEBBLE, MAT_ROCK, MAT_SKY, MAT_TERRAIN, SPECK_MODES, Appearance, make_appearance
 from .mesh import hull_mesh
 from .noise import LatticeNoise
 from .rocks import ROCK_SHAPES, Rock, make_rock
@@ -291,7 +291,7 @@ def _dist_to_segments(xy, segments):
 
 def make_scene(seed: int, keep_clear=(), n_near_rocks: Optional[int] = None, sun_elevation_deg: Optional[float] = None,
                sun_azimuth_rad: Optional[float] = None, texture=None, terrain: str = "rolling", rock_shape: str = "faceted",
-               sun_elevation_range_deg: tuple = (35.0, 60.0)) -> Scene:
+               sun_elevation_range_deg: tuple = (35.0, 60.0), specks: str = "lod") -> Scene:
     """A scene from ``seed`` (any int). ``keep_clear``: ``[(p0_xy, p1_xy, half_width_m), ...]`` corridors free of rocks.
 
     The target rock is ``scene.rocks[0]`` at the origin. ``sun_azimuth_rad``: direction (from north towards
@@ -300,12 +300,15 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: Optional[int] = None, sun
     whose relative albedo replaces the procedural soil grain and specks (geometry and random draws unchanged).
     ``terrain``: a key of :data:`~scipctl.sim.terrain.TERRAIN_KINDS` (the height field, rocks, pebbles and sand
     around the rock); ``rock_shape``: a key of :data:`~scipctl.sim.rocks.ROCK_SHAPES`; ``n_near_rocks``
-    overrides the terrain kind's count of rocks near the target. The defaults make today's scene.
+    overrides the terrain kind's count of rocks near the target; ``specks``: ``Appearance.specks`` (``lod`` or
+    ``filtered``; random draws unchanged). The defaults make today's scene.
     """
     if terrain not in TERRAIN_KINDS:
         raise ValueError(f"terrain: unknown {terrain!r} (want one of {', '.join(TERRAIN_KINDS)})")
     if rock_shape not in ROCK_SHAPES:
         raise ValueError(f"rock_shape: unknown {rock_shape!r} (want one of {', '.join(ROCK_SHAPES)})")
+    if specks not in SPECK_MODES:
+        raise ValueError(f"specks: unknown {specks!r} (want one of {', '.join(SPECK_MODES)})")
     lo_el, hi_el = (float(v) for v in sun_elevation_range_deg)
     if not 0 < lo_el <= hi_el < 90:
         raise ValueError(f"sun_elevation_range_deg: want 0 < lo <= hi < 90, got {sun_elevation_range_deg}")
@@ -420,6 +423,8 @@ def make_scene(seed: int, keep_clear=(), n_near_rocks: Optional[int] = None, sun
 
     if texture is not None:
         app = _replace(app, texture=texture)
+    if specks != "lod":
+        app = _replace(app, specks=specks)
     if gp.bedrock:  # the plates' exposure at the mesh's vertices, interpolated as the mesh is
         app = _replace(app, bedrock_exposure=GridValues(xs, field_.exposure(xy, spacing)))
     el = np.deg2rad(sun_elevation_deg if sun_elevation_deg is not None else r_sun.uniform(lo_el, hi_el))

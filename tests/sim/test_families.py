@@ -32,7 +32,7 @@ def test_registry_covers_every_dimension_and_round_trips():
     fixed = [f for f in FAMILIES.values() if not f.randomised]
     assert {f.terrain for f in fixed} == set(TERRAIN_KINDS)
     assert {f.rocks for f in fixed} == set(ROCK_SHAPES)
-    assert {f.texture for f in fixed} == {"procedural", "real"} and {f.rover for f in fixed} == {"default", "m2020"}
+    assert {f.texture for f in fixed} == {"procedural", "real", "procedural-filtered"} and {f.rover for f in fixed} == {"default", "m2020"}
     assert {0.0, 0.5, 1.0, 2.0} <= {f.error_scale for f in fixed}
     sun = [f.sun_elevation_deg for f in fixed]
     assert min(lo for lo, _ in sun) <= 20 and max(hi for _, hi in sun) >= 70
