@@ -8,9 +8,9 @@ step's ``p_success`` and the final hazcam step's ``extra["closure"]``). Per chai
 is within 4 px of the mark (the label), and
 
 * ``steps``: the chain's verdict today (every step GO);
-* ``closure``: a rule with no fitted number: GO when scip's answer is GO, the closure is confirmed, the pancam
-  track it starts from is GO by the step model, and the closure lands within ``CLOSURE_AGREE_PX`` (4, the success
-  radius) of the answer;
+* ``closure``: a rule with no fitted number: GO when scip's answer is GO, the closure is confirmed (from a trusted
+  pancam track) and lands within ``CLOSURE_AGREE_PX`` (4, the success radius) of the answer; ``closure+ref_go``:
+  also the pancam track GO by the step model;
 * ``logistic`` (features with and without the closure): a logistic regression (scikit-learn, C = 0.1,
   standardised) of the label on [scip's logit, the lowest tracking step's logit, the reference pancam track's
   logit] (+ [closure confirmed, log(closure px + 0.5)]), fitted with each family left out; GO at p >= 0.9.
@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from scipctl.campaign.jobs import family_of_file
+
 CLOSURE_AGREE_PX = 4.0
 SUCCESS_PX = 4.0
 
@@ -38,10 +40,16 @@ def chain_rows(dirs):
     rows = []
     for d in dirs:
         for f in sorted(glob.glob(str(Path(d) / "records" / "*.jsonl"))):
+            family = None
             for line in open(f):
                 r = json.loads(line)
+                if r.get("kind") == "downlink" and (r.get("job") or {}).get("path"):
+                    # the family from the simulation record beside the file (campaigns before the fix of
+                    # campaign/jobs.family_of_file recorded synth --family downlinks as 'default')
+                    family = family_of_file(Path(r["job"]["path"]))
                 if r.get("kind") != "chain" or "steps" not in r["record"]:
                     continue
+                r["family"] = family or r["family"]
                 steps = r["record"]["steps"]
                 fin = next((i for i, s in enumerate(steps) if s["camera"] == "hazcam" and s["extra"].get("final")), None)
                 row = {"family": r["family"], "downlink": r["downlink"], "target": r["record"]["target"],
@@ -64,8 +72,8 @@ def chain_rows(dirs):
                 cpx = c.get("closure_px")
                 x = x0 + [conf, math.log((cpx if cpx is not None else 100.0) + 0.5)]
                 row.update(x=x, x0=x0)
-                row["rule"] = bool(H["go"] and c["status"] == "confirmed" and ref is not None and ref["go"]
-                                   and cpx is not None and cpx <= CLOSURE_AGREE_PX)
+                row["rule"] = bool(H["go"] and c["status"] == "confirmed" and cpx is not None and cpx <= CLOSURE_AGREE_PX)
+                row["rule_ref_go"] = bool(row["rule"] and ref is not None and ref["go"])
                 rows.append(row)
     return rows
 
@@ -103,11 +111,13 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("dirs", nargs="+")
     ap.add_argument("--json")
+    ap.add_argument("--rows", action="store_true", help="print one line per chain")
     a = ap.parse_args()
     rows = chain_rows(a.dirs)
     family_out(rows, "x")
     family_out(rows, "x0")
     verdicts = {"steps": lambda r: r["chain_go"], "closure": lambda r: r["rule"],
+                "closure+ref_go": lambda r: r.get("rule_ref_go", False),
                 "logistic+closure": lambda r: r.get("p_x", 0) >= 0.9, "logistic": lambda r: r.get("p_x0", 0) >= 0.9}
     out = {}
     for fam in sorted({r["family"] for r in rows}) + ["pooled"]:
@@ -124,7 +134,7 @@ def main():
     for r in cl:
         st[r["closure"]["status"]] = st.get(r["closure"]["status"], 0) + 1
     print("closure status over chains with a final answer:", st)
-    for r in cl:
+    for r in (cl if a.rows else []):
         c = r["closure"]
         print(f'{r["family"]:>16s} {r["downlink"][-22:]:>22s} {r["target"]:>4s} final {r["final_px"]:6.2f} '
               f'closure {c["status"]:>12s} px {c.get("closure_px") if c.get("closure_px") is None else round(c["closure_px"], 2)} '

@@ -82,8 +82,9 @@ class ChainParams:
     other_search_radius_px: float = 60.0
     other_context_half_px: int = 100
     # the closure check (pipeline/chain_closure.py): the final hazcam answer re-found straight from the last
-    # trusted pancam track, recorded on the final step's extra["closure"]
-    closure: bool = True
+    # trusted pancam track, recorded on the final step's extra["closure"]. Off by default: measured, it costs 12-44 %
+    # of a chain's CPU and does not make a chain GO it could trust (docs/stereo-and-tracking.md, "Closure")
+    closure: bool = False
 
     def check(self) -> "ChainParams":
         """Raise ValueError naming the first bad field; return self."""

@@ -10,6 +10,10 @@ the drive between the two stops, NCC refines). Where the two paths agree, the na
 they disagree, one of them is wrong. The pancam track itself is shared by both paths, so its own trust still
 counts.
 
+When the pancam track at that stop was flagged, the closure starts from the navcam handoff there instead (found
+from the designation image across the drive, not from the pancam track): coarser (~3.7 mm at 4.5 m), still
+independent of the navcam tracks that follow it.
+
 The check records, on the final hazcam step's ``extra["closure"]``, a :class:`Closure`'s dict: the status of
 the feature step (``confirmed`` / ``unconfirmed`` / ``failed``, or why there was nothing to check), the
 reference product, the closure pixel and its distance ``closure_px`` to the chain's answer, and the feature
@@ -33,7 +37,7 @@ class Closure:
     final hazcam image (None unless found); ``closure_px``: its distance to the chain's final answer (hazcam px)."""
 
     status: str
-    reference: Optional[str] = None  # product id of the pancam image the closure started from
+    reference: Optional[str] = None  # product id of the image the closure started from (a pancam or navcam)
     reference_step: Optional[int] = None  # its index in the chain
     uv: Optional[list] = None
     closure_px: Optional[float] = None
@@ -51,14 +55,20 @@ class Closure:
 
 
 def closure_reference(steps: list, final: int) -> Optional[int]:
-    """Index of the chain's last trusted pancam track before step ``final`` (ok, not unverified, with a pixel and a
-    stereo point), or None. The designation itself is not one: from ~10 m to the hazcam the change of scale
+    """Index of the step the closure starts from, or None: the chain's last trusted pancam track before step
+    ``final``; when there is none, its last trusted navcam handoff (at the approach's imaging stop, found from the
+    designation image across the drive when the pancam track there was flagged). Trusted: ok, not unverified, with
+    a pixel and a stereo point, at an earlier stop than ``final``. Navcam tracks are never the reference: they are
+    what the closure checks. The designation is not one either: from ~10 m to the hazcam the change of scale
     (~10x) is more than the feature step bridges."""
-    for i in range(final - 1, -1, -1):
-        s = steps[i]
-        if (s.camera == "pancam" and s.kind == "track" and s.ok and not s.extra.get("unverified")
-                and s.tracked_uv is not None and s.xyz_site_m is not None and s.position != steps[final].position):
-            return i
+    def trusted(s):
+        return (s.ok and not s.extra.get("unverified") and s.tracked_uv is not None and s.xyz_site_m is not None
+                and s.position != steps[final].position)
+
+    for camera, kind in (("pancam", "track"), ("navcam", "handoff")):
+        for i in range(final - 1, -1, -1):
+            if steps[i].camera == camera and steps[i].kind == kind and trusted(steps[i]):
+                return i
     return None
 
 

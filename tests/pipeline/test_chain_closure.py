@@ -21,9 +21,11 @@ def test_the_reference_is_the_last_trusted_pancam_track():
     steps[3] = _step("pancam", "track", (1, 2), ok=False)  # a flagged track is no reference
     assert closure_reference(steps, 5) == 1
     steps[1] = _step("pancam", "track", (1, 1), unverified=True)
-    assert closure_reference(steps, 5) is None  # the designation (~10 m) is not one
+    assert closure_reference(steps, 5) == 2  # no trusted pancam track: the navcam handoff at the imaging stop
     steps[1] = _step("pancam", "track", (1, 1), xyz=None)  # no stereo point: nothing to render through
-    assert closure_reference(steps, 5) is None
+    assert closure_reference(steps, 5) == 2
+    steps[2] = _step("navcam", "handoff", (1, 1), ok=False)
+    assert closure_reference(steps, 5) is None  # navcam tracks and the designation (~10 m) are never one
 
 
 def test_closure_params_and_record():
