@@ -5,7 +5,7 @@ The chain hands the target from stop to stop; an error at one stop is carried, n
 the chain's navcam pixel off faithfully, drift included. The closure is a second, shorter path to the same
 hazcam pixel: the pancam image of the approach's imaging stop (~4.5 m; at 0.28 mrad/px its footprint on the
 target, ~1.3 mm, is finer than the hazcam's at ~1 m, ~2 mm) is rendered through the target's local plane into
-the final hazcam view and found there by the chain's own feature-guided step (features remove the pose error of
+the final hazcam view and found there by the chain's own feature-guided step (:func:`~scipctl.pipeline.feature_track.feature_track`: features remove the pose error of
 the drive between the two stops, NCC refines). Where the two paths agree, the navcam steps did not drift; where
 they disagree, one of them is wrong. The pancam track itself is shared by both paths, so its own trust still
 counts.
@@ -80,7 +80,7 @@ def closure_check(dl, steps: list, params) -> Closure:
     """
     from ..core.point_stereo import on_left_ray
     from ..core.windows import window_scale_for_handoff
-    from .chain import _feature_track
+    from .feature_track import feature_track
     from .plane_warp import local_normals_site
 
     final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
@@ -107,7 +107,7 @@ def closure_check(dl, steps: list, params) -> Closure:
         return Closure("failed", R.product_id, ref)
     rng_new = float(np.linalg.norm(X_new - prod.camera_model.C))
     scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, rng_prev, 1.0 / prod.camera_model.hs, rng_new)
-    tr, info = _feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera), {},
+    tr, info = feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera), {},
                               params)
     out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale),
                   ncc_peak=info.get("ncc_score"), feature_local_inliers=int(info.get("feature_local_inliers", 0)),

@@ -34,7 +34,7 @@ class McView:
 
 
 # how far from its pose-estimate prediction the chain's tracker finds the target: anywhere in the image (the
-# feature-guided step, pipeline/chain.py _feature_track, matches against the whole new image) or within the
+# feature-guided step, pipeline/feature_track.py, matches against the whole new image) or within the
 # square search region of ChainParams.search_radius_px (NCC alone: the "scale" chain, or the plane chain's fallback)
 TRACKER_REACHES = ("image", "search")
 

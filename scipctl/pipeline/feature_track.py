@@ -1,0 +1,155 @@
+"""The chain's feature-guided step (pipeline/chain.py; the closure check, pipeline/chain_closure.py, uses it too):
+the previous view rendered into the new one through a plane, SIFT features matched against the whole new image,
+a RANSAC model for the pose error, NCC to refine (docs/stereo-and-tracking.md, "Tracking through the stops")."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..jsonutil import finite_or_none as _f
+from ..model import ImageProduct
+from .plane_warp import plane_warped_view, render_through_plane
+
+
+def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
+                  half: int, feats: dict, params):
+    """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
+
+    For each plane normal in ``view_normals`` (site frame, planes through
+    ``X_site``), ``prev``'s image is rendered into ``prod``'s view around the
+    prediction ``pred_uv`` (:func:`plane_warped_view`) at ``prev``'s own
+    resolution (one rendered pixel per ``scale`` new pixels, ``scale`` = new
+    pixels per previous pixel at the target, at least 1), so that scale and
+    perspective changes are taken out by the geometry and what is left is the
+    pose-estimate error (a shift and a small rotation). Its SIFT keypoints
+    near the target are matched against those of the whole new image
+    (area-downsampled by the same factor, so that both have the same blur) and
+    a homography ``G`` (pose-estimate pixels of ``prod`` -> real pixels) is
+    fitted by RANSAC, with keypoints from a few reaches and models (``params.feature_candidates``)
+    around the target. For each ``G``, the template (half-size ``half``) is
+    rendered through the target's plane ``n_site`` at the pixels ``G^-1``
+    maps the new image's to, so that it carries the rotation of the pose
+    error too, and NCC-tracked within ``params.feature_fine_radius_px`` of the mapped
+    prediction; the best NCC wins. ``feats`` caches the new images' keypoints
+    by ``(product id, downsampling)``. ``info`` records the path, the
+    winner's inlier counts and the coarse position.
+    """
+    from ..core.features import detect_features, knn_matches, locate_by_features
+    from ..core.tracking import TrackResult, track
+
+    info = {"coarse": "features", "feature_inliers": 0, "feature_local_inliers": 0}
+    img = prod.pixels_float()
+    g = np.arange(-half, half + 1, dtype=float)
+    c = np.round(np.asarray(pred_uv, float))
+    cands, seen, reasons = [], [], []
+
+    def confirmed(cd):
+        loc, tr = cd[0], cd[1]
+        return tr.ok and np.all(np.isfinite(tr.uv)) and np.linalg.norm(tr.uv - loc.uv) <= params.feature_confirm_px
+
+    for factor in params.feature_step_factors:
+        if any(confirmed(cd) for cd in cands):
+            break  # a coarser rendering only when nothing was confirmed at the finer one
+        step_px = float(np.clip(scale * factor, 1.0, 4.0 * factor))
+        vhalf = int(round(params.view_reach_px / step_px))
+        key = (prod.product_id, round(step_px, 2))
+        if key not in feats:
+            feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
+        # pose-estimate pixels of prod -> rendering pixels
+        S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px],
+                      [0, 0, 1.0]])
+        for k, n_view in enumerate(view_normals):
+            view, vc = plane_warped_view(prev, prod, X_site, n_view, pred_uv, vhalf, step_px=step_px)
+            if np.isfinite(view).mean() < 0.2:
+                reasons.append(f"plane {k}: the previous view does not cover the prediction")
+                continue
+            ref = detect_features(view)
+            # the keypoints within the largest reach, matched once: each candidate takes its reach's rows
+            reach_max = max(cand[0] for cand in params.feature_candidates)
+            if len(ref):
+                ref = ref.subset(np.linalg.norm(ref.uv - vc, axis=1) <= reach_max * vhalf)
+            knn = knn_matches(ref, feats[key])
+            for reach, model, min_inliers in params.feature_candidates:
+                loc = locate_by_features(ref, vc, feats[key], ref_radius_px=reach * vhalf, model=model,
+                                         ransac_threshold_px=2.0 * step_px, min_inliers=min_inliers,
+                                         local_radius_px=params.feature_local_px / step_px, knn=knn)
+                if not loc.ok:
+                    reasons.append(f"x{factor:g} plane {k} reach {reach:g}: {loc.reason}")
+                    continue
+                if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
+                    continue
+                seen.append(loc.uv)
+                try:
+                    Gi = np.linalg.inv(loc.transform @ S)
+                except np.linalg.LinAlgError:
+                    continue
+                cc = np.round(loc.uv)
+                xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
+                yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ys = yh[:, :2] / yh[:, 2:3]
+                tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+                if np.isfinite(tpl).mean() < 0.9:
+                    continue
+                tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
+                tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
+                           min_score=0.3)
+                cands.append((loc, tr, k, reach, factor))
+    if not cands:
+        info["feature_status"] = "failed"
+        info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
+        return None, info
+    # Several candidates (planes, reaches, resolutions) measure the same position. A candidate is confirmed when
+    # NCC refines it to a peak near its feature match. The answer pools the candidates instead of taking the
+    # single best, so that which candidate scores a hair higher does not move the answer by their spread:
+    # confirmed -> the score-weighted mean of the confirmed NCC positions within params.feature_agree_px of the best one;
+    # none confirmed -> the inlier-weighted geometric median of the feature matches (reported as such).
+    good = [cd for cd in cands if confirmed(cd)]
+    if good:
+        best = max(good, key=lambda cd: (cd[1].score, -cd[2], cd[3], cd[4]))
+        near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= params.feature_agree_px]
+        w = np.array([max(cd[1].score, 1e-3) for cd in near])
+        uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
+        loc, tr, k, reach, factor = best
+        info["feature_status"] = "confirmed"
+        info["feature_pooled"] = len(near)
+        out = TrackResult(True, "", uv, best[1].score, best[1].second_score, best[1].ratio, best[1].sharpness,
+                          best[1].levels)
+    else:
+        pts = np.array([cd[0].uv for cd in cands])
+        w = np.array([max(cd[0].n_inliers, 1) for cd in cands], float)
+        uv = geometric_median(pts, w)
+        loc, tr, k, reach, factor = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv), -cd[0].n_inliers))
+        info["feature_status"] = "unconfirmed"
+        info["feature_pooled"] = len(cands)
+        # the NCC peak found elsewhere is not this position's score: recorded in info only
+        out = TrackResult(True, "", uv, float("nan"), float("nan"), float("nan"), float("nan"), 0)
+    info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
+                 "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
+                 "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
+                 "feature_shift_px": float(np.linalg.norm(out.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
+                 "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
+    return out, info
+
+
+def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-6) -> np.ndarray:
+    """Weighted geometric median of ``points`` ``(N, 2)`` (Weiszfeld's iteration from the weighted mean).
+
+    The point minimising ``sum w_i |x - p_i|``: one far-off point moves it
+    by little, and it moves continuously with the points (a robust pooling
+    of candidate positions).
+    """
+    p = np.asarray(points, float)
+    w = np.asarray(weights, float)
+    if p.ndim != 2 or p.shape[1] != 2 or w.shape != (len(p),) or len(p) == 0:
+        raise ValueError(f"points (N, 2) and weights (N,) expected, got {p.shape} and {w.shape}")
+    x = (w[:, None] * p).sum(0) / w.sum()
+    for _ in range(iterations):
+        d = np.linalg.norm(p - x, axis=1)
+        if np.any(d < 1e-12):
+            return p[int(np.argmin(d))].copy()
+        x_new = ((w / d)[:, None] * p).sum(0) / (w / d).sum()
+        if np.linalg.norm(x_new - x) < tol_px:
+            return x_new
+        x = x_new
+    return x
