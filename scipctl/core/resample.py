@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "cubic_axis", "cubic_weights"]
+__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "sample_bicubic_grids", "cubic_axis",
+           "cubic_weights"]
 
 #: the cubic kernel's parameter (OpenCV's INTER_CUBIC uses -0.75)
 CUBIC_A = -0.75
@@ -135,3 +136,40 @@ def sample_bicubic_grid(image, u, v) -> np.ndarray:
     # the pixels (h, w, 4 rows, 4 columns): the tap rows, then their tap columns (a C-ordered float64 copy)
     g = img[jv.reshape(-1)][:, iu.reshape(-1)].reshape(h, 4, w, 4).transpose(0, 2, 1, 3).astype(np.float64, order="C")
     return np.einsum("...r,...rc,...c->...", wv, g, wu)
+
+
+def sample_bicubic_grids(image, u, v) -> np.ndarray:
+    """``image`` ``(H, W)`` sampled by cubic convolution on every grid of one set of columns ``u[a]`` and one set
+    of rows ``v[b]``: ``u`` ``(A, w)`` and ``v`` ``(B, h)`` positions; returns ``(B, A, h, w)`` float64 with
+    ``[b, a]`` bit for bit :func:`sample_bicubic_grid` ``(image, u[a], v[b])`` (the NCC peak refinement samples
+    a 3 x 3 set of shifted windows at once).
+
+    :func:`sample_bicubic` sums, per output, the 16 terms ``(wv[r] * pixel[r, c]) * wu[c]`` one after the other
+    (``r`` outer, ``c`` inner, from 0; ``numpy.einsum``'s order). Here the same terms are summed in the same
+    order, but the first product ``wv[r] * pixel`` is computed once per tap row and image column (its value does
+    not depend on which output or column shift uses it) and the sum runs over whole arrays (one addition per
+    term), not per output. ``tests/core/test_resample.py`` compares it with :func:`sample_bicubic_grid` bit for
+    bit.
+    """
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"image: expected a non-empty (H, W) array, got shape {img.shape}")
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    if u.ndim != 2 or v.ndim != 2:
+        raise ValueError(f"u, v: expected (A, w) and (B, h) arrays, got shapes {u.shape} and {v.shape}")
+    H, W = img.shape
+    (A, w), (B, h) = u.shape, v.shape
+    wu, iu = cubic_axis(u, W)  # (A w, 4)
+    wv, jv = cubic_axis(v, H)  # (B h, 4)
+    # the tap rows (4 r, B h, W) in float64, each times its weight: wv[r] * pixel[r, column]
+    q = img[jv.T.reshape(-1)].astype(np.float64).reshape(4, B * h, W)
+    q *= wv.T[:, :, None]
+    # every term: (4 r, B h, 4 c, A w) = (wv[r] * pixel[r, c]) * wu[c]
+    p = np.take(q, iu.T.reshape(4, A * w), axis=2)
+    p *= wu.T
+    out = np.zeros((B * h, A * w))
+    for r in range(4):
+        for c in range(4):
+            out += p[r, :, c]
+    return np.ascontiguousarray(out.reshape(B, h, A, w).transpose(0, 2, 1, 3))
