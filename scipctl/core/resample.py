@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "sample_bicubic_grids", "cubic_axis",
-           "cubic_weights"]
+__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_uv", "sample_bicubic_grid",
+           "sample_bicubic_grids", "cubic_axis", "cubic_weights"]
 
 #: the cubic kernel's parameter (OpenCV's INTER_CUBIC uses -0.75)
 CUBIC_A = -0.75
@@ -101,6 +101,35 @@ def sample_bicubic(image, u, v) -> np.ndarray:
     else:
         g = img[jv[..., :, None], iu[..., None, :]].astype(np.float64)
     return np.einsum("...r,...rc,...c->...", wv, g, wu)
+
+
+def sample_bicubic_uv(image, uv) -> np.ndarray:
+    """``image`` ``(H, W)`` sampled by cubic convolution at ``uv`` ``(2, ...)`` (``u`` then ``v`` stacked): float64
+    ``(...)``, bit for bit :func:`sample_bicubic` ``(image, uv[0], uv[1])``.
+
+    The same operations on the same numbers, each done once for both axes (one floor, one
+    :func:`cubic_weights`, one clip) and without :func:`sample_bicubic`'s separate checks: for the hot loops
+    that sample one small window per call (affine point stereo's Nelder-Mead, hundreds of windows per match).
+    """
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"image: expected a non-empty (H, W) array, got shape {img.shape}")
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim < 1 or uv.shape[0] != 2:
+        raise ValueError(f"uv: expected a (2, ...) array, got shape {uv.shape}")
+    if not np.isfinite(uv).all():
+        raise ValueError("u, v: sampling positions must be finite")
+    H, W = img.shape
+    f = np.floor(uv)
+    w = cubic_weights(uv - f)  # (2, ..., 4): u's weights, v's weights
+    i = f.astype(np.int64)[..., None] + _OFFSETS  # (2, ..., 4)
+    i = np.minimum(np.maximum(i, 0), np.array([W - 1, H - 1]).reshape((2,) + (1,) * (i.ndim - 1)))
+    iu, jv = i[0], i[1]
+    if img.flags.c_contiguous:
+        g = img.take(jv[..., :, None] * W + iu[..., None, :]).astype(np.float64)  # (..., 4 rows, 4 columns)
+    else:
+        g = img[jv[..., :, None], iu[..., None, :]].astype(np.float64)
+    return np.einsum("...r,...rc,...c->...", w[1], g, w[0])
 
 
 def cubic_axis(x, n: int) -> tuple:

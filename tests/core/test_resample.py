@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from scipctl.core.resample import (cubic_axis, cubic_weights, sample_bicubic, sample_bicubic_grid, sample_bicubic_grids,
-                                   sample_bilinear)
+                                   sample_bicubic_uv, sample_bilinear)
 
 cv2 = pytest.importorskip("cv2")
 
@@ -125,3 +125,35 @@ def test_grids_are_bit_for_bit_the_grid_sampling(dtype):
         sample_bicubic_grids(np.zeros((4, 4)), np.array([[np.nan]]), np.zeros((1, 2)))
     with pytest.raises(ValueError):
         sample_bicubic_grids(np.zeros((4, 4)), np.zeros(3), np.zeros((1, 2)))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.uint8, np.uint16])
+@pytest.mark.parametrize("contiguous", [True, False])
+def test_stacked_sampling_is_bit_for_bit_the_pointwise_sampling(dtype, contiguous):
+    """sample_bicubic_uv (u and v stacked: affine point stereo's Nelder-Mead) gives exactly sample_bicubic:
+    random images, shapes and positions inside, on and beyond the border, whole-pixel positions, -0.0 pixels."""
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        H, W = rng.integers(1, 40, 2)
+        shape = tuple(rng.integers(1, 25, rng.integers(1, 3)))
+        if dtype in (np.uint8, np.uint16):
+            img = rng.integers(0, np.iinfo(dtype).max, (H, W), endpoint=True).astype(dtype)
+        else:
+            img = (rng.standard_normal((H, W)) * rng.choice([1e-3, 1.0, 255.0])).astype(dtype)
+            img[rng.random((H, W)) < 0.2] = -0.0
+        if not contiguous:
+            img = np.asfortranarray(img)
+        if trial % 3 == 0:
+            u = rng.integers(-3, W + 3, shape).astype(np.float64)
+            v = rng.integers(-3, H + 3, shape).astype(np.float64)
+        else:
+            u = rng.uniform(-3, W + 3, shape)
+            v = rng.uniform(-3, H + 3, shape)
+        got = sample_bicubic_uv(img, np.stack([u, v]))
+        want = sample_bicubic(img, u, v)
+        assert got.shape == want.shape == shape and got.dtype == want.dtype
+        assert np.array_equal(_bits(got), _bits(want))
+    with pytest.raises(ValueError):
+        sample_bicubic_uv(np.zeros((4, 4)), np.array([[np.nan], [0.0]]))
+    with pytest.raises(ValueError):
+        sample_bicubic_uv(np.zeros((4, 4)), np.zeros((3, 2)))
