@@ -107,9 +107,13 @@ def sample_bicubic_uv(image, uv) -> np.ndarray:
     """``image`` ``(H, W)`` sampled by cubic convolution at ``uv`` ``(2, ...)`` (``u`` then ``v`` stacked): float64
     ``(...)``, bit for bit :func:`sample_bicubic` ``(image, uv[0], uv[1])``.
 
-    The same operations on the same numbers, each done once for both axes (one floor, one
-    :func:`cubic_weights`, one clip) and without :func:`sample_bicubic`'s separate checks: for the hot loops
-    that sample one small window per call (affine point stereo's Nelder-Mead, hundreds of windows per match).
+    For the hot loops that sample one small window per call (affine point stereo's Nelder-Mead, hundreds of
+    windows per match). The same operations on the same numbers, laid out taps first (``(4, 2, n)`` weights
+    and indices, ``(4 rows, 4 columns, n)`` pixels) so that each is one numpy call over long rows, both axes
+    at once: the weights are :func:`cubic_weights`' expressions, and each output sums the 16 terms
+    ``(wv[r] * pixel[r, c]) * wu[c]`` one after the other from 0, ``r`` outer and ``c`` inner, which is what
+    ``numpy.einsum`` does in :func:`sample_bicubic` (``tests/core/test_resample.py`` compares them bit for bit
+    on random inputs).
     """
     img = np.asarray(image)
     if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
@@ -117,19 +121,35 @@ def sample_bicubic_uv(image, uv) -> np.ndarray:
     uv = np.asarray(uv, dtype=np.float64)
     if uv.ndim < 1 or uv.shape[0] != 2:
         raise ValueError(f"uv: expected a (2, ...) array, got shape {uv.shape}")
+    shape = uv.shape[1:]
+    uv = uv.reshape(2, -1)
     if not np.isfinite(uv).all():
         raise ValueError("u, v: sampling positions must be finite")
     H, W = img.shape
     f = np.floor(uv)
-    w = cubic_weights(uv - f)  # (2, ..., 4): u's weights, v's weights
-    i = f.astype(np.int64)[..., None] + _OFFSETS  # (2, ..., 4)
-    i = np.minimum(np.maximum(i, 0), np.array([W - 1, H - 1]).reshape((2,) + (1,) * (i.ndim - 1)))
-    iu, jv = i[0], i[1]
+    t = uv - f
+    a = CUBIC_A
+    w = np.empty((4,) + t.shape)  # (4 taps, 2 axes, n): cubic_weights(t), taps first
+    x = 1 + t
+    w0 = ((a * x - 5 * a) * x + 8 * a) * x - 4 * a
+    w1 = ((a + 2) * t - (a + 3)) * t * t + 1
+    x = 1 - t
+    w2 = ((a + 2) * x - (a + 3)) * x * x + 1
+    w[0], w[1], w[2] = w0, w1, w2
+    w[3] = 1.0 - w0 - w1 - w2
+    i = f.astype(np.int64) + _OFFSETS[:, None, None]  # (4, 2, n): tap columns, tap rows
+    i = np.minimum(np.maximum(i, 0), np.array([[W - 1], [H - 1]]))
     if img.flags.c_contiguous:
-        g = img.take(jv[..., :, None] * W + iu[..., None, :]).astype(np.float64)  # (..., 4 rows, 4 columns)
+        g = img.take((i[:, 1] * W)[:, None, :] + i[None, :, 0]).astype(np.float64)  # (4 rows, 4 columns, n)
     else:
-        g = img[jv[..., :, None], iu[..., None, :]].astype(np.float64)
-    return np.einsum("...r,...rc,...c->...", w[1], g, w[0])
+        g = img[i[:, None, 1], i[None, :, 0]].astype(np.float64)
+    g *= w[:, None, 1]  # wv[r] * pixel[r, c]
+    g *= w[None, :, 0]  # (...) * wu[c]
+    out = np.zeros(g.shape[2])
+    for r in range(4):
+        for c in range(4):
+            out += g[r, c]
+    return out.reshape(shape)
 
 
 def cubic_axis(x, n: int) -> tuple:
