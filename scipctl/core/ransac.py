@@ -133,7 +133,10 @@ def _fit_homography(s, d):
     A[1::2, 3:5], A[1::2, 5] = sn, 1.0
     A[1::2, 6:8] = -dn[:, 1:2] * sn
     A[1::2, 8] = -dn[:, 1]
-    _, sv, Vt = np.linalg.svd(A)
+    # only sv and Vt are used: without the (2n, 2n) U (LAPACK's gesdd computes the same R, bidiagonal form,
+    # singular values and Vt with or without it; the local optimisation fits hundreds of pairs, where the full U
+    # cost ~5x the rest). A minimal sample (8 x 9) needs the full Vt: its null vector is Vt's 9th row.
+    _, sv, Vt = np.linalg.svd(A, full_matrices=n <= 4)
     if n == 4 and sv[-2] < 1e-9 * sv[0]:  # a degenerate (e.g. collinear) sample has a 2-D null space
         return None
     Hn = Vt[-1].reshape(3, 3)
