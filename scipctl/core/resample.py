@@ -103,6 +103,46 @@ def sample_bicubic(image, u, v) -> np.ndarray:
     return np.einsum("...r,...rc,...c->...", wv, g, wu)
 
 
+def _cubic_weights_taps_first(t: np.ndarray, a: float = CUBIC_A) -> np.ndarray:
+    """:func:`cubic_weights` of ``t`` ``(...)`` laid out taps first, ``(4, ...)``: its expressions, operation for
+    operation (in place where they were temporaries, and the near piece of taps 1 and 2 in one pass)."""
+    w = np.empty((4,) + t.shape)
+    x = 1 + t
+    w0 = w[0]  # ((a x - 5 a) x + 8 a) x - 4 a
+    np.multiply(a, x, out=w0)
+    w0 -= 5 * a
+    w0 *= x
+    w0 += 8 * a
+    w0 *= x
+    w0 -= 4 * a
+    near = w[1:3]  # ((a + 2) x - (a + 3)) x x + 1 at x = t and x = 1 - t
+    near[0] = t
+    np.subtract(1, t, out=near[1])
+    y = (a + 2) * near
+    y -= a + 3
+    y *= near
+    y *= near
+    y += 1
+    near[...] = y
+    np.subtract(1.0, w0, out=w[3])  # 1 - w0 - w1 - w2
+    w[3] -= w[1]
+    w[3] -= w[2]
+    return w
+
+
+def _sum_terms(terms: np.ndarray) -> np.ndarray:
+    """The sum over the first axis of ``terms`` ``(16, n)`` taken one term after the other from 0, as
+    ``numpy.einsum`` sums :func:`sample_bicubic`'s terms: ``np.add.reduce`` over the outer axis adds whole rows in
+    turn (from the first row instead of 0: the ``+ 0.0`` turns the one possible difference, a sum of -0.0 terms,
+    into einsum's +0.0). With one column numpy would sum the column pairwise: then a plain loop."""
+    if terms.shape[1] >= 2:
+        return np.add.reduce(terms, axis=0) + 0.0
+    out = np.zeros(terms.shape[1:])
+    for k in range(terms.shape[0]):
+        out += terms[k]
+    return out
+
+
 def sample_bicubic_uv(image, uv) -> np.ndarray:
     """``image`` ``(H, W)`` sampled by cubic convolution at ``uv`` ``(2, ...)`` (``u`` then ``v`` stacked): float64
     ``(...)``, bit for bit :func:`sample_bicubic` ``(image, uv[0], uv[1])``.
@@ -128,15 +168,7 @@ def sample_bicubic_uv(image, uv) -> np.ndarray:
     H, W = img.shape
     f = np.floor(uv)
     t = uv - f
-    a = CUBIC_A
-    w = np.empty((4,) + t.shape)  # (4 taps, 2 axes, n): cubic_weights(t), taps first
-    x = 1 + t
-    w0 = ((a * x - 5 * a) * x + 8 * a) * x - 4 * a
-    w1 = ((a + 2) * t - (a + 3)) * t * t + 1
-    x = 1 - t
-    w2 = ((a + 2) * x - (a + 3)) * x * x + 1
-    w[0], w[1], w[2] = w0, w1, w2
-    w[3] = 1.0 - w0 - w1 - w2
+    w = _cubic_weights_taps_first(t)  # (4 taps, 2 axes, n)
     i = f.astype(np.int64) + _OFFSETS[:, None, None]  # (4, 2, n): tap columns, tap rows
     i = np.minimum(np.maximum(i, 0), np.array([[W - 1], [H - 1]]))
     if img.flags.c_contiguous:
@@ -145,11 +177,7 @@ def sample_bicubic_uv(image, uv) -> np.ndarray:
         g = img[i[:, None, 1], i[None, :, 0]].astype(np.float64)
     g *= w[:, None, 1]  # wv[r] * pixel[r, c]
     g *= w[None, :, 0]  # (...) * wu[c]
-    out = np.zeros(g.shape[2])
-    for r in range(4):
-        for c in range(4):
-            out += g[r, c]
-    return out.reshape(shape)
+    return _sum_terms(g.reshape(16, -1)).reshape(shape)
 
 
 def cubic_axis(x, n: int) -> tuple:
@@ -196,8 +224,8 @@ def sample_bicubic_grids(image, u, v) -> np.ndarray:
     :func:`sample_bicubic` sums, per output, the 16 terms ``(wv[r] * pixel[r, c]) * wu[c]`` one after the other
     (``r`` outer, ``c`` inner, from 0; ``numpy.einsum``'s order). Here the same terms are summed in the same
     order, but the first product ``wv[r] * pixel`` is computed once per tap row and image column (its value does
-    not depend on which output or column shift uses it) and the sum runs over whole arrays (one addition per
-    term), not per output. ``tests/core/test_resample.py`` compares it with :func:`sample_bicubic_grid` bit for
+    not depend on which output or column shift uses it) and the sum runs over whole arrays (the terms' slices
+    added in turn, see ``_sum_terms``), not per output. ``tests/core/test_resample.py`` compares it with :func:`sample_bicubic_grid` bit for
     bit.
     """
     img = np.asarray(image)
@@ -217,8 +245,11 @@ def sample_bicubic_grids(image, u, v) -> np.ndarray:
     # every term: (4 r, B h, 4 c, A w) = (wv[r] * pixel[r, c]) * wu[c]
     p = np.take(q, iu.T.reshape(4, A * w), axis=2)
     p *= wu.T
-    out = np.zeros((B * h, A * w))
-    for r in range(4):
-        for c in range(4):
-            out += p[r, :, c]
+    if A * w >= 2:  # numpy adds the (B h, A w) slices in turn, r outer, c inner (as _sum_terms)
+        out = np.add.reduce(p, axis=(0, 2)) + 0.0
+    else:
+        out = np.zeros((B * h, A * w))
+        for r in range(4):
+            for c in range(4):
+                out += p[r, :, c]
     return np.ascontiguousarray(out.reshape(B, h, A, w).transpose(0, 2, 1, 3))

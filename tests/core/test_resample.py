@@ -104,6 +104,8 @@ def test_grids_are_bit_for_bit_the_grid_sampling(dtype):
         H, W = rng.integers(1, 40, 2)
         h, w = rng.integers(1, 30, 2)
         A, B = rng.integers(1, 4, 2)
+        if trial < 6:  # a single column (and a single grid): numpy would sum one column pairwise
+            w, A = 1, 1
         if dtype in (np.uint8, np.uint16):
             img = rng.integers(0, np.iinfo(dtype).max, (H, W), endpoint=True).astype(dtype)
         else:
@@ -135,7 +137,7 @@ def test_stacked_sampling_is_bit_for_bit_the_pointwise_sampling(dtype, contiguou
     rng = np.random.default_rng(12)
     for trial in range(300):
         H, W = rng.integers(1, 40, 2)
-        shape = tuple(rng.integers(1, 25, rng.integers(1, 3)))
+        shape = tuple(rng.integers(1, 25, rng.integers(1, 3))) if trial >= 4 else [(1,), (1, 1), (2,), (1, 2)][trial]
         if dtype in (np.uint8, np.uint16):
             img = rng.integers(0, np.iinfo(dtype).max, (H, W), endpoint=True).astype(dtype)
         else:
