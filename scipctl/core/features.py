@@ -173,9 +173,12 @@ def to_uint8(image, valid: Optional[np.ndarray] = None) -> np.ndarray:
     lo, hi = np.percentile(a[ok], [0.5, 99.5])
     if not hi > lo:
         hi = lo + 1.0
-    out = np.clip((a - lo) * (255.0 / (hi - lo)), 0, 255)
-    out = np.where(ok, out, 127.5)
-    return np.round(out).astype(np.uint8)
+    out = np.subtract(a, lo)  # float64 (lo is), in place from here on: the same operations without temporaries
+    out *= 255.0 / (hi - lo)
+    np.clip(out, 0, 255, out=out)
+    np.copyto(out, 127.5, where=~ok)
+    np.round(out, out=out)
+    return out.astype(np.uint8)
 
 
 def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float = 1.0,

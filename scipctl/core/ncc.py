@@ -29,7 +29,7 @@ from typing import Optional
 import numpy as np
 
 from .image import as_float_image
-from .resample import cubic_axis, sample_bicubic_grid
+from .resample import sample_bicubic_grids
 
 __all__ = [
     "default_min_std",
@@ -144,26 +144,22 @@ def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iteratio
     crop = crop - np.float32(crop.mean())
     # exact sampling positions (scipctl.core.resample): OpenCV 4.x would round them to 1/32 px
     # the patch shifted by (du, dv) is sample_bicubic(crop, gx + pad + du, gy + pad + dv) on the (th, tw) grid;
-    # a 3x3 step shares its three column and three row shifts: their taps are computed once (bit for bit the same)
-    gx, gy = np.arange(tw, dtype=np.float64), np.arange(th, dtype=np.float64)
-    cols, rows = {}, {}
+    # a 3x3 step's nine patches (three column and three row shifts) are sampled at once, bit for bit the same
+    gx = np.arange(tw, dtype=np.float64) + pad
+    gy = np.arange(th, dtype=np.float64) + pad
 
-    def shifted(du, dv):
-        if du not in cols:
-            cols[du] = cubic_axis(gx + pad + du, crop.shape[1])
-        if dv not in rows:
-            rows[dv] = cubic_axis(gy + pad + dv, crop.shape[0])
-        return sample_bicubic_grid(crop, cols[du], rows[dv]).astype(np.float32)
+    def shifted(dus, dvs):  # (len(dvs), len(dus), th, tw) float32: [j, i] shifted by (dus[i], dvs[j])
+        return sample_bicubic_grids(crop, gx + np.array(dus)[:, None], gy + np.array(dvs)[:, None]).astype(np.float32)
 
     d = np.array(d0, dtype=float)
     sharp = 0.0
     for it in range(iterations):
         h = 1.0 / 2 ** min(it, 2)
         m3 = np.empty((3, 3))
+        patches = shifted([d[0] + (i - 1) * h for i in range(3)], [d[1] + (j - 1) * h for j in range(3)])
         for j in range(3):
             for i in range(3):
-                patch = shifted(d[0] + (i - 1) * h, d[1] + (j - 1) * h)
-                m3[j, i] = cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0]
+                m3[j, i] = cv2.matchTemplate(patches[j, i], tpl, cv2.TM_CCOEFF_NORMED)[0, 0]
         dx, dy, sharp = subpixel_peak(m3, 1, 1)
         sharp /= h * h
         d += (dx * h, dy * h)
@@ -171,7 +167,7 @@ def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iteratio
             return None
         if h <= 0.25 and abs(dx * h) < 1e-3 and abs(dy * h) < 1e-3:
             break
-    patch = shifted(d[0], d[1])
+    patch = shifted([d[0]], [d[1]])[0, 0]
     score = float(cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
     return d, sharp, score
 

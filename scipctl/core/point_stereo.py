@@ -364,7 +364,7 @@ def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.
     """
     from scipy.optimize import minimize
 
-    from .resample import sample_bicubic
+    from .resample import sample_bicubic_uv
 
     th, tw = tpl0.shape
     ys, xs = np.mgrid[0:th, 0:tw].astype(np.float64)
@@ -375,16 +375,17 @@ def _affine_refine(tpl0: np.ndarray, R: np.ndarray, uv_r: np.ndarray, c_win: np.
     tn = tn - tn.mean()
     tnorm = np.sqrt(np.dot(tn, tn))
     n = tn.size
-    # per evaluation (hundreds per call): U = base_u + du - t_u (gx x + gy y), likewise V; the template is
-    # zero-mean, so sum((p - mean p) tn) = sum(p tn) and sum((p - mean p)^2) = sum(p^2) - (sum p)^2 / n
-    base_u, base_v = uv_r[0] + x, uv_r[1] + y
-    tu_x, tu_y, tv_x, tv_y = t[0] * x, t[0] * y, t[1] * x, t[1] * y
+    # per evaluation (hundreds per call): U = base_u + du - t_u (gx x + gy y), likewise V (computed together,
+    # (2, th, tw): the same operations on each element); the template is zero-mean, so
+    # sum((p - mean p) tn) = sum(p tn) and sum((p - mean p)^2) = sum(p^2) - (sum p)^2 / n
+    base = np.stack([uv_r[0] + x, uv_r[1] + y])
+    t_x = np.stack([t[0] * x, t[1] * x])
+    t_y = np.stack([t[0] * y, t[1] * y])
 
     def ncc(p):
-        du, dv, gx, gy = p
-        U = base_u + du - (gx * tu_x + gy * tu_y)
-        V = base_v + dv - (gx * tv_x + gy * tv_y)
-        patch = sample_bicubic(R, U, V).ravel()
+        gx, gy = p[2], p[3]
+        UV = base + p[:2, None, None] - (gx * t_x + gy * t_y)
+        patch = sample_bicubic_uv(R, UV).ravel()
         sp = patch.sum()
         var = float(np.dot(patch, patch)) - sp * sp / n
         den = np.sqrt(var) * tnorm if var > 0 else 0.0

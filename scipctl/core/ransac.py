@@ -133,7 +133,10 @@ def _fit_homography(s, d):
     A[1::2, 3:5], A[1::2, 5] = sn, 1.0
     A[1::2, 6:8] = -dn[:, 1:2] * sn
     A[1::2, 8] = -dn[:, 1]
-    _, sv, Vt = np.linalg.svd(A)
+    # only sv and Vt are used: without the (2n, 2n) U (LAPACK's gesdd computes the same R, bidiagonal form,
+    # singular values and Vt with or without it; the local optimisation fits hundreds of pairs, where the full U
+    # cost ~5x the rest). A minimal sample (8 x 9) needs the full Vt: its null vector is Vt's 9th row.
+    _, sv, Vt = np.linalg.svd(A, full_matrices=n <= 4)
     if n == 4 and sv[-2] < 1e-9 * sv[0]:  # a degenerate (e.g. collinear) sample has a 2-D null space
         return None
     Hn = Vt[-1].reshape(3, 3)
@@ -143,8 +146,61 @@ def _fit_homography(s, d):
     return H / H[2, 2]
 
 
+def _fit_homographies(S: np.ndarray, D: np.ndarray) -> list:
+    """:func:`_fit_homography` of many samples at once: ``S``, ``D`` ``(B, n, 2)``; a list of ``B`` models
+    ``(3, 3)`` or None, each bit for bit ``_fit_homography(S[b], D[b])`` (the same operations on each sample's
+    numbers, batched: the normalisers' sums run over the same axis lengths, the SVDs and solves are LAPACK's
+    per matrix; ``tests/core/test_ransac.py`` compares them on random samples). RANSAC's minimal samples.
+    Returns None instead when LAPACK raised for one of them (the plain fit of that sample raises too)."""
+    B, n, _ = S.shape
+
+    def normalisers(p):  # (B, 3, 3): _normaliser of each sample
+        c = np.add.reduce(p, axis=1) / n
+        d = np.add.reduce(np.sqrt(((p - c[:, None, :]) ** 2).sum(axis=2)), axis=1) / n
+        pos = d > 0
+        sc = np.where(pos, np.sqrt(2.0) / np.where(pos, d, 1.0), 1.0)
+        T = np.zeros((B, 3, 3))
+        T[:, 0, 0], T[:, 1, 1], T[:, 2, 2] = sc, sc, 1.0
+        T[:, 0, 2], T[:, 1, 2] = -sc * c[:, 0], -sc * c[:, 1]
+        return T
+
+    def applied(T, p):  # apply_model of each sample
+        h = np.empty((B, n, 3))
+        h[..., :2] = p
+        h[..., 2] = 1.0
+        q = h @ T.transpose(0, 2, 1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return q[..., :2] / q[..., 2:3]
+
+    T_srcnorm_src, T_dstnorm_dst = normalisers(S), normalisers(D)
+    sn, dn = applied(T_srcnorm_src, S), applied(T_dstnorm_dst, D)
+    A = np.zeros((B, 2 * n, 9))
+    A[:, 0::2, 0:2], A[:, 0::2, 2] = sn, 1.0
+    A[:, 0::2, 6:8] = -dn[..., :1] * sn
+    A[:, 0::2, 8] = -dn[..., 0]
+    A[:, 1::2, 3:5], A[:, 1::2, 5] = sn, 1.0
+    A[:, 1::2, 6:8] = -dn[..., 1:2] * sn
+    A[:, 1::2, 8] = -dn[..., 1]
+    try:
+        _, sv, Vt = np.linalg.svd(A, full_matrices=n <= 4)
+        H = np.linalg.solve(T_dstnorm_dst, Vt[:, -1].reshape(B, 3, 3) @ T_srcnorm_src)
+    except np.linalg.LinAlgError:  # a sample whose own fit raises (non-finite pairs): the caller fits each alone
+        return None
+    out = []
+    for b in range(B):
+        Hb = H[b]
+        if (n == 4 and sv[b, -2] < 1e-9 * sv[b, 0]) or not np.all(np.isfinite(Hb)) or abs(Hb[2, 2]) < 1e-12:
+            out.append(None)
+        else:
+            out.append(Hb / Hb[2, 2])
+    return out
+
+
 _FITTERS = {"translation": _fit_translation, "similarity": _fit_similarity, "affine": _fit_affine,
             "homography": _fit_homography}
+#: fitters of many minimal samples at once (bit for bit the plain fitter on each)
+_BATCH_FITTERS = {"homography": _fit_homographies}
+_UNFITTED = object()
 
 
 def fit_model(model: str, src, dst) -> np.ndarray | None:
@@ -192,10 +248,25 @@ def ransac(model: str, src, dst, threshold_px: float, seed: int = 0, max_iterati
     s_h = _homogeneous(s)
     best_cost, best_M, best_count = np.inf, None, 0
     needed, it = max_iterations, 0
+    # a model with a batch fitter draws the next samples ahead (the same draws in the same order: the generator
+    # is used for nothing else) and fits them together, 8 then up to 64 at a time; the hypotheses are then
+    # scored one by one as before, and the draws beyond the stop are dropped
+    fit_many, ahead, block = _BATCH_FITTERS.get(model), [], 8
     while it < min(needed, max_iterations):
         it += 1
-        idx = rng.choice(n, size=k, replace=False)
-        M = fit(s[idx], d[idx])
+        if fit_many is not None:
+            if not ahead:
+                m = min(block, min(needed, max_iterations) - it + 1)
+                idx = np.array([rng.choice(n, size=k, replace=False) for _ in range(m)])
+                fitted = fit_many(s[idx], d[idx])  # None: LAPACK raised on one; each is then fitted in its turn
+                ahead = list(zip(idx, fitted if fitted is not None else [_UNFITTED] * m))[::-1]
+                block = min(2 * block, 64)
+            row, M = ahead.pop()
+            if M is _UNFITTED:
+                M = fit(s[row], d[row])
+        else:
+            idx = rng.choice(n, size=k, replace=False)
+            M = fit(s[idx], d[idx])
         if M is None or not np.all(np.isfinite(M)):
             continue
         e = _residual_sq(M, s, d, s_h)

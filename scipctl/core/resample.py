@@ -23,7 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_grid", "cubic_axis", "cubic_weights"]
+__all__ = ["CUBIC_A", "sample_bilinear", "sample_bicubic", "sample_bicubic_uv", "sample_bicubic_grid",
+           "sample_bicubic_grids", "cubic_axis", "cubic_weights"]
 
 #: the cubic kernel's parameter (OpenCV's INTER_CUBIC uses -0.75)
 CUBIC_A = -0.75
@@ -102,6 +103,83 @@ def sample_bicubic(image, u, v) -> np.ndarray:
     return np.einsum("...r,...rc,...c->...", wv, g, wu)
 
 
+def _cubic_weights_taps_first(t: np.ndarray, a: float = CUBIC_A) -> np.ndarray:
+    """:func:`cubic_weights` of ``t`` ``(...)`` laid out taps first, ``(4, ...)``: its expressions, operation for
+    operation (in place where they were temporaries, and the near piece of taps 1 and 2 in one pass)."""
+    w = np.empty((4,) + t.shape)
+    x = 1 + t
+    w0 = w[0]  # ((a x - 5 a) x + 8 a) x - 4 a
+    np.multiply(a, x, out=w0)
+    w0 -= 5 * a
+    w0 *= x
+    w0 += 8 * a
+    w0 *= x
+    w0 -= 4 * a
+    near = w[1:3]  # ((a + 2) x - (a + 3)) x x + 1 at x = t and x = 1 - t
+    near[0] = t
+    np.subtract(1, t, out=near[1])
+    y = (a + 2) * near
+    y -= a + 3
+    y *= near
+    y *= near
+    y += 1
+    near[...] = y
+    np.subtract(1.0, w0, out=w[3])  # 1 - w0 - w1 - w2
+    w[3] -= w[1]
+    w[3] -= w[2]
+    return w
+
+
+def _sum_terms(terms: np.ndarray) -> np.ndarray:
+    """The sum over the first axis of ``terms`` ``(16, n)`` taken one term after the other from 0, as
+    ``numpy.einsum`` sums :func:`sample_bicubic`'s terms: ``np.add.reduce`` over the outer axis adds whole rows in
+    turn (from the first row instead of 0: the ``+ 0.0`` turns the one possible difference, a sum of -0.0 terms,
+    into einsum's +0.0). With one column numpy would sum the column pairwise: then a plain loop."""
+    if terms.shape[1] >= 2:
+        return np.add.reduce(terms, axis=0) + 0.0
+    out = np.zeros(terms.shape[1:])
+    for k in range(terms.shape[0]):
+        out += terms[k]
+    return out
+
+
+def sample_bicubic_uv(image, uv) -> np.ndarray:
+    """``image`` ``(H, W)`` sampled by cubic convolution at ``uv`` ``(2, ...)`` (``u`` then ``v`` stacked): float64
+    ``(...)``, bit for bit :func:`sample_bicubic` ``(image, uv[0], uv[1])``.
+
+    For the hot loops that sample one small window per call (affine point stereo's Nelder-Mead, hundreds of
+    windows per match). The same operations on the same numbers, laid out taps first (``(4, 2, n)`` weights
+    and indices, ``(4 rows, 4 columns, n)`` pixels) so that each is one numpy call over long rows, both axes
+    at once: the weights are :func:`cubic_weights`' expressions, and each output sums the 16 terms
+    ``(wv[r] * pixel[r, c]) * wu[c]`` one after the other from 0, ``r`` outer and ``c`` inner, which is what
+    ``numpy.einsum`` does in :func:`sample_bicubic` (``tests/core/test_resample.py`` compares them bit for bit
+    on random inputs).
+    """
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"image: expected a non-empty (H, W) array, got shape {img.shape}")
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim < 1 or uv.shape[0] != 2:
+        raise ValueError(f"uv: expected a (2, ...) array, got shape {uv.shape}")
+    shape = uv.shape[1:]
+    uv = uv.reshape(2, -1)
+    if not np.isfinite(uv).all():
+        raise ValueError("u, v: sampling positions must be finite")
+    H, W = img.shape
+    f = np.floor(uv)
+    t = uv - f
+    w = _cubic_weights_taps_first(t)  # (4 taps, 2 axes, n)
+    i = f.astype(np.int64) + _OFFSETS[:, None, None]  # (4, 2, n): tap columns, tap rows
+    i = np.minimum(np.maximum(i, 0), np.array([[W - 1], [H - 1]]))
+    if img.flags.c_contiguous:
+        g = img.take((i[:, 1] * W)[:, None, :] + i[None, :, 0]).astype(np.float64)  # (4 rows, 4 columns, n)
+    else:
+        g = img[i[:, None, 1], i[None, :, 0]].astype(np.float64)
+    g *= w[:, None, 1]  # wv[r] * pixel[r, c]
+    g *= w[None, :, 0]  # (...) * wu[c]
+    return _sum_terms(g.reshape(16, -1)).reshape(shape)
+
+
 def cubic_axis(x, n: int) -> tuple:
     """The cubic-convolution taps of positions ``x`` ``(m,)`` along an axis of ``n`` samples: weights ``(m, 4)``
     (:func:`cubic_weights`) and tap indices ``(m, 4)`` clipped to ``[0, n - 1]``, computed as
@@ -135,3 +213,43 @@ def sample_bicubic_grid(image, u, v) -> np.ndarray:
     # the pixels (h, w, 4 rows, 4 columns): the tap rows, then their tap columns (a C-ordered float64 copy)
     g = img[jv.reshape(-1)][:, iu.reshape(-1)].reshape(h, 4, w, 4).transpose(0, 2, 1, 3).astype(np.float64, order="C")
     return np.einsum("...r,...rc,...c->...", wv, g, wu)
+
+
+def sample_bicubic_grids(image, u, v) -> np.ndarray:
+    """``image`` ``(H, W)`` sampled by cubic convolution on every grid of one set of columns ``u[a]`` and one set
+    of rows ``v[b]``: ``u`` ``(A, w)`` and ``v`` ``(B, h)`` positions; returns ``(B, A, h, w)`` float64 with
+    ``[b, a]`` bit for bit :func:`sample_bicubic_grid` ``(image, u[a], v[b])`` (the NCC peak refinement samples
+    a 3 x 3 set of shifted windows at once).
+
+    :func:`sample_bicubic` sums, per output, the 16 terms ``(wv[r] * pixel[r, c]) * wu[c]`` one after the other
+    (``r`` outer, ``c`` inner, from 0; ``numpy.einsum``'s order). Here the same terms are summed in the same
+    order, but the first product ``wv[r] * pixel`` is computed once per tap row and image column (its value does
+    not depend on which output or column shift uses it) and the sum runs over whole arrays (the terms' slices
+    added in turn, see ``_sum_terms``), not per output. ``tests/core/test_resample.py`` compares it with :func:`sample_bicubic_grid` bit for
+    bit.
+    """
+    img = np.asarray(image)
+    if img.ndim != 2 or img.shape[0] < 1 or img.shape[1] < 1:
+        raise ValueError(f"image: expected a non-empty (H, W) array, got shape {img.shape}")
+    u = np.asarray(u, dtype=np.float64)
+    v = np.asarray(v, dtype=np.float64)
+    if u.ndim != 2 or v.ndim != 2:
+        raise ValueError(f"u, v: expected (A, w) and (B, h) arrays, got shapes {u.shape} and {v.shape}")
+    H, W = img.shape
+    (A, w), (B, h) = u.shape, v.shape
+    wu, iu = cubic_axis(u, W)  # (A w, 4)
+    wv, jv = cubic_axis(v, H)  # (B h, 4)
+    # the tap rows (4 r, B h, W) in float64, each times its weight: wv[r] * pixel[r, column]
+    q = img[jv.T.reshape(-1)].astype(np.float64).reshape(4, B * h, W)
+    q *= wv.T[:, :, None]
+    # every term: (4 r, B h, 4 c, A w) = (wv[r] * pixel[r, c]) * wu[c]
+    p = np.take(q, iu.T.reshape(4, A * w), axis=2)
+    p *= wu.T
+    if A * w >= 2:  # numpy adds the (B h, A w) slices in turn, r outer, c inner (as _sum_terms)
+        out = np.add.reduce(p, axis=(0, 2)) + 0.0
+    else:
+        out = np.zeros((B * h, A * w))
+        for r in range(4):
+            for c in range(4):
+                out += p[r, :, c]
+    return np.ascontiguousarray(out.reshape(B, h, A, w).transpose(0, 2, 1, 3))

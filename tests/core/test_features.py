@@ -190,3 +190,26 @@ def test_bad_input():
     empty = Features(np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0), (64, 64))
     loc = locate_by_features(empty, [10.0, 10.0], f, ref_radius_px=20)
     assert not loc.ok and "too few keypoints" in loc.reason
+
+
+def test_to_uint8_is_bit_for_bit_the_plain_expression():
+    """to_uint8 (in place) gives exactly the plain expression with temporaries, on random images of several dtypes
+    with NaNs and masks."""
+    rng = np.random.default_rng(4)
+    for trial in range(60):
+        dtype = [np.float32, np.float64, np.uint8, np.uint16][trial % 4]
+        a = rng.random((int(rng.integers(1, 90)), int(rng.integers(1, 90)))) * rng.choice([1.0, 255.0, 65535.0])
+        a = a.astype(dtype)
+        if a.dtype.kind == "f":
+            a[rng.random(a.shape) < 0.2] = np.nan
+        valid = None if trial % 3 else rng.random(a.shape) < 0.7
+        f = np.asarray(a, dtype=np.float32)
+        ok = np.isfinite(f) if valid is None else (valid & np.isfinite(f))
+        if not ok.any():
+            want = np.zeros(f.shape, np.uint8)
+        else:
+            lo, hi = np.percentile(f[ok], [0.5, 99.5])
+            if not hi > lo:
+                hi = lo + 1.0
+            want = np.round(np.where(ok, np.clip((f - lo) * (255.0 / (hi - lo)), 0, 255), 127.5)).astype(np.uint8)
+        assert np.array_equal(to_uint8(a, valid), want)

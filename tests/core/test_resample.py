@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from scipctl.core.resample import cubic_axis, cubic_weights, sample_bicubic, sample_bicubic_grid, sample_bilinear
+from scipctl.core.resample import (cubic_axis, cubic_weights, sample_bicubic, sample_bicubic_grid, sample_bicubic_grids,
+                                   sample_bicubic_uv, sample_bilinear)
 
 cv2 = pytest.importorskip("cv2")
 
@@ -86,3 +87,75 @@ def test_grid_sampling_is_bit_for_bit_the_pointwise_sampling(contiguous):
         assert np.array_equal(sample_bicubic_grid(img, cubic_axis(u, img.shape[1]), cubic_axis(v, img.shape[0])), want)
     with pytest.raises(ValueError):
         sample_bicubic_grid(img, np.array([np.nan]), np.zeros(2))
+
+
+def _bits(a):
+    """The float64 array's bit patterns (tells -0.0 from 0.0 and compares NaNs)."""
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.int64)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.uint8, np.uint16])
+def test_grids_are_bit_for_bit_the_grid_sampling(dtype):
+    """sample_bicubic_grids (several column and row shifts at once: the NCC peak refinement's 3 x 3 steps) gives,
+    for every pair, exactly sample_bicubic_grid: random images, shapes and positions (inside, on and beyond the
+    border), integer positions (zero weights) and images holding -0.0 (the sum's zeros keep their sign)."""
+    rng = np.random.default_rng(11)
+    for trial in range(300):
+        H, W = rng.integers(1, 40, 2)
+        h, w = rng.integers(1, 30, 2)
+        A, B = rng.integers(1, 4, 2)
+        if trial < 6:  # a single column (and a single grid): numpy would sum one column pairwise
+            w, A = 1, 1
+        if dtype in (np.uint8, np.uint16):
+            img = rng.integers(0, np.iinfo(dtype).max, (H, W), endpoint=True).astype(dtype)
+        else:
+            img = (rng.standard_normal((H, W)) * rng.choice([1e-3, 1.0, 255.0])).astype(dtype)
+            img[rng.random((H, W)) < 0.2] = -0.0
+            img[rng.random((H, W)) < 0.1] = 0.0
+        if trial % 3 == 0:  # whole-pixel positions and shifts: weights exactly 0 and 1
+            u = rng.integers(-3, W + 3, w).astype(np.float64)[None] + rng.integers(-2, 3, A)[:, None]
+            v = rng.integers(-3, H + 3, h).astype(np.float64)[None] + rng.integers(-2, 3, B)[:, None]
+        else:
+            u = np.sort(rng.uniform(-3, W + 3, w))[None] + rng.uniform(-1, 1, A)[:, None]
+            v = np.sort(rng.uniform(-3, H + 3, h))[None] + rng.uniform(-1, 1, B)[:, None]
+        got = sample_bicubic_grids(img, u, v)
+        assert got.shape == (B, A, h, w) and got.dtype == np.float64 and got.flags.c_contiguous
+        for b in range(B):
+            for a in range(A):
+                assert np.array_equal(_bits(got[b, a]), _bits(sample_bicubic_grid(img, u[a], v[b])))
+    with pytest.raises(ValueError):
+        sample_bicubic_grids(np.zeros((4, 4)), np.array([[np.nan]]), np.zeros((1, 2)))
+    with pytest.raises(ValueError):
+        sample_bicubic_grids(np.zeros((4, 4)), np.zeros(3), np.zeros((1, 2)))
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64, np.uint8, np.uint16])
+@pytest.mark.parametrize("contiguous", [True, False])
+def test_stacked_sampling_is_bit_for_bit_the_pointwise_sampling(dtype, contiguous):
+    """sample_bicubic_uv (u and v stacked: affine point stereo's Nelder-Mead) gives exactly sample_bicubic:
+    random images, shapes and positions inside, on and beyond the border, whole-pixel positions, -0.0 pixels."""
+    rng = np.random.default_rng(12)
+    for trial in range(300):
+        H, W = rng.integers(1, 40, 2)
+        shape = tuple(rng.integers(1, 25, rng.integers(1, 3))) if trial >= 4 else [(1,), (1, 1), (2,), (1, 2)][trial]
+        if dtype in (np.uint8, np.uint16):
+            img = rng.integers(0, np.iinfo(dtype).max, (H, W), endpoint=True).astype(dtype)
+        else:
+            img = (rng.standard_normal((H, W)) * rng.choice([1e-3, 1.0, 255.0])).astype(dtype)
+            img[rng.random((H, W)) < 0.2] = -0.0
+        if not contiguous:
+            img = np.asfortranarray(img)
+        if trial % 3 == 0:
+            u = rng.integers(-3, W + 3, shape).astype(np.float64)
+            v = rng.integers(-3, H + 3, shape).astype(np.float64)
+        else:
+            u = rng.uniform(-3, W + 3, shape)
+            v = rng.uniform(-3, H + 3, shape)
+        got = sample_bicubic_uv(img, np.stack([u, v]))
+        want = sample_bicubic(img, u, v)
+        assert got.shape == want.shape == shape and got.dtype == want.dtype
+        assert np.array_equal(_bits(got), _bits(want))
+    with pytest.raises(ValueError):
+        sample_bicubic_uv(np.zeros((4, 4)), np.array([[np.nan], [0.0]]))
+    with pytest.raises(ValueError):
+        sample_bicubic_uv(np.zeros((4, 4)), np.zeros((3, 2)))
