@@ -5,10 +5,11 @@ The chain hands the target from stop to stop; an error at one stop is carried, n
 the chain's navcam pixel off faithfully, drift included. The closure is a second, shorter path to the same
 hazcam pixel: the pancam image of the approach's imaging stop (~4.5 m; at 0.28 mrad/px its footprint on the
 target, ~1.3 mm, is finer than the hazcam's at ~1 m, ~2 mm) is rendered through the target's local plane into
-the final hazcam view and found there by the chain's own feature-guided step (:func:`~scipctl.pipeline.feature_track.feature_track`: features remove the pose error of
-the drive between the two stops, NCC refines). Where the two paths agree, the navcam steps did not drift; where
-they disagree, one of them is wrong. The pancam track itself is shared by both paths, so its own trust still
-counts.
+the final hazcam view and found there by the chain's own feature-guided step
+(:func:`~scipctl.pipeline.feature_track.feature_track`: features remove the pose error of the drive between the
+two stops, NCC refines). Where the two paths agree, the navcam steps did not drift; where they disagree, one of
+them is wrong. The pancam track itself is shared by both paths, so an error there is in both (measured: the
+closure is therefore not a GO; off by default, ``ChainParams.closure``).
 
 When the pancam track at that stop was flagged, the closure starts from the navcam handoff there instead (found
 from the designation image across the drive, not from the pancam track): coarser (~3.7 mm at 4.5 m), still
