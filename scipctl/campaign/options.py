@@ -21,7 +21,8 @@ class CampaignOptions:
     handoff's half-resolution dense stereo (``simulate-handoff --fast``); ``predict_route``: the approach the
     prediction is made for (``PredictParams.route``: ``plan``, what ``sequence`` uplinks, or ``downlink``, the
     downlink's own later stops, which its chain ran over); ``success_px``: a handoff (and a chain's
-    final answer) within this many hazcam pixels of the mark is a success.
+    final answer) within this many hazcam pixels of the mark is a success; ``closure``: each chain also runs its
+    closure check (recorded on its final step).
     """
 
     handoff: bool = True
@@ -32,12 +33,15 @@ class CampaignOptions:
     success_px: float = 4.0
     fast: bool = False
     predict_route: str = "plan"  # PredictParams.route: "plan" (the planner's approach) or "downlink" (its own stops)
+    closure: bool = False  # the chain's closure check (ChainParams.closure, pipeline/chain_closure.py) on every chain
 
     def check(self) -> "CampaignOptions":
         if not (self.handoff or self.chain or self.predict):
             raise InputError("campaign", "--no-handoff/--no-chain/--no-predict", "nothing left to run on a downlink")
         if not (isinstance(self.success_px, (int, float)) and math.isfinite(self.success_px) and self.success_px > 0):
             raise InputError("campaign", "--success-px", f"must be a positive finite number, got {self.success_px}")
+        if self.closure and not self.chain:
+            raise InputError("campaign", "--closure", "is a check of the chain: not with --no-chain")
         if self.predict_route not in ("plan", "downlink"):
             raise InputError("campaign", "--predict-route", f"must be plan or downlink, got {self.predict_route!r}")
         if self.handoff:
@@ -54,15 +58,18 @@ class CampaignOptions:
         return [n for n in NAVCAMS if any(p[1] == n for p in self.pairs)]
 
     def to_dict(self) -> dict:
-        return {"handoff": self.handoff, "chain": self.chain, "predict": self.predict,
-                "methods": list(self.methods), "pairs": [list(p) for p in self.pairs],
-                "success_px": float(self.success_px), "fast": self.fast, "predict_route": self.predict_route}
+        d = {"handoff": self.handoff, "chain": self.chain, "predict": self.predict,
+             "methods": list(self.methods), "pairs": [list(p) for p in self.pairs],
+             "success_px": float(self.success_px), "fast": self.fast, "predict_route": self.predict_route}
+        if self.closure:  # only when on: the keys of campaigns without it stay what they were
+            d["closure"] = True
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignOptions":
         return cls(bool(d["handoff"]), bool(d["chain"]), bool(d["predict"]), tuple(d["methods"]),
                    tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]),
-                   str(d.get("predict_route", "plan")))
+                   str(d.get("predict_route", "plan")), bool(d.get("closure", False)))
 
     def key(self) -> str:
         """SHA-256 of everything here that changes an answer, and of the tool's version."""

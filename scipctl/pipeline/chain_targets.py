@@ -9,12 +9,13 @@ from ..errors import InputError
 from ..model import Downlink
 
 
-def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = None) -> list:
+def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = None, closure: bool = False) -> list:
     """One entry per target marked in the first left pancam image (or only the target ``only``):
     ``{"downlink", "target", "steps": [ChainStep, ...], "go", "nogo_step", "advice", "why"}`` (the chain's
     verdict, :func:`~scipctl.pipeline.chain_trust.chain_verdict`), or with ``"error"`` (one line), no steps and
-    ``go`` False when the chain stops on bad input. Empty when the downlink has no left pancam image."""
-    from .chain import run_chain
+    ``go`` False when the chain stops on bad input. Empty when the downlink has no left pancam image. ``closure``:
+    each chain also runs its closure check (``ChainParams.closure``)."""
+    from .chain import ChainParams, run_chain
     from .chain_trust import REDESIGNATE, chain_verdict
 
     out = []
@@ -30,7 +31,8 @@ def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = No
         if mk is None:
             continue
         try:
-            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups)
+            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups,
+                              params=ChainParams(closure=True) if closure else None)
             out.append({"downlink": downlink_name, "target": t.id, "steps": steps,
                         **chain_verdict(steps).to_dict()})
         except InputError as e:

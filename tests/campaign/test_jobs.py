@@ -95,3 +95,46 @@ def test_done_means_same_key_and_ok(tmp_path):
     store.write(failed)
     assert not store.is_done(job, key)  # a failed downlink runs again
     assert store.read(job.job_id).error == "load: x.mcap: header: bad magic"
+
+
+def test_the_closure_option_changes_the_key_only_when_on():
+    """--closure (the chain's closure check) is part of what a downlink's records were made with, but campaigns
+    without it keep the key they had before the option existed."""
+    import hashlib
+
+    from scipctl import __version__
+
+    opts = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),))
+    before = {"handoff": True, "chain": True, "predict": True, "methods": ["pure-kinematic"],
+              "pairs": [["pure-kinematic", "near"]], "success_px": 4.0, "fast": False, "predict_route": "plan"}
+    text = json.dumps({"options": before, "version": __version__}, sort_keys=True)
+    assert opts.key() == hashlib.sha256(text.encode()).hexdigest()
+    on = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), closure=True).check()
+    assert on.key() != opts.key() and on.to_dict()["closure"] is True
+    assert CampaignOptions.from_dict(on.to_dict()) == on and CampaignOptions.from_dict(opts.to_dict()) == opts
+    with pytest.raises(InputError, match="--closure"):
+        CampaignOptions(handoff=False, chain=False, closure=True).check()
+
+
+def test_the_closure_option_reaches_every_chain(monkeypatch):
+    """campaign --closure: the task asks run_marked_chains for it, which runs each chain with ChainParams(closure=True)
+    (the check itself is tested in tests/pipeline/test_chain.py)."""
+    import scipctl.pipeline.chain as chain_mod
+    from scipctl.campaign import task
+    from scipctl.io.downlink import read_downlink
+
+    seen = []
+
+    def fake_run_chain(dl, start, uv, target_id=None, setups=None, params=None):
+        seen.append(None if params is None else params.closure)
+        return []
+
+    monkeypatch.setattr(chain_mod, "run_chain", fake_run_chain)
+    monkeypatch.setattr("scipctl.pipeline.chain_trust.chain_verdict",
+                        lambda steps: type("V", (), {"to_dict": lambda self: {}})())
+    dl = read_downlink(SOLS / "mcap" / "paper-s1-arc.mcap")
+    job = file_jobs([SOLS / "mcap" / "paper-s1-arc.mcap"])[0]
+    for closure, want in ((True, True), (False, None)):
+        seen.clear()
+        task._chain(dl, job, DownlinkResult(job, "k"), closure)
+        assert seen and all(s is want for s in seen), (closure, seen)

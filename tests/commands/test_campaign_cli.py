@@ -29,6 +29,7 @@ runner = CliRunner()
     ([str(SOL), "--methods", "telepathy", "-o", "{out}"], "telepathy"),
     ([str(SOL), "--methods", "pure-kinematic", "--no-handoff", "-o", "{out}"], "--methods"),
     ([str(SOL), "--no-handoff", "--no-chain", "--no-predict", "-o", "{out}"], "nothing left"),
+    ([str(SOL), "--no-chain", "--closure", "-o", "{out}"], "--closure"),
     ([str(SOL), "--success-px", "0", "-o", "{out}"], "--success-px"),
     ([str(SOL), "--workers", "0", "-o", "{out}"], "--workers"),
     ([str(SOL), "--memory-limit", "plenty", "-o", "{out}"], "--memory-limit"),
