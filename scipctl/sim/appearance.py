@@ -152,8 +152,8 @@ class Appearance:
         """``(dark, bright)`` ``(N,)`` float32 in [0, 1]: the specks of ``noise`` at points ``PT`` ``(3, N)`` (see ``specks``)."""
         if self.specks == "lod" or footprint_m is None:
             return th.apply(noise.eval_T(PT, footprint_m))
-        if self.specks != "filtered":
-            raise ValueError(f"Appearance.specks: {self.specks!r} (want 'lod' or 'filtered')")
+        if self.specks not in SPECK_MODES:
+            raise ValueError(f"Appearance.specks: {self.specks!r} (want one of {', '.join(SPECK_MODES)})")
         dark, bright = th.apply(noise.eval_T(PT, None))
         mean_dark, mean_bright = self._speck_cover(noise, th)
         # the finest octave's cell is the specks' size: lod_weight's fade (1 up to a footprint of 2/3 cell, 0 from
@@ -163,7 +163,7 @@ class Appearance:
 
     def _speck_cover(self, noise: FractalNoise, th: "SpeckThresholds") -> tuple:
         """Mean ``(dark, bright)`` of ``noise``'s specks at full detail, over 2^16 points of a seeded 1 m cube (cached)."""
-        key = id(noise)
+        key = noise  # by identity (FractalNoise has no __eq__), held by the cache: no id() reuse
         cache = self.__dict__.setdefault("_cover", {})
         if key not in cache:
             P = np.random.default_rng(0x5BEC).uniform(0.0, 1.0, (3, 1 << 16)).astype(np.float32)
