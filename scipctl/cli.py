@@ -266,6 +266,7 @@ def campaign(
     chain: bool = typer.Option(True, "--chain/--no-chain", help="Run the chain from the pancam designation."),
     predict: bool = typer.Option(True, "--predict/--no-predict", help="Run the pre-uplink prediction of each marked target."),
     closure: bool = typer.Option(False, "--closure", help="Each chain also runs its closure check: the final hazcam answer re-found straight from the 4.5 m pancam track (docs/stereo-and-tracking.md, 'Closure'; costs 12-44 % of a chain)."),
+    chain_answer: str = typer.Option("handoff", "--chain-answer", help="The chain's final hazcam answer: handoff (scip's handoff of the chain's navcam pixel) or closure (the closure's pixel when it is confirmed, skipping the navcam tracks; docs/stereo-and-tracking.md, 'Closure as the answer')."),
     predict_route: str = typer.Option("plan", "--predict-route", help="The approach predicted: plan (the planner's, as sequence uplinks it) or downlink (the downlink's own later stops, which its chain ran over: for scoring the prediction against the chain)."),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: all)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
@@ -282,7 +283,7 @@ def campaign(
     from .commands import campaign as command
 
     command.campaign(srcs, out, synth, seeds, runs, families, no_errors, handoff, chain, predict, methods, success_px,
-        fast, scheduler, workers, memory_limit, summarize, json_out, predict_route, closure)
+        fast, scheduler, workers, memory_limit, summarize, json_out, predict_route, closure, chain_answer)
 
 
 def main() -> None:

@@ -22,7 +22,7 @@ class CampaignOptions:
     prediction is made for (``PredictParams.route``: ``plan``, what ``sequence`` uplinks, or ``downlink``, the
     downlink's own later stops, which its chain ran over); ``success_px``: a handoff (and a chain's
     final answer) within this many hazcam pixels of the mark is a success; ``closure``: each chain also runs its
-    closure check (recorded on its final step).
+    closure check (recorded on its final step); ``chain_answer``: the chain's final answer (``ChainParams.answer``).
     """
 
     handoff: bool = True
@@ -34,6 +34,7 @@ class CampaignOptions:
     fast: bool = False
     predict_route: str = "plan"  # PredictParams.route: "plan" (the planner's approach) or "downlink" (its own stops)
     closure: bool = False  # the chain's closure check (ChainParams.closure, pipeline/chain_closure.py) on every chain
+    chain_answer: str = "handoff"  # ChainParams.answer: the chain's final answer, "handoff" or "closure"
 
     def check(self) -> "CampaignOptions":
         if not (self.handoff or self.chain or self.predict):
@@ -42,6 +43,13 @@ class CampaignOptions:
             raise InputError("campaign", "--success-px", f"must be a positive finite number, got {self.success_px}")
         if self.closure and not self.chain:
             raise InputError("campaign", "--closure", "is a check of the chain: not with --no-chain")
+        from ..pipeline.chain import CHAIN_ANSWERS
+
+        if self.chain_answer not in CHAIN_ANSWERS:
+            raise InputError("campaign", "--chain-answer", f"must be one of {', '.join(CHAIN_ANSWERS)}, "
+                                                           f"got {self.chain_answer!r}")
+        if self.chain_answer != "handoff" and not self.chain:
+            raise InputError("campaign", "--chain-answer", "is the chain's answer: not with --no-chain")
         if self.predict_route not in ("plan", "downlink"):
             raise InputError("campaign", "--predict-route", f"must be plan or downlink, got {self.predict_route!r}")
         if self.handoff:
@@ -63,13 +71,16 @@ class CampaignOptions:
              "success_px": float(self.success_px), "fast": self.fast, "predict_route": self.predict_route}
         if self.closure:  # only when on: the keys of campaigns without it stay what they were
             d["closure"] = True
+        if self.chain_answer != "handoff":  # likewise
+            d["chain_answer"] = self.chain_answer
         return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "CampaignOptions":
         return cls(bool(d["handoff"]), bool(d["chain"]), bool(d["predict"]), tuple(d["methods"]),
                    tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]),
-                   str(d.get("predict_route", "plan")), bool(d.get("closure", False)))
+                   str(d.get("predict_route", "plan")), bool(d.get("closure", False)),
+                   str(d.get("chain_answer", "handoff")))
 
     def key(self) -> str:
         """SHA-256 of everything here that changes an answer, and of the tool's version."""

@@ -167,7 +167,7 @@ def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int =
         if job.path is not None and dl.source_sha256 not in (None, job.input_sha256):
             res.fail("load", InputError(job.path, "sha256", "the file changed after the campaign hashed it"))
         stages = (("handoff", options.handoff, lambda: _handoff(dl, job, options, res)),
-                  ("chain", options.chain, lambda: _chain(dl, job, res, options.closure)),
+                  ("chain", options.chain, lambda: _chain(dl, job, res, options.closure, options.chain_answer)),
                   ("predict", options.predict, lambda: _predict(dl, options, res)))
         for stage, wanted, fn in stages:
             if not wanted:
@@ -184,8 +184,8 @@ def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int =
     return res
 
 
-def _chain(dl, job: DownlinkJob, res: DownlinkResult, closure: bool = False) -> None:
+def _chain(dl, job: DownlinkJob, res: DownlinkResult, closure: bool = False, answer: str = "handoff") -> None:
     from ..pipeline.chain_targets import run_marked_chains
 
     res.chains = [dict(c, steps=[s.to_dict() for s in c["steps"]])
-                  for c in run_marked_chains(dl, job.name, closure=closure)]
+                  for c in run_marked_chains(dl, job.name, closure=closure, answer=answer)]

@@ -16,7 +16,8 @@ from ..errors import CommandFailed, InputError
 from .output import emit_json, note, stderr_console
 
 
-def _options(handoff, chain, predict, methods, success_px, fast, predict_route="plan", closure=False):
+def _options(handoff, chain, predict, methods, success_px, fast, predict_route="plan", closure=False,
+             chain_answer="handoff"):
     from ..campaign.options import CampaignOptions
     from .handoff import _parse_methods
 
@@ -24,7 +25,7 @@ def _options(handoff, chain, predict, methods, success_px, fast, predict_route="
         raise InputError("campaign", "--methods", "only with --handoff")
     names, _, pairs = _parse_methods(methods) if handoff else ([], [], set())
     return CampaignOptions(handoff, chain, predict, tuple(names), tuple(sorted(pairs)), success_px, fast,
-                           predict_route, closure).check()
+                           predict_route, closure, chain_answer).check()
 
 
 def _jobs(srcs, synth, seeds, runs, families, no_errors):
@@ -112,7 +113,7 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
              families: Optional[str], no_errors: bool, handoff: bool, chain: bool, predict: bool,
              methods: Optional[str], success_px: float, fast: bool, scheduler: Optional[str], workers: Optional[int],
              memory_limit: Optional[str], summarize_dir: Optional[Path], json_out: bool,
-             predict_route: str = "plan", closure: bool = False) -> None:
+             predict_route: str = "plan", closure: bool = False, chain_answer: str = "handoff") -> None:
     """``scipctl campaign``: run (or with ``summarize_dir`` only re-aggregate) and write the summary."""
     from ..campaign.cluster import ClusterSpec
     from ..campaign.store import CampaignStore
@@ -134,7 +135,7 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
         raise InputError("campaign", "SRC", "give downlinks (files, folders, globs) or --synth SCENARIO")
     if out is None:
         raise InputError("campaign", "-o/--out", "give the output folder")
-    options = _options(handoff, chain, predict, methods, success_px, fast, predict_route, closure)
+    options = _options(handoff, chain, predict, methods, success_px, fast, predict_route, closure, chain_answer)
     cluster = ClusterSpec(scheduler, workers, memory_limit).check()
     jobs = _jobs(srcs, synth, seeds, runs, families, no_errors)
     store = CampaignStore(out)

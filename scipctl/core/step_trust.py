@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .handoff.trust_model import evidence_from_dict, evidence_to_dict, feature_matrix
+from .handoff.trust_model import evidence_from_dict, evidence_to_dict, logistic_probability
 
 STEP_KINDS = ("pancam-track", "navcam-handoff", "navcam-track")
 
@@ -124,12 +124,8 @@ class StepTrustModel:
 
     def probability(self, evidence: list) -> np.ndarray:
         """P(within ``success_mm``) ``(N,)`` for each :class:`StepEvidence`."""
-        if not evidence:
-            return np.zeros(0)
-        X = feature_matrix(evidence, self.features)
-        X = np.where(np.isfinite(X), X, np.asarray(self.fill, float))
-        Z = np.clip((X - np.asarray(self.mean, float)) / np.asarray(self.scale, float), -self.clip_z, self.clip_z)
-        return 1.0 / (1.0 + np.exp(-(Z @ np.asarray(self.coef, float) + self.intercept)))
+        return logistic_probability(evidence, self.features, self.fill, self.mean, self.scale, self.coef,
+                                    self.intercept, self.clip_z)
 
     def to_dict(self) -> dict:
         return {"kind": "logistic", "features": [[k, v[0], v[1]] for k, v in self.features.items()],

@@ -43,6 +43,9 @@ def _per_camera(name: str, values: dict, fallback, minimum, integer: bool = Fals
             raise ValueError(f"ChainParams.{name}[{cam!r}]: must be {kind} >= {minimum}, got {v!r}")
 
 
+CHAIN_ANSWERS = ("handoff", "closure")  # ChainParams.answer
+
+
 @dataclass(frozen=True)
 class ChainParams:
     """Window sizes, search radii and feature-matching settings of the tracking chain (:func:`run_chain`).
@@ -86,6 +89,10 @@ class ChainParams:
     # trusted pancam track, recorded on the final step's extra["closure"]. Off by default: measured, it costs 12-44 %
     # of a chain's CPU and does not make a chain GO it could trust (docs/stereo-and-tracking.md, "Closure")
     closure: bool = False
+    # which pixel is the chain's final hazcam answer: "handoff" (scip's handoff of the chain's navcam pixel) or
+    # "closure" (runs the closure check and, when it is confirmed, answers with the closure's pixel: a path that
+    # skips the navcam tracks; p_success from the closure model, docs/stereo-and-tracking.md "Closure as the answer")
+    answer: str = "handoff"
 
     def check(self) -> "ChainParams":
         """Raise ValueError naming the first bad field; return self."""
@@ -114,6 +121,8 @@ class ChainParams:
             raise ValueError("ChainParams.feature_candidates: must not be empty")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
+        if self.answer not in CHAIN_ANSWERS:
+            raise ValueError(f"ChainParams.answer: must be one of {', '.join(CHAIN_ANSWERS)}, got {self.answer!r}")
         return self
 
     def template_half(self, camera: str) -> int:
@@ -215,7 +224,8 @@ def stereo_at(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
 
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
               handoff_method: str = "scip", template_mode: str = "plane", handoff_at: str = "every",
-              params: Optional[ChainParams] = None, step_model=None, setups: Optional[dict] = None) -> list:
+              params: Optional[ChainParams] = None, step_model=None, setups: Optional[dict] = None,
+              closure_model=None) -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
     ``template_mode``: ``"plane"`` (default) renders the previous stop's image
@@ -245,6 +255,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     ``scip`` (:mod:`scipctl.pipeline.chain_trust`). ``setups``: a dict shared by the chains of one downlink,
     where the hazcam handoffs keep their :class:`~scipctl.pipeline.handoff.HandoffSetup` by product ids (dense
     stereo and registrations do not depend on the target: computed once, the same answers).
+    ``closure_model``: the :class:`~scipctl.core.closure_trust.ClosureTrustModel` of an adopted closure answer
+    (``params.answer == "closure"``; None: the packaged one).
     """
     params = (params or ChainParams()).check()
     if template_mode not in ("plane", "scale"):
@@ -442,18 +454,58 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     for s in handoffs:
         s.extra["final"] = s is handoffs[-1]
     _mark_after_unverified(steps)
-    if params.closure and handoffs and handoffs[-1].tracked_uv is not None:
+    if (params.closure or params.answer == "closure") and handoffs and handoffs[-1].tracked_uv is not None:
         from .chain_closure import closure_check
 
         handoffs[-1].extra["closure"] = closure_check(dl, steps, params).to_dict()
-    from .chain_trust import score_steps
+    from .chain_trust import advice_for, score_steps
 
     if step_model is None:
         from ..io.step_trust_model import load_packaged_step_trust_model
 
         step_model = load_packaged_step_trust_model()
     score_steps(steps, step_model)
+    if params.answer == "closure" and handoffs and "closure" in handoffs[-1].extra:
+        # after the scoring: the closure's evidence includes its reference step's own p_success
+        final = steps.index(handoffs[-1])
+        _adopt_closure(dl, steps, final, step, params, closure_model)
+        steps[final].advice = None if steps[final].go else advice_for(steps, final)
     return steps
+
+
+def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: ChainParams, model=None) -> None:
+    """Make a confirmed closure the chain's final answer, in place: ``steps[final]`` (the final hazcam handoff) is
+    replaced by a step at the closure's pixel (point stereo there, the error against the mark), ``extra["answer"]``
+    ``"closure"`` and the handoff's own answer kept under ``extra["handoff"]``; its ``p_success`` from the closure
+    trust model (``model``; None: the packaged one; no model: None and NO-GO). An unconfirmed or failed closure
+    leaves the handoff's answer (``extra["answer"]`` ``"handoff"``)."""
+    from .chain_closure import closure_evidence
+
+    H = steps[final]
+    cl = H.extra.get("closure") or {}
+    if cl.get("status") != "confirmed" or cl.get("uv") is None:
+        H.extra["answer"] = "handoff"
+        return
+    if model is None:
+        from ..io.closure_trust_model import load_packaged_closure_trust_model
+
+        model = load_packaged_closure_trust_model()
+    haz = dl.product(H.product_id)
+    uv = np.asarray(cl["uv"], float)
+    ps = stereo_at(dl, haz, uv, params)
+    ok = ps is not None and ps.ok
+    handoff = {"uv": H.tracked_uv, "error_px": H.error_px, "p_success": H.p_success, "go": H.go,
+               "ncc_peak": H.ncc_peak, "ok": H.ok, "reason": H.reason}
+    extra = {k: v for k, v in H.extra.items() if k != "px_mm"}
+    extra.update({"answer": "closure", "handoff": handoff})
+    reason = "" if ok else ("no right eye" if ps is None else f"stereo: {ps.reason}")
+    new = make_step(haz, H.kind, H.predicted_uv, uv, ps, cl.get("ncc_peak"), ok=ok, reason=reason, extra=extra)
+    if model is None:
+        new.p_success, new.go = None, False
+    else:
+        p = float(model.probability([closure_evidence(steps, cl)])[0])
+        new.p_success, new.go = p, bool(ok and p >= model.go_min_p)
+    steps[final] = new
 
 
 def _mark_after_unverified(steps: list) -> None:

@@ -118,3 +118,21 @@ def closure_check(dl, steps: list, params) -> Closure:
         out.uv = [float(x) for x in tr.uv]
         out.closure_px = float(np.linalg.norm(np.asarray(tr.uv) - np.asarray(H.tracked_uv, float)))
     return out
+
+
+def closure_evidence(steps: list, closure: dict):
+    """The :class:`~scipctl.core.closure_trust.ClosureEvidence` of a chain's closure (``closure``: a
+    :class:`Closure`'s dict, as recorded on the final step); ``steps``: the chain's
+    :class:`~scipctl.pipeline.chain.ChainStep` list (its reference step's own ``p_success``)."""
+    from ..core.closure_trust import ClosureEvidence
+
+    def num(v):
+        return float("nan") if v is None else float(v)
+
+    ref = closure.get("reference_step")
+    R = steps[ref] if isinstance(ref, int) and 0 <= ref < len(steps) else None
+    return ClosureEvidence(
+        ncc_peak=num(closure.get("ncc_peak")), local_inliers=num(closure.get("feature_local_inliers")),
+        confirmed=num(closure.get("feature_confirmed")), shift_px=num(closure.get("feature_shift_px")),
+        scale=num(closure.get("scale")), from_pancam=float(R is not None and R.camera == "pancam"),
+        ref_p_success=num(None if R is None else R.p_success), handoff_px=num(closure.get("closure_px")))

@@ -5,7 +5,9 @@ chain's own GO (docs/stereo-and-tracking.md, "Trust along the chain").
   (:class:`~scipctl.core.step_trust.StepTrustModel`, packaged ``scipctl/data/step_trust_model.json``) over the
   step's own diagnostics (:func:`step_evidence`), ``go`` = ``p_success >= go_min_p``; a lost step
   (no pixel) has ``p_success`` 0;
-- the navcam -> hazcam handoff: ``scip``'s (set by :func:`~scipctl.pipeline.chain.run_chain`);
+- the navcam -> hazcam handoff: ``scip``'s (set by :func:`~scipctl.pipeline.chain.run_chain`), or, when the
+  chain answers with its closure (``ChainParams.answer``), the closure model's
+  (:mod:`scipctl.core.closure_trust`);
 - the designation: not scored here (``p_success`` None, ``go`` True: the chain starts from what the operator
   designated; the designation's own trust is ``designate``'s);
 - the chain is GO only when every step up to the final hazcam handoff is GO and there is a final hazcam answer
@@ -122,12 +124,22 @@ class ChainVerdict:
 
 
 def chain_verdict(steps: list) -> ChainVerdict:
-    """The :class:`ChainVerdict` of a scored chain (steps after the final hazcam handoff are not part of it)."""
+    """The :class:`ChainVerdict` of a scored chain (steps after the final hazcam handoff are not part of it; when
+    the final answer is the chain's closure, ``extra["answer"] == "closure"``, neither are the steps between the
+    closure's reference and the final one: the answer does not depend on them)."""
     final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
     upto = steps if final is None else steps[: final + 1]
+    skip = set()
+    if final is not None and steps[final].extra.get("answer") == "closure":
+        # the answer is the closure's: found from its reference step, past the navcam steps after it
+        ref = (steps[final].extra.get("closure") or {}).get("reference_step")
+        if isinstance(ref, int):
+            skip = set(range(ref + 1, final))
     for i, s in enumerate(upto):
         if s.camera == "hazcam" and i != final:
             continue  # a handoff at an earlier hazcam stop is a side answer: the chain goes on by navcam
+        if i in skip:
+            continue
         if not s.go:
             p = "-" if s.p_success is None else f"{s.p_success:.2f}"
             return ChainVerdict(False, i, s.advice or advice_for(steps, i),

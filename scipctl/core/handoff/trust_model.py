@@ -103,6 +103,18 @@ def feature_matrix(evidence: list, spec: dict) -> np.ndarray:
     return np.asarray(rows, float).reshape(len(evidence), len(spec))
 
 
+def logistic_probability(evidence: list, features: dict, fill, mean, scale, coef, intercept: float,
+                         clip_z: float) -> np.ndarray:
+    """``(N,)`` ``sigmoid(coef . clip((f(evidence) - mean) / scale, +-clip_z) + intercept)``, unknown raw features
+    at ``fill``: one logistic model over any evidence dataclass (``features``: name -> (attribute, transform))."""
+    if not evidence:
+        return np.zeros(0)
+    X = feature_matrix(evidence, features)
+    X = np.where(np.isfinite(X), X, np.asarray(fill, float))
+    Z = np.clip((X - np.asarray(mean, float)) / np.asarray(scale, float), -clip_z, clip_z)
+    return 1.0 / (1.0 + np.exp(-(Z @ np.asarray(coef, float) + intercept)))
+
+
 @dataclass
 class LogisticFit:
     """One fitted success radius: ``p = sigmoid(coef . z + intercept)``, and the GO threshold chosen for it."""

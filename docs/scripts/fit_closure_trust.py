@@ -1,0 +1,138 @@
+"""The closure's trust model: its table from campaign records, the fit and the held-out figures
+(docs/stereo-and-tracking.md, "Closure as the answer").
+
+    # 1. the table: every confirmed closure of campaign folders run with --closure or --chain-answer closure
+    python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz
+    # 2. the model (scipctl/data/closure_trust_model.json) and the held-out report (one family out at a time)
+    python docs/scripts/fit_closure_trust.py fit closures.jsonl.gz -o scipctl/data/closure_trust_model.json --report r.json
+    # 3. a table scored by a fitted model (another population: nothing refitted)
+    python docs/scripts/fit_closure_trust.py score closures.jsonl.gz --model scipctl/data/closure_trust_model.json
+
+A chain's family is its campaign header's ``family``. The fit needs scikit-learn; the model it writes is evaluated
+with numpy only. Same table, same bytes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+
+def cmd_table(args) -> None:
+    from scipctl.pipeline.closure_trust_fit import closure_row
+
+    rows, chains = [], 0
+    for out in args.campaigns:
+        for f in sorted(Path(out, "records").glob("*.jsonl")):
+            lines = [json.loads(line) for line in f.read_text(encoding="utf-8").splitlines() if line.strip()]
+            header = lines[0]
+            if header.get("status") != "ok":
+                continue
+            path = (header.get("job") or {}).get("path")
+            name = f"{Path(path).parent.name}/{Path(path).name}" if path else str(header.get("downlink"))
+            for rec in lines[1:]:
+                if rec.get("kind") == "chain":
+                    chains += 1
+                    row = closure_row(rec["record"], str(header.get("family") or "default"), name)
+                    if row is not None:
+                        rows.append(row)
+    rows.sort(key=lambda r: (r.family, r.downlink, r.target))
+    text = "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows)
+    Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
+    print(json.dumps({"chains": chains, "confirmed_closures": len(rows)}), file=sys.stderr)
+
+
+def read_table(path) -> list:
+    from scipctl.pipeline.closure_trust_fit import ClosureRow
+
+    text = gzip.decompress(Path(path).read_bytes()).decode("utf-8")
+    return [ClosureRow.from_dict(json.loads(line)) for line in text.splitlines() if line.strip()]
+
+
+def stats(pairs: list, go_min_p: float) -> dict:
+    """Brier, base rate, GO figures and reliability of ``[(row, p, within)]``."""
+    p = np.array([x[1] for x in pairs], float)
+    y = np.array([x[2] for x in pairs], bool)
+    go = p >= go_min_p
+    out = {"n": int(len(p)), "within": int(y.sum()), "brier": float(np.mean((p - y) ** 2)) if len(p) else None,
+           "brier_base_rate": float(np.mean((y.mean() - y) ** 2)) if len(p) else None,
+           "go": int(go.sum()), "go_within": int((go & y).sum()), "misses": int((~y).sum()),
+           "misses_nogo": int((~go & ~y).sum()), "reliability": []}
+    for lo, hi in ((0.0, 0.2), (0.2, 0.5), (0.5, 0.8), (0.8, 0.9), (0.9, 1.0001)):
+        m = (p >= lo) & (p < hi)
+        out["reliability"].append({"lo": lo, "hi": min(hi, 1.0), "n": int(m.sum()),
+                                   "mean_p": float(p[m].mean()) if m.any() else None,
+                                   "observed": float(y[m].mean()) if m.any() else None})
+    return out
+
+
+def cmd_fit(args) -> None:
+    import sklearn
+
+    from scipctl.io.closure_trust_model import closure_trust_model_json
+    from scipctl.io.provenance import provenance
+    from scipctl.pipeline.closure_trust_fit import (SUCCESS_PX, choose_go_min_p, fit_closure_model, held_out,
+                                                    training_rows)
+    from scipctl.pipeline.trust_fit import C_REG
+
+    rows = read_table(args.table)
+    pairs = held_out(rows, SUCCESS_PX)
+    go_min_p = choose_go_min_p(pairs)
+    ev, y, fams = training_rows(rows, SUCCESS_PX)
+    prov = provenance({"table0": str(args.table)}, deterministic=True)
+    prov.update({"C": C_REG, "n_rows": int(len(y)), "n_within": int(y.sum()),
+                 "training_families": sorted(set(fams)), "scikit_learn": sklearn.__version__,
+                 "go_rule": "smallest p in 0.90..0.99 whose leave-one-family-out GO answers are right >= 98 % "
+                            "of the time; 1.0 (never GO) when none is",
+                 "command": f"python docs/scripts/fit_closure_trust.py fit {args.table} -o {args.out}"})
+    model = fit_closure_model(ev, y, SUCCESS_PX, go_min_p=go_min_p, provenance=prov)
+    Path(args.out).write_text(closure_trust_model_json(model), encoding="utf-8")
+    if args.report:
+        per = {}
+        for fam in sorted({r.family for r, _, _ in pairs}):
+            per[fam] = stats([x for x in pairs if x[0].family == fam], go_min_p)
+        per["pooled"] = stats(pairs, go_min_p)
+        report = {"go_min_p": go_min_p, "held_out": per, "coef": dict(zip(model.features, model.coef))}
+        Path(args.report).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    print(json.dumps({"out": str(args.out), "go_min_p": go_min_p, "rows": int(len(y)), "within": int(y.sum())}),
+          file=sys.stderr)
+
+
+def cmd_score(args) -> None:
+    from scipctl.core.closure_trust import ClosureEvidence
+    from scipctl.io.closure_trust_model import closure_trust_model_from_text
+
+    model = closure_trust_model_from_text(Path(args.model).read_text(encoding="utf-8"), args.model)
+    rows = [r for r in read_table(args.table) if r.closure_error_px is not None]
+    ps = model.probability([ClosureEvidence.from_dict(r.evidence) for r in rows])
+    pairs = [(r, float(p), r.closure_error_px <= model.success_px) for r, p in zip(rows, ps)]
+    per = {fam: stats([x for x in pairs if x[0].family == fam], model.go_min_p)
+           for fam in sorted({r.family for r in rows})}
+    per["pooled"] = stats(pairs, model.go_min_p)
+    print(json.dumps({"go_min_p": model.go_min_p, "scored": per}, indent=1, sort_keys=True))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("table")
+    t.add_argument("campaigns", nargs="+")
+    t.add_argument("-o", "--out", required=True)
+    f = sub.add_parser("fit")
+    f.add_argument("table")
+    f.add_argument("-o", "--out", required=True)
+    f.add_argument("--report")
+    s = sub.add_parser("score")
+    s.add_argument("table")
+    s.add_argument("--model", required=True)
+    a = ap.parse_args()
+    {"table": cmd_table, "fit": cmd_fit, "score": cmd_score}[a.cmd](a)
+
+
+if __name__ == "__main__":
+    main()
