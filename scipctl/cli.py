@@ -151,6 +151,7 @@ def simulate_handoff(
     far: Optional[str] = typer.Option(None, "--far", help="Left far-navcam product id."),
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
     chain: bool = typer.Option(False, "--chain", help="Also run the whole chain from the pancam designation (each step with p_success and GO)."),
+    chain_answer: str = typer.Option("handoff", "--chain-answer", help="With --chain: the chain's final hazcam answer, handoff (scip's) or closure (the closure's pixel when confirmed; docs/stereo-and-tracking.md, 'Closure as the answer')."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
     trust_model: Optional[Path] = typer.Option(None, "--trust-model", help="scip's trust model (scipctl fit-trust; default: the packaged one)."),
     products_dir: Optional[Path] = _products_dir_option(),
@@ -163,7 +164,7 @@ def simulate_handoff(
     from .commands import handoff as command
 
     command.simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
-        products_root=products_dir, trust_model=trust_model)
+        products_root=products_dir, trust_model=trust_model, chain_answer=chain_answer)
 
 
 @app.command("trust-evidence")

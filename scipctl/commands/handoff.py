@@ -45,7 +45,7 @@ def _fmt_stats(s):
 
 
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
-                     fast=False, products_root=None, trust_model=None):
+                     fast=False, products_root=None, trust_model=None, chain_answer="handoff"):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
     (and the chains with ``chain``); one JSON document on stdout with ``json_out``."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -62,6 +62,13 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
     names, navcams, pairs = _parse_methods(methods)
+    from ..pipeline.chain import CHAIN_ANSWERS
+
+    if chain_answer not in CHAIN_ANSWERS:
+        raise InputError("simulate-handoff", "--chain-answer", f"must be one of {', '.join(CHAIN_ANSWERS)}, "
+                                                               f"got {chain_answer!r}")
+    if chain_answer != "handoff" and not chain:
+        raise InputError("simulate-handoff", "--chain-answer", "is the chain's answer: give --chain too")
     con = stderr_console()
     records, chains, per_dl = [], [], []
     sources = [open_source(s, products_root=products_root) for s in srcs]  # validate every input before any work
@@ -114,7 +121,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                            "dense_stereo_s": {k: round(c.nav.dense_seconds, 3) for k, c in setup.cases.items()},
                            "input_sha256": dl.source_sha256, "saved_to": str(saved)})
             if chain:
-                chains.extend(run_marked_chains(dl, name, target))
+                chains.extend(run_marked_chains(dl, name, target, answer=chain_answer))
             del done
     rows = table1(records)
     doc = {

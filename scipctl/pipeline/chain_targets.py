@@ -34,7 +34,8 @@ def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = No
             continue
         try:
             steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups,
-                              params=ChainParams(closure=closure, answer=answer))
+                              params=ChainParams(closure=closure, answer=answer)
+                              if (closure or answer != "handoff") else None)
             out.append({"downlink": downlink_name, "target": t.id, "steps": steps,
                         **chain_verdict(steps).to_dict()})
         except InputError as e:

@@ -114,6 +114,15 @@ def test_the_closure_option_changes_the_key_only_when_on():
     assert CampaignOptions.from_dict(on.to_dict()) == on and CampaignOptions.from_dict(opts.to_dict()) == opts
     with pytest.raises(InputError, match="--closure"):
         CampaignOptions(handoff=False, chain=False, closure=True).check()
+    # --chain-answer likewise: in the key only when it is not the default
+    ans = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),),
+                          chain_answer="closure").check()
+    assert ans.key() not in (opts.key(), on.key()) and ans.to_dict()["chain_answer"] == "closure"
+    assert "chain_answer" not in opts.to_dict() and CampaignOptions.from_dict(ans.to_dict()) == ans
+    with pytest.raises(InputError, match="--chain-answer"):
+        CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), chain_answer="x").check()
+    with pytest.raises(InputError, match="--chain-answer"):
+        CampaignOptions(handoff=False, chain=False, predict=True, chain_answer="closure").check()
 
 
 def test_the_closure_option_reaches_every_chain(monkeypatch):
@@ -126,7 +135,7 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
     seen = []
 
     def fake_run_chain(dl, start, uv, target_id=None, setups=None, params=None):
-        seen.append(None if params is None else params.closure)
+        seen.append(None if params is None else (params.closure, params.answer))
         return []
 
     monkeypatch.setattr(chain_mod, "run_chain", fake_run_chain)
@@ -134,7 +143,8 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
                         lambda steps: type("V", (), {"to_dict": lambda self: {}})())
     dl = read_downlink(SOLS / "mcap" / "paper-s1-arc.mcap")
     job = file_jobs([SOLS / "mcap" / "paper-s1-arc.mcap"])[0]
-    for closure, want in ((True, True), (False, None)):
+    for closure, answer, want in ((True, "handoff", (True, "handoff")), (False, "handoff", None),
+                                  (False, "closure", (False, "closure"))):
         seen.clear()
-        task._chain(dl, job, DownlinkResult(job, "k"), closure)
-        assert seen and all(s is want for s in seen), (closure, seen)
+        task._chain(dl, job, DownlinkResult(job, "k"), closure, answer)
+        assert seen and all(s == want for s in seen), (closure, answer, seen)

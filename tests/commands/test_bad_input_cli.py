@@ -213,6 +213,8 @@ BAD_ARGS = [
     (["simulate-handoff", S, "--from", "hazcam_left_1_0", "--pixel", "3,3"], "--from must be a left navcam product"),
     (["simulate-handoff", S, "--hazcam", "ghost"], "ghost: product_id: no such image product"),
     (["simulate-handoff", S, "--target", "ghost", "--methods", "pure-kinematic"], "ghost: target: no such marked target"),
+    (["simulate-handoff", S, "--chain", "--chain-answer", "navcam"], "--chain-answer: must be one of handoff, closure"),
+    (["simulate-handoff", S, "--chain-answer", "closure"], "--chain-answer: is the chain's answer: give --chain too"),
     # sequence
     (["sequence", S, "--target", "ghost"], "ghost: --target: not designated"),
     (["sequence", S, "--target", "t_flat", "--format", "pdf"], "--format: format: unknown format 'pdf'"),

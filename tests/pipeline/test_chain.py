@@ -431,3 +431,44 @@ def test_run_chain_records_the_closure_when_asked(dl, closures):
     # the hazcam answer carries Open3D's ICP run-to-run rounding (test_chain_stability.py): closure_px within 1e-9
     assert got.pop("closure_px") == pytest.approx(want.pop("closure_px"), abs=1e-9)
     assert got == want
+
+
+def test_run_chain_answers_with_a_confirmed_closure(dl, chains, closures):
+    """ChainParams(answer="closure"): a confirmed closure becomes the final answer (its pixel bit for bit, the
+    error against the mark, the handoff's own answer kept under extra["handoff"], p_success from the packaged
+    closure model on that closure's evidence); an unconfirmed one leaves the handoff's answer. On s1-straight t2
+    the closure is confirmed from the 4.5 m pancam track, on t1 it is unconfirmed (measured)."""
+    if _stem(dl) != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains, ~10 s)")
+    from scipctl.io.closure_trust_model import load_packaged_closure_trust_model
+    from scipctl.pipeline.chain_closure import closure_evidence
+
+    model = load_packaged_closure_trust_model()
+    assert model is not None
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    seen = set()
+    for tid in ("t1", "t2"):
+        mk = dl.target(tid).mark_in(start.product_id)
+        steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="closure"))
+        fin, base = steps[-1], chains[tid][-1]
+        assert fin.extra["final"] and len(steps) == len(chains[tid])
+        c = closures[tid]
+        seen.add(c["status"])
+        if c["status"] == "confirmed":
+            assert fin.extra["answer"] == "closure" and fin.tracked_uv == c["uv"]
+            # the handoff's answer carries Open3D's ICP run-to-run rounding (test_chain_stability.py)
+            assert fin.extra["handoff"]["uv"] == pytest.approx(base.tracked_uv, abs=1e-6)
+            assert fin.error_px == pytest.approx(np.hypot(*(np.subtract(c["uv"], fin.mark_uv))), abs=1e-12)
+            assert fin.p_success == model.probability([closure_evidence(steps, fin.extra["closure"])])[0]
+            assert fin.go == (fin.ok and fin.p_success >= model.go_min_p)
+            assert fin.error_px <= 4.0  # from the pancam track: the bound of the closure test above
+        else:
+            assert fin.extra["answer"] == "handoff" and "handoff" not in fin.extra
+            assert fin.tracked_uv == pytest.approx(base.tracked_uv, abs=1e-6)
+            assert fin.p_success == pytest.approx(base.p_success, abs=1e-6)
+    assert seen == {"confirmed", "unconfirmed"}
+
+
+def test_chain_params_refuse_an_unknown_answer():
+    with pytest.raises(ValueError, match="ChainParams.answer"):
+        ChainParams(answer="scip").check()

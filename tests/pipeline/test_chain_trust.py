@@ -114,3 +114,23 @@ def test_evidence_counts_the_earlier_steps():
     assert ev.kind == "navcam-track" and ev.prior_steps == 2 and ev.prior_flagged == 1 and ev.prior_min_ncc == 0.4
     assert ev.status_confirmed == 1.0 and ev.px_mm == 1.5 and ev.zoom == 2.0
     assert advice_for(steps, 1) == NEW_IMAGE  # confirmed features, only the flag: not a re-designation
+
+
+def test_a_closure_answer_is_judged_without_the_navcam_steps_it_skips():
+    """When the final answer is the closure's (``extra["answer"] == "closure"``, found from its reference step
+    across the navcam tracks), a NO-GO navcam track between the reference and the final step does not decide the
+    chain; a NO-GO step up to the reference still does, and so does the final step itself."""
+    steps = _chain()
+    steps[3] = _step(2, "navcam", "track", status="failed", ok=False)
+    _score(steps)
+    assert not chain_verdict(steps).go and chain_verdict(steps).step == 3  # the handoff's answer depends on it
+    steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
+    v = chain_verdict(steps)
+    assert v.go and v.step is None
+    steps[1] = _step(1, "pancam", "track", status="failed", ok=False)  # the reference itself
+    _score(steps)
+    steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
+    assert chain_verdict(steps).step == 1
+    steps = _score(_chain(), haz_go=False)
+    steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
+    assert chain_verdict(steps).step == 5

@@ -1,0 +1,89 @@
+"""The closure's trust model: the packaged file is what its command makes from the committed closure table, the
+held-out evaluation never scores a family with a model that saw it, and the table is what the chain records say
+(tests/data/README.md, "closure_trust")."""
+
+import gzip
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("sklearn")
+
+ROOT = Path(__file__).resolve().parents[2]
+TABLE = Path("tests/data/closure_trust/closures.jsonl.gz")
+MODEL = Path("scipctl/data/closure_trust_model.json")
+
+
+def _rows():
+    from scipctl.pipeline.closure_trust_fit import ClosureRow
+
+    text = gzip.decompress((ROOT / TABLE).read_bytes()).decode("utf-8")
+    return [ClosureRow.from_dict(json.loads(line)) for line in text.splitlines() if line.strip()]
+
+
+def test_packaged_model_is_reproduced_bit_for_bit_by_its_command(tmp_path):
+    """The command of the model's provenance, run on the committed table (same relative paths), writes the same
+    bytes as the packaged file."""
+    (tmp_path / TABLE.parent).mkdir(parents=True)
+    shutil.copy(ROOT / TABLE, tmp_path / TABLE)
+    (tmp_path / MODEL.parent).mkdir(parents=True)
+    env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"}
+    r = subprocess.run([sys.executable, str(ROOT / "docs/scripts/fit_closure_trust.py"), "fit", str(TABLE), "-o",
+                        str(MODEL)], cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / MODEL).read_bytes() == (ROOT / MODEL).read_bytes()
+    prov = json.loads((ROOT / MODEL).read_text())["provenance"]
+    assert prov["command"] == f"python docs/scripts/fit_closure_trust.py fit {TABLE} -o {MODEL}"
+
+
+def test_held_out_families_are_answered_by_models_that_never_saw_them(monkeypatch):
+    import scipctl.pipeline.closure_trust_fit as fit
+
+    rows = _rows()
+    fams = sorted({r.family for r in rows})
+    assert len(fams) >= 4 and len(rows) >= 40
+    seen = []
+    real = fit.fit_closure_model
+
+    def spy(evidence, y, *a, **k):
+        seen.append(len(y))
+        return real(evidence, y, *a, **k)
+
+    monkeypatch.setattr(fit, "fit_closure_model", spy)
+    pairs = fit.held_out(rows)
+    assert len(pairs) == sum(r.closure_error_px is not None for r in rows)
+    for fam in fams:
+        n_other = sum(1 for r in rows if r.family != fam and r.closure_error_px is not None)
+        assert n_other in seen  # each fold fitted on the other families' rows only
+    assert all(0.0 <= p <= 1.0 and w == (r.closure_error_px <= fit.SUCCESS_PX) for r, p, w in pairs)
+
+
+def test_a_row_is_made_from_a_chain_record_with_a_confirmed_closure():
+    """closure_row reads both forms of record: a chain that only checked its closure (the handoff's pixel is the
+    final answer) and one that adopted it (the handoff's pixel under extra["handoff"]); no row without a confirmed
+    closure."""
+    from scipctl.pipeline.closure_trust_fit import closure_row
+
+    blank = {k: None for k in ("predicted_uv", "tracked_uv", "mark_uv", "error_px", "ncc_peak", "range_m",
+                               "xyz_site_m", "truth_xyz_site_m", "error_3d_m", "p_success")}
+    blank.update(ok=True, reason="", go=False, advice=None)
+    ref = dict(blank, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.7, extra={})
+    cl = {"status": "confirmed", "uv": [103.0, 204.0], "reference_step": 0, "ncc_peak": 0.8, "closure_px": 5.0,
+          "feature_local_inliers": 9, "feature_confirmed": 2, "feature_shift_px": 40.0, "scale": 0.6}
+    fin = dict(blank, camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
+               tracked_uv=[103.0, 209.0], extra={"final": True, "closure": cl})
+    row = closure_row({"target": "t1", "steps": [ref, fin]}, "fam", "d")
+    assert row.closure_error_px == pytest.approx(5.0) and row.handoff_error_px == pytest.approx(3.0 * 10 ** 0.5)
+    assert row.evidence["from_pancam"] == 1.0 and row.evidence["ref_p_success"] == 0.7
+    assert row.evidence["handoff_px"] == 5.0 and row.target == "t1"
+    adopted = dict(fin, tracked_uv=cl["uv"], extra={"final": True, "closure": cl, "answer": "closure",
+                                                    "handoff": {"uv": [103.0, 209.0]}})
+    again = closure_row({"target": "t1", "steps": [ref, adopted]}, "fam", "d")
+    assert again == row
+    for status in ("unconfirmed", "failed"):
+        bad = dict(fin, extra={"final": True, "closure": dict(cl, status=status)})
+        assert closure_row({"target": "t1", "steps": [ref, bad]}, "fam", "d") is None
