@@ -73,25 +73,17 @@ def closure_reference(steps: list, final: int) -> Optional[int]:
     return None
 
 
-def closure_check(dl, steps: list, params) -> Closure:
-    """The :class:`Closure` of a chain whose final hazcam handoff is the step with ``extra["final"]``.
-
-    ``dl``: the downlink; ``steps``: the chain's :class:`~scipctl.pipeline.chain.ChainStep` list; ``params``: its
-    :class:`~scipctl.pipeline.chain.ChainParams` (the feature step's settings, the hazcam template size).
-    """
+def track_from_step(dl, R, prod, params):
+    """The target found in ``prod`` (an image product) straight from the chain step ``R`` (its image and pixel,
+    its stereo point on that pixel's ray, the local plane there) by the chain's feature-guided step:
+    ``(TrackResult or None, info dict, scale, predicted pixel)``; ``(None, {}, nan, None)`` when the target projects
+    behind ``prod``'s camera."""
     from ..core.point_stereo import on_left_ray
     from ..core.windows import window_scale_for_handoff
     from .feature_track import feature_track
     from .plane_warp import local_normals_site
 
-    final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
-    if final is None or steps[final].tracked_uv is None:
-        return Closure("no final answer")
-    ref = closure_reference(steps, final)
-    if ref is None:
-        return Closure("no reference")
-    R, H = steps[ref], steps[final]
-    prev, prod = dl.product(R.product_id), dl.product(H.product_id)
+    prev = dl.product(R.product_id)
     # the reference's estimate on its tracked pixel's ray, as the chain keeps it (on_left_ray)
     X_prev = on_left_ray(prev.camera_model, R.tracked_uv, prev.pose.T_site_rover.inverse().apply(np.asarray(R.xyz_site_m)))
     X_site = prev.pose.T_site_rover.apply(X_prev)
@@ -105,11 +97,30 @@ def closure_check(dl, steps: list, params) -> Closure:
     X_new = prod.pose.T_site_rover.inverse().apply(X_site)
     pred = prod.camera_model.project(X_new[None])[0]
     if not np.all(np.isfinite(pred)):
-        return Closure("failed", R.product_id, ref)
+        return None, {}, float("nan"), None
     rng_new = float(np.linalg.norm(X_new - prod.camera_model.C))
     scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, rng_prev, 1.0 / prod.camera_model.hs, rng_new)
     tr, info = feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera), {},
-                              params)
+                             params)
+    return tr, info, float(scale), pred
+
+
+def closure_check(dl, steps: list, params) -> Closure:
+    """The :class:`Closure` of a chain whose final hazcam handoff is the step with ``extra["final"]``.
+
+    ``dl``: the downlink; ``steps``: the chain's :class:`~scipctl.pipeline.chain.ChainStep` list; ``params``: its
+    :class:`~scipctl.pipeline.chain.ChainParams` (the feature step's settings, the hazcam template size).
+    """
+    final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
+    if final is None or steps[final].tracked_uv is None:
+        return Closure("no final answer")
+    ref = closure_reference(steps, final)
+    if ref is None:
+        return Closure("no reference")
+    R, H = steps[ref], steps[final]
+    tr, info, scale, pred = track_from_step(dl, R, dl.product(H.product_id), params)
+    if pred is None:
+        return Closure("failed", R.product_id, ref)
     out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale),
                   ncc_peak=info.get("ncc_score"), feature_local_inliers=int(info.get("feature_local_inliers", 0)),
                   feature_confirmed=int(info.get("feature_confirmed", 0)),
