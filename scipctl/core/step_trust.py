@@ -22,9 +22,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from .handoff.trust_model import evidence_from_dict, evidence_to_dict, logistic_probability
+from .handoff.trust_model import evidence_from_dict, evidence_to_dict
+from .logistic_model import SingleLogistic
 
 STEP_KINDS = ("pancam-track", "navcam-handoff", "navcam-track")
 
@@ -97,10 +96,14 @@ STEP_FEATURES: dict[str, tuple[str, str]] = {
 
 
 @dataclass
-class StepTrustModel:
+class StepTrustModel(SingleLogistic):
     """A fitted step model (see the module docstring). ``features``: name -> [StepEvidence attribute,
     transform]; ``fill``/``mean``/``scale``/``coef``: one value per feature; ``go_min_p``: the GO threshold chosen
-    on held-out families; ``success_mm``: the radius the probability is for."""
+    on held-out families; ``success_mm``: the radius the probability is for. Evaluation and file form:
+    :class:`~scipctl.core.logistic_model.SingleLogistic`."""
+
+    RADIUS = "success_mm"
+    WHAT = "step trust model"
 
     features: dict
     fill: list
@@ -112,38 +115,3 @@ class StepTrustModel:
     success_mm: float
     provenance: dict = field(default_factory=dict)
     clip_z: float = 5.0
-
-    def __post_init__(self):
-        F = len(self.features)
-        if not (len(self.fill) == len(self.mean) == len(self.scale) == len(self.coef) == F):
-            raise ValueError(f"StepTrustModel: fill/mean/scale/coef must have {F} entries (one per feature)")
-        if not (0.0 < self.go_min_p <= 1.0):
-            raise ValueError(f"StepTrustModel.go_min_p = {self.go_min_p!r}: must be in (0, 1]")
-        if not (self.success_mm > 0 and self.clip_z > 0):
-            raise ValueError("StepTrustModel: success_mm and clip_z must be > 0")
-
-    def probability(self, evidence: list) -> np.ndarray:
-        """P(within ``success_mm``) ``(N,)`` for each :class:`StepEvidence`."""
-        return logistic_probability(evidence, self.features, self.fill, self.mean, self.scale, self.coef,
-                                    self.intercept, self.clip_z)
-
-    def to_dict(self) -> dict:
-        return {"kind": "logistic", "features": [[k, v[0], v[1]] for k, v in self.features.items()],
-                "fill": list(self.fill), "mean": list(self.mean), "scale": list(self.scale), "coef": list(self.coef),
-                "intercept": self.intercept, "go_min_p": self.go_min_p, "success_mm": self.success_mm,
-                "clip_z": self.clip_z, "provenance": dict(self.provenance)}
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "StepTrustModel":
-        """From :meth:`to_dict`'s output; ``ValueError`` naming what is wrong."""
-        try:
-            if d.get("kind", "logistic") != "logistic":
-                raise ValueError(f"step trust model: kind {d.get('kind')!r}, only 'logistic' is evaluated")
-            return cls(features={str(f[0]): (str(f[1]), str(f[2])) for f in d["features"]},
-                       fill=[float(x) for x in d["fill"]], mean=[float(x) for x in d["mean"]],
-                       scale=[float(x) for x in d["scale"]], coef=[float(x) for x in d["coef"]],
-                       intercept=float(d["intercept"]), go_min_p=float(d["go_min_p"]),
-                       success_mm=float(d["success_mm"]), provenance=dict(d.get("provenance", {})),
-                       clip_z=float(d.get("clip_z", 5.0)))
-        except (KeyError, TypeError, IndexError, AttributeError) as e:
-            raise ValueError(f"step trust model: missing or malformed field ({e})") from None
