@@ -2,13 +2,15 @@
 (docs/stereo-and-tracking.md, "Closure as the answer").
 
     # 1. the table: every confirmed closure of campaign folders run with --closure or --chain-answer closure
-    python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz
+    python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz [--family-dir DIR=FAMILY ...]
     # 2. the model (scipctl/data/closure_trust_model.json) and the held-out report (one family out at a time)
     python docs/scripts/fit_closure_trust.py fit closures.jsonl.gz -o scipctl/data/closure_trust_model.json --report r.json
     # 3. a table scored by a fitted model (another population: nothing refitted)
     python docs/scripts/fit_closure_trust.py score closures.jsonl.gz --model scipctl/data/closure_trust_model.json
 
-A chain's family is its campaign header's ``family``. The fit needs scikit-learn; the model it writes is evaluated
+A chain's family is its campaign header's ``family``, or the first ``--family-dir DIR=FAMILY`` whose DIR is a
+component of the downlink's path (campaigns made before ``campaign`` read the family ``synth --family`` records
+called every such downlink ``default``). The fit needs scikit-learn; the model it writes is evaluated
 with numpy only. Same table, same bytes.
 """
 
@@ -23,9 +25,20 @@ from pathlib import Path
 import numpy as np
 
 
+def family_of(header: dict, dirs: dict) -> str:
+    """The family of a campaign record's downlink: the first ``dirs`` entry naming a component of its path, else the
+    header's ``family``."""
+    path = (header.get("job") or {}).get("path")
+    for part in Path(path).parts if path else ():
+        if part in dirs:
+            return dirs[part]
+    return str(header.get("family") or "default")
+
+
 def cmd_table(args) -> None:
     from scipctl.pipeline.closure_trust_fit import closure_row
 
+    dirs = dict(x.split("=", 1) for x in args.family_dir)
     rows, chains = [], 0
     for out in args.campaigns:
         for f in sorted(Path(out, "records").glob("*.jsonl")):
@@ -38,10 +51,16 @@ def cmd_table(args) -> None:
             for rec in lines[1:]:
                 if rec.get("kind") == "chain":
                     chains += 1
-                    row = closure_row(rec["record"], str(header.get("family") or "default"), name)
+                    row = closure_row(rec["record"], family_of(header, dirs), name)
                     if row is not None:
                         rows.append(row)
-    rows.sort(key=lambda r: (r.family, r.downlink, r.target))
+    # the same downlink in two campaigns: its first campaign's rows only
+    seen, unique = set(), []
+    for r in rows:
+        if (r.downlink, r.target) not in seen:
+            seen.add((r.downlink, r.target))
+            unique.append(r)
+    rows = sorted(unique, key=lambda r: (r.family, r.downlink, r.target))
     text = "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows)
     Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
     print(json.dumps({"chains": chains, "confirmed_closures": len(rows)}), file=sys.stderr)
@@ -123,6 +142,7 @@ def main():
     t = sub.add_parser("table")
     t.add_argument("campaigns", nargs="+")
     t.add_argument("-o", "--out", required=True)
+    t.add_argument("--family-dir", action="append", default=[], metavar="DIR=FAMILY")
     f = sub.add_parser("fit")
     f.add_argument("table")
     f.add_argument("-o", "--out", required=True)

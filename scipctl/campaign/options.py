@@ -8,6 +8,7 @@ import math
 from dataclasses import dataclass
 
 from ..errors import InputError
+from ..pipeline.chain import DEFAULT_CHAIN_ANSWER
 
 NAVCAMS = ("near", "far")
 
@@ -34,7 +35,7 @@ class CampaignOptions:
     fast: bool = False
     predict_route: str = "plan"  # PredictParams.route: "plan" (the planner's approach) or "downlink" (its own stops)
     closure: bool = False  # the chain's closure check (ChainParams.closure, pipeline/chain_closure.py) on every chain
-    chain_answer: str = "handoff"  # ChainParams.answer: the chain's final answer, "handoff" or "closure"
+    chain_answer: str = DEFAULT_CHAIN_ANSWER  # ChainParams.answer: the chain's final answer, "closure" or "handoff"
 
     def check(self) -> "CampaignOptions":
         if not (self.handoff or self.chain or self.predict):
@@ -48,8 +49,6 @@ class CampaignOptions:
         if self.chain_answer not in CHAIN_ANSWERS:
             raise InputError("campaign", "--chain-answer", f"must be one of {', '.join(CHAIN_ANSWERS)}, "
                                                            f"got {self.chain_answer!r}")
-        if self.chain_answer != "handoff" and not self.chain:
-            raise InputError("campaign", "--chain-answer", "is the chain's answer: not with --no-chain")
         if self.predict_route not in ("plan", "downlink"):
             raise InputError("campaign", "--predict-route", f"must be plan or downlink, got {self.predict_route!r}")
         if self.handoff:
@@ -71,7 +70,7 @@ class CampaignOptions:
              "success_px": float(self.success_px), "fast": self.fast, "predict_route": self.predict_route}
         if self.closure:  # only when on: the keys of campaigns without it stay what they were
             d["closure"] = True
-        if self.chain_answer != "handoff":  # likewise
+        if self.chain_answer != "handoff":  # likewise: campaigns before the closure answer were "handoff" ones
             d["chain_answer"] = self.chain_answer
         return d
 
@@ -80,7 +79,7 @@ class CampaignOptions:
         return cls(bool(d["handoff"]), bool(d["chain"]), bool(d["predict"]), tuple(d["methods"]),
                    tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]),
                    str(d.get("predict_route", "plan")), bool(d.get("closure", False)),
-                   str(d.get("chain_answer", "handoff")))
+                   str(d.get("chain_answer", "handoff")))  # a record without it was made before the option
 
     def key(self) -> str:
         """SHA-256 of everything here that changes an answer, and of the tool's version."""

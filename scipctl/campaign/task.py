@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import time
+from typing import Optional
 
 from ..errors import CommandFailed, InputError
 from .jobs import DEFAULT_FAMILY, DownlinkJob
@@ -184,7 +185,7 @@ def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int =
     return res
 
 
-def _chain(dl, job: DownlinkJob, res: DownlinkResult, closure: bool = False, answer: str = "handoff") -> None:
+def _chain(dl, job: DownlinkJob, res: DownlinkResult, closure: bool = False, answer: Optional[str] = None) -> None:
     from ..pipeline.chain_targets import run_marked_chains
 
     res.chains = [dict(c, steps=[s.to_dict() for s in c["steps"]])

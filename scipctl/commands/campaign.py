@@ -17,15 +17,17 @@ from .output import emit_json, note, stderr_console
 
 
 def _options(handoff, chain, predict, methods, success_px, fast, predict_route="plan", closure=False,
-             chain_answer="handoff"):
+             chain_answer=None):
     from ..campaign.options import CampaignOptions
     from .handoff import _parse_methods
 
     if methods is not None and not handoff:
         raise InputError("campaign", "--methods", "only with --handoff")
+    if chain_answer is not None and not chain:
+        raise InputError("campaign", "--chain-answer", "is the chain's answer: not with --no-chain")
     names, _, pairs = _parse_methods(methods) if handoff else ([], [], set())
     return CampaignOptions(handoff, chain, predict, tuple(names), tuple(sorted(pairs)), success_px, fast,
-                           predict_route, closure, chain_answer).check()
+                           predict_route, closure, *([] if chain_answer is None else [chain_answer])).check()
 
 
 def _jobs(srcs, synth, seeds, runs, families, no_errors):
@@ -113,7 +115,7 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
              families: Optional[str], no_errors: bool, handoff: bool, chain: bool, predict: bool,
              methods: Optional[str], success_px: float, fast: bool, scheduler: Optional[str], workers: Optional[int],
              memory_limit: Optional[str], summarize_dir: Optional[Path], json_out: bool,
-             predict_route: str = "plan", closure: bool = False, chain_answer: str = "handoff") -> None:
+             predict_route: str = "plan", closure: bool = False, chain_answer: Optional[str] = None) -> None:
     """``scipctl campaign``: run (or with ``summarize_dir`` only re-aggregate) and write the summary."""
     from ..campaign.cluster import ClusterSpec
     from ..campaign.store import CampaignStore

@@ -45,7 +45,7 @@ def _fmt_stats(s):
 
 
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
-                     fast=False, products_root=None, trust_model=None, chain_answer="handoff"):
+                     fast=False, products_root=None, trust_model=None, chain_answer=None):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
     (and the chains with ``chain``); one JSON document on stdout with ``json_out``."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
@@ -64,10 +64,10 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     names, navcams, pairs = _parse_methods(methods)
     from ..pipeline.chain import CHAIN_ANSWERS
 
-    if chain_answer not in CHAIN_ANSWERS:
+    if chain_answer is not None and chain_answer not in CHAIN_ANSWERS:
         raise InputError("simulate-handoff", "--chain-answer", f"must be one of {', '.join(CHAIN_ANSWERS)}, "
                                                                f"got {chain_answer!r}")
-    if chain_answer != "handoff" and not chain:
+    if chain_answer is not None and not chain:
         raise InputError("simulate-handoff", "--chain-answer", "is the chain's answer: give --chain too")
     con = stderr_console()
     records, chains, per_dl = [], [], []

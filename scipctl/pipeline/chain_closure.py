@@ -9,7 +9,9 @@ the final hazcam view and found there by the chain's own feature-guided step
 (:func:`~scipctl.pipeline.feature_track.feature_track`: features remove the pose error of the drive between the
 two stops, NCC refines). Where the two paths agree, the navcam steps did not drift; where they disagree, one of
 them is wrong. The pancam track itself is shared by both paths, so an error there is in both (measured: the
-closure is therefore not a GO; off by default, ``ChainParams.closure``).
+closure is therefore not a GO). Measured again as the answer, a confirmed closure is more often right than the
+handoff path, so it is the chain's default answer (``ChainParams.answer``; docs/stereo-and-tracking.md, "Closure as
+the answer"); ``ChainParams.closure`` records the check on a chain that answers by handoff.
 
 When the pancam track at that stop was flagged, the closure starts from the navcam handoff there instead (found
 from the designation image across the drive, not from the pancam track): coarser (~3.7 mm at 4.5 m), still

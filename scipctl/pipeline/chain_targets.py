@@ -10,13 +10,13 @@ from ..model import Downlink
 
 
 def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = None, closure: bool = False,
-                      answer: str = "handoff") -> list:
+                      answer: Optional[str] = None) -> list:
     """One entry per target marked in the first left pancam image (or only the target ``only``):
     ``{"downlink", "target", "steps": [ChainStep, ...], "go", "nogo_step", "advice", "why"}`` (the chain's
     verdict, :func:`~scipctl.pipeline.chain_trust.chain_verdict`), or with ``"error"`` (one line), no steps and
     ``go`` False when the chain stops on bad input. Empty when the downlink has no left pancam image. ``closure``:
     each chain also runs its closure check (``ChainParams.closure``); ``answer``: the chain's final answer
-    (``ChainParams.answer``: ``handoff`` or ``closure``)."""
+    (``ChainParams.answer``: ``closure`` or ``handoff``; None: its default)."""
     from .chain import ChainParams, run_chain
     from .chain_trust import REDESIGNATE, chain_verdict
 
@@ -34,8 +34,7 @@ def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = No
             continue
         try:
             steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups,
-                              params=ChainParams(closure=closure, answer=answer)
-                              if (closure or answer != "handoff") else None)
+                              params=ChainParams(closure=closure, **({} if answer is None else {"answer": answer})))
             out.append({"downlink": downlink_name, "target": t.id, "steps": steps,
                         **chain_verdict(steps).to_dict()})
         except InputError as e:

@@ -104,30 +104,30 @@ def test_the_closure_option_changes_the_key_only_when_on():
 
     from scipctl import __version__
 
-    opts = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),))
+    opts = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), chain_answer="handoff")
     before = {"handoff": True, "chain": True, "predict": True, "methods": ["pure-kinematic"],
               "pairs": [["pure-kinematic", "near"]], "success_px": 4.0, "fast": False, "predict_route": "plan"}
     text = json.dumps({"options": before, "version": __version__}, sort_keys=True)
     assert opts.key() == hashlib.sha256(text.encode()).hexdigest()
-    on = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), closure=True).check()
+    on = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), closure=True,
+                         chain_answer="handoff").check()
     assert on.key() != opts.key() and on.to_dict()["closure"] is True
     assert CampaignOptions.from_dict(on.to_dict()) == on and CampaignOptions.from_dict(opts.to_dict()) == opts
     with pytest.raises(InputError, match="--closure"):
         CampaignOptions(handoff=False, chain=False, closure=True).check()
-    # --chain-answer likewise: in the key only when it is not the default
-    ans = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),),
-                          chain_answer="closure").check()
-    assert ans.key() not in (opts.key(), on.key()) and ans.to_dict()["chain_answer"] == "closure"
+    # --chain-answer: campaigns made before it were "handoff" ones and keep their key; the default ("closure")
+    # is in the key, so a campaign re-run with today's default does its chains again
+    ans = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),))
+    assert ans.chain_answer == "closure" and ans.key() not in (opts.key(), on.key())
+    assert ans.to_dict()["chain_answer"] == "closure"
     assert "chain_answer" not in opts.to_dict() and CampaignOptions.from_dict(ans.to_dict()) == ans
     with pytest.raises(InputError, match="--chain-answer"):
         CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), chain_answer="x").check()
-    with pytest.raises(InputError, match="--chain-answer"):
-        CampaignOptions(handoff=False, chain=False, predict=True, chain_answer="closure").check()
 
 
 def test_the_closure_option_reaches_every_chain(monkeypatch):
-    """campaign --closure: the task asks run_marked_chains for it, which runs each chain with ChainParams(closure=True)
-    (the check itself is tested in tests/pipeline/test_chain.py)."""
+    """campaign --closure and --chain-answer: the task asks run_marked_chains for them, which runs each chain with
+    them in its ChainParams (the check and the answer are tested in tests/pipeline/test_chain.py)."""
     import scipctl.pipeline.chain as chain_mod
     from scipctl.campaign import task
     from scipctl.io.downlink import read_downlink
@@ -143,7 +143,7 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
                         lambda steps: type("V", (), {"to_dict": lambda self: {}})())
     dl = read_downlink(SOLS / "mcap" / "paper-s1-arc.mcap")
     job = file_jobs([SOLS / "mcap" / "paper-s1-arc.mcap"])[0]
-    for closure, answer, want in ((True, "handoff", (True, "handoff")), (False, "handoff", None),
+    for closure, answer, want in ((True, "handoff", (True, "handoff")), (False, None, (False, "closure")),
                                   (False, "closure", (False, "closure"))):
         seen.clear()
         task._chain(dl, job, DownlinkResult(job, "k"), closure, answer)

@@ -30,6 +30,8 @@ runner = CliRunner()
     ([str(SOL), "--methods", "pure-kinematic", "--no-handoff", "-o", "{out}"], "--methods"),
     ([str(SOL), "--no-handoff", "--no-chain", "--no-predict", "-o", "{out}"], "nothing left"),
     ([str(SOL), "--no-chain", "--closure", "-o", "{out}"], "--closure"),
+    ([str(SOL), "--no-chain", "--chain-answer", "closure", "-o", "{out}"], "--chain-answer: is the chain's answer"),
+    ([str(SOL), "--chain-answer", "navcam", "-o", "{out}"], "--chain-answer: must be one of"),
     ([str(SOL), "--success-px", "0", "-o", "{out}"], "--success-px"),
     ([str(SOL), "--workers", "0", "-o", "{out}"], "--workers"),
     ([str(SOL), "--memory-limit", "plenty", "-o", "{out}"], "--memory-limit"),

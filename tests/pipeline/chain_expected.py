@@ -31,3 +31,14 @@ EXPECTED_ERROR_PX = {
         "t1": [None, 3.5, 5.5, 12.5, 8.5],
     },
 }
+
+# The final hazcam answer of the default chain (ChainParams.answer "closure": the closure's pixel when it is
+# confirmed, else the handoff's), measured in session 12 by docs/scripts/chain_perturb.py over the same four runs
+# (OpenCV 5.0.0; as they are, designation +(0.01, 0) and (-0.007, +0.007) px, +-1 DN seeded noise), times 1.25,
+# rounded up to 0.5 px. s1-straight t1's closure is unconfirmed in three of the four runs (the handoff's answer)
+# and confirmed in one.
+EXPECTED_FINAL_PX = {
+    "paper-s1-straight": {"t1": 2.0,   # measured 0.55-1.28 px
+                          "t2": 2.5},  # measured 1.57-2.00 px
+    "paper-s1-arc": {"t1": 9.0},       # measured 4.48-6.98 px (from the navcam handoff: its error carried)
+}
