@@ -227,7 +227,7 @@ def stereo_at(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
               handoff_method: str = "scip", template_mode: str = "plane", handoff_at: str = "every",
               params: Optional[ChainParams] = None, step_model=None, setups: Optional[dict] = None,
-              closure_model=None) -> list:
+              closure_model=None, feature_cache: Optional[dict] = None) -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
     ``template_mode``: ``"plane"`` (default) renders the previous stop's image
@@ -258,7 +258,9 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     where the hazcam handoffs keep their :class:`~scipctl.pipeline.handoff.HandoffSetup` by product ids (dense
     stereo and registrations do not depend on the target: computed once, the same answers).
     ``closure_model``: the :class:`~scipctl.core.closure_trust.ClosureTrustModel` of an adopted closure answer
-    (``params.answer == "closure"``; None: the packaged one).
+    (``params.answer == "closure"``; None: the packaged one). ``feature_cache``: a dict shared by the chains of one
+    downlink, where the feature step keeps each image's keypoints by (product id, downsampling): computed once,
+    the same keypoints (None: this chain's own).
     """
     params = (params or ChainParams()).check()
     if template_mode not in ("plane", "scale"):
@@ -323,7 +325,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
     normal, ground, normal_from = None, None, None
-    feats = {}  # product_id -> keypoints of the whole image (each new image is searched once)
+    # (product_id, downsampling) -> keypoints of the whole image (each new image is searched once)
+    feats = {} if feature_cache is None else feature_cache
 
     positions = [p for p in dl.positions() if p != start.position]
     positions = [p for p in positions if min(im.time_s for im in dl.images_at(p)) > start.time_s]
@@ -459,7 +462,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     if (params.closure or params.answer == "closure") and handoffs and handoffs[-1].tracked_uv is not None:
         from .chain_closure import closure_check
 
-        handoffs[-1].extra["closure"] = closure_check(dl, steps, params).to_dict()
+        handoffs[-1].extra["closure"] = closure_check(dl, steps, params, feats).to_dict()
     from .chain_trust import advice_for, score_steps
 
     if step_model is None:

@@ -75,11 +75,11 @@ def closure_reference(steps: list, final: int) -> Optional[int]:
     return None
 
 
-def track_from_step(dl, R, prod, params):
+def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     """The target found in ``prod`` (an image product) straight from the chain step ``R`` (its image and pixel,
     its stereo point on that pixel's ray, the local plane there) by the chain's feature-guided step:
     ``(TrackResult or None, info dict, scale, predicted pixel)``; ``(None, {}, nan, None)`` when the target projects
-    behind ``prod``'s camera."""
+    behind ``prod``'s camera. ``feats``: the feature step's keypoint cache (:func:`feature_track`; None: its own)."""
     from ..core.point_stereo import on_left_ray
     from ..core.windows import window_scale_for_handoff
     from .feature_track import feature_track
@@ -102,16 +102,17 @@ def track_from_step(dl, R, prod, params):
         return None, {}, float("nan"), None
     rng_new = float(np.linalg.norm(X_new - prod.camera_model.C))
     scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, rng_prev, 1.0 / prod.camera_model.hs, rng_new)
-    tr, info = feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera), {},
-                             params)
+    tr, info = feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera),
+                             {} if feats is None else feats, params)
     return tr, info, float(scale), pred
 
 
-def closure_check(dl, steps: list, params) -> Closure:
+def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Closure:
     """The :class:`Closure` of a chain whose final hazcam handoff is the step with ``extra["final"]``.
 
     ``dl``: the downlink; ``steps``: the chain's :class:`~scipctl.pipeline.chain.ChainStep` list; ``params``: its
-    :class:`~scipctl.pipeline.chain.ChainParams` (the feature step's settings, the hazcam template size).
+    :class:`~scipctl.pipeline.chain.ChainParams` (the feature step's settings, the hazcam template size); ``feats``:
+    the feature step's keypoint cache (None: its own).
     """
     final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
     if final is None or steps[final].tracked_uv is None:
@@ -120,7 +121,7 @@ def closure_check(dl, steps: list, params) -> Closure:
     if ref is None:
         return Closure("no reference")
     R, H = steps[ref], steps[final]
-    tr, info, scale, pred = track_from_step(dl, R, dl.product(H.product_id), params)
+    tr, info, scale, pred = track_from_step(dl, R, dl.product(H.product_id), params, feats)
     if pred is None:
         return Closure("failed", R.product_id, ref)
     out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale),

@@ -26,6 +26,7 @@ def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = No
         return out
     start = starts[0]
     setups = {}  # the hazcam handoffs' setups, shared by the targets (same products, same answers)
+    features = {}  # the feature step's keypoints of each image, likewise
     for t in dl.targets:
         if only and t.id != only:
             continue
@@ -33,7 +34,7 @@ def run_marked_chains(dl: Downlink, downlink_name: str, only: Optional[str] = No
         if mk is None:
             continue
         try:
-            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups,
+            steps = run_chain(dl, start, [mk.u, mk.v], target_id=t.id, setups=setups, feature_cache=features,
                               params=ChainParams(closure=closure, **({} if answer is None else {"answer": answer})))
             out.append({"downlink": downlink_name, "target": t.id, "steps": steps,
                         **chain_verdict(steps).to_dict()})

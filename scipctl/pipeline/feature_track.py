@@ -31,7 +31,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     maps the new image's to, so that it carries the rotation of the pose
     error too, and NCC-tracked within ``params.feature_fine_radius_px`` of the mapped
     prediction; the best NCC wins. ``feats`` caches the new images' keypoints
-    by ``(product id, downsampling)``. ``info`` records the path, the
+    by ``(product id, downsampling)`` (the chains of one downlink may share it: same image, same downsampling, same
+    keypoints). ``info`` records the path, the
     winner's inlier counts and the coarse position.
     """
     from ..core.features import detect_features, knn_matches, locate_by_features
@@ -52,7 +53,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             break  # a coarser rendering only when nothing was confirmed at the finer one
         step_px = float(np.clip(scale * factor, 1.0, 4.0 * factor))
         vhalf = int(round(params.view_reach_px / step_px))
-        key = (prod.product_id, round(step_px, 2))
+        key = (prod.product_id, step_px)  # exact: a cache shared by chains gives each the keypoints it would compute
         if key not in feats:
             feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
         # pose-estimate pixels of prod -> rendering pixels

@@ -473,3 +473,24 @@ def test_run_chain_answers_with_a_confirmed_closure(dl, chains, closures):
 def test_chain_params_refuse_an_unknown_answer():
     with pytest.raises(ValueError, match="ChainParams.answer"):
         ChainParams(answer="scip").check()
+
+
+def test_a_feature_cache_shared_by_the_chains_of_a_downlink_changes_no_answer(dl, chains):
+    """run_marked_chains shares the feature step's keypoints between the chains of one downlink (each image's,
+    by its exact downsampling): the second chain gets the same keypoints it would compute, so the same pixels, bit
+    for bit at every tracking step (the hazcam step within the ICP rounding of test_chain_stability.py)."""
+    if _stem(dl) != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains, ~10 s)")
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    cache = {}
+    for tid in ("t1", "t2"):
+        mk = dl.target(tid).mark_in(start.product_id)
+        steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=HANDOFF, feature_cache=cache)
+    assert any(pid.startswith("s1-straight") and ds == 1.0 for pid, ds in cache)  # keyed by the exact downsampling
+    alone = chains["t2"]
+    assert [s.product_id for s in steps] == [s.product_id for s in alone]
+    for s, a in zip(steps, alone):
+        if s.camera == "hazcam":
+            assert np.allclose(s.tracked_uv, a.tracked_uv, rtol=0, atol=1e-9)
+        else:
+            assert s.tracked_uv == a.tracked_uv and s.extra == a.extra, s.product_id
