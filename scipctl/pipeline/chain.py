@@ -481,8 +481,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
 def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: ChainParams, model=None) -> None:
     """Make a confirmed closure the chain's final answer, in place: ``steps[final]`` (the final hazcam handoff) is
     replaced by a step at the closure's pixel (point stereo there, the error against the mark), ``extra["answer"]``
-    ``"closure"`` and the handoff's own answer kept under ``extra["handoff"]``; its ``p_success`` from the closure
-    trust model (``model``; None: the packaged one; no model: None and NO-GO). An unconfirmed or failed closure
+    ``"closure"`` and the handoff's own answer kept under ``extra["handoff"]``; its ``p_success`` (and
+    ``extra["go_min_p"]``) from the closure trust model (``model``; None: the packaged one; no model: None and NO-GO). An unconfirmed or failed closure
     leaves the handoff's answer (``extra["answer"]`` ``"handoff"``)."""
     from .chain_closure import closure_evidence
 
@@ -500,9 +500,9 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
     ps = stereo_at(dl, haz, uv, params)
     ok = ps is not None and ps.ok
     handoff = {"uv": H.tracked_uv, "error_px": H.error_px, "p_success": H.p_success, "go": H.go,
-               "ncc_peak": H.ncc_peak, "ok": H.ok, "reason": H.reason}
-    extra = {k: v for k, v in H.extra.items() if k != "px_mm"}
-    extra.update({"answer": "closure", "handoff": handoff})
+               "go_min_p": H.extra.get("go_min_p"), "ncc_peak": H.ncc_peak, "ok": H.ok, "reason": H.reason}
+    extra = {k: v for k, v in H.extra.items() if k not in ("px_mm", "go_min_p")}
+    extra.update({"answer": "closure", "handoff": handoff, "go_min_p": None if model is None else model.go_min_p})
     reason = "" if ok else ("no right eye" if ps is None else f"stereo: {ps.reason}")
     new = make_step(haz, H.kind, H.predicted_uv, uv, ps, cl.get("ncc_peak"), ok=ok, reason=reason, extra=extra)
     if model is None:

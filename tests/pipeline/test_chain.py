@@ -461,7 +461,8 @@ def test_run_chain_answers_with_a_confirmed_closure(dl, chains, closures):
             assert fin.extra["handoff"]["uv"] == pytest.approx(base.tracked_uv, abs=1e-6)
             assert fin.error_px == pytest.approx(np.hypot(*(np.subtract(c["uv"], fin.mark_uv))), abs=1e-12)
             assert fin.p_success == model.probability([closure_evidence(steps, fin.extra["closure"])])[0]
-            assert fin.go == (fin.ok and fin.p_success >= model.go_min_p)
+            assert fin.go == (fin.ok and fin.p_success >= model.go_min_p) and fin.extra["go_min_p"] == model.go_min_p
+            assert fin.extra["handoff"]["go_min_p"] == base.extra["go_min_p"]
             if steps[c["reference_step"]].camera == "pancam":
                 assert fin.error_px <= 4.0  # from the pancam track: the bound of the closure test above
         else:
