@@ -201,6 +201,9 @@ def _trust(step) -> str:
     status = (step.extra or {}).get("feature_status")
     if status:
         parts.append(status)
+    if (step.extra or {}).get("answer") == "closure":
+        ref = (step.extra.get("closure") or {}).get("reference")
+        parts.append(f"closure from {ref}")
     if step.reason:
         parts.append(str(step.reason))
     return " ".join(parts)

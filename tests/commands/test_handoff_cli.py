@@ -102,3 +102,5 @@ def test_chain_option_reports_every_step_against_the_marks(sol):
     # the designation is the mark itself
     assert steps[0]["error_px"] == 0.0
     assert "tracking chain" in r.stderr and "trust" in r.stderr
+    if steps[-1]["extra"].get("answer") == "closure":  # the final answer's origin is in its trust column
+        assert "closure" in r.stderr
