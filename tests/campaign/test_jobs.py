@@ -134,7 +134,7 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
 
     seen = []
 
-    def fake_run_chain(dl, start, uv, target_id=None, setups=None, params=None):
+    def fake_run_chain(dl, start, uv, target_id=None, setups=None, params=None, feature_cache=None):
         seen.append(None if params is None else (params.closure, params.answer))
         return []
 
