@@ -482,8 +482,8 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
     """Make a confirmed closure the chain's final answer, in place: ``steps[final]`` (the final hazcam handoff) is
     replaced by a step at the closure's pixel (point stereo there, the error against the mark), ``extra["answer"]``
     ``"closure"`` and the handoff's own answer kept under ``extra["handoff"]``; its ``p_success`` (and
-    ``extra["go_min_p"]``) from the closure trust model (``model``; None: the packaged one; no model: None and NO-GO). An unconfirmed or failed closure
-    leaves the handoff's answer (``extra["answer"]`` ``"handoff"``)."""
+    ``extra["go_min_p"]``) from the closure trust model (``model``; None: the packaged one; no model: None and
+    NO-GO). An unconfirmed or failed closure leaves the handoff's answer (``extra["answer"]`` ``"handoff"``)."""
     from .chain_closure import closure_evidence
 
     H = steps[final]
