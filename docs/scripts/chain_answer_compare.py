@@ -33,8 +33,8 @@ def chain_rows(campaigns: list, dirs: dict) -> list:
                     continue
                 st = r["record"]["steps"]
                 fin = next((s for s in st if s["camera"] == "hazcam" and s["extra"].get("final")), None)
-                row = {"family": family_of(lines[0], dirs), "handoff_px": math.inf, "answer_px": math.inf, "reference": None,
-                       "closure": None, "p": None, "go": bool(r["record"].get("go"))}
+                row = {"family": family_of(lines[0], dirs), "handoff_px": math.inf, "answer_px": math.inf,
+                       "reference": None, "closure": None, "p": None, "go": bool(r["record"].get("go"))}
                 if fin is not None and fin.get("mark_uv") is not None:
                     mk = fin["mark_uv"]
                     x = fin["extra"]

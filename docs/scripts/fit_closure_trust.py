@@ -4,7 +4,8 @@
     # 1. the table: every confirmed closure of campaign folders run with --closure or --chain-answer closure
     python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz [--family-dir DIR=FAMILY ...]
     # 2. the model (scipctl/data/closure_trust_model.json) and the held-out report (one family out at a time)
-    python docs/scripts/fit_closure_trust.py fit closures.jsonl.gz -o scipctl/data/closure_trust_model.json --report r.json
+    python docs/scripts/fit_closure_trust.py fit closures.jsonl.gz -o scipctl/data/closure_trust_model.json \
+        --report r.json
     # 3. a table scored by a fitted model (another population: nothing refitted)
     python docs/scripts/fit_closure_trust.py score closures.jsonl.gz --model scipctl/data/closure_trust_model.json
 
