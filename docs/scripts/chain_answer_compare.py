@@ -13,41 +13,33 @@ the final answer is the handoff's).
 from __future__ import annotations
 
 import argparse
-import glob
 import json
 import math
 from collections import defaultdict
 
 
 def chain_rows(campaigns: list, dirs: dict) -> list:
-    from fit_closure_trust import family_of
+    from campaign_chains import campaign_chains
 
     rows = []
-    for camp in campaigns:
-        for f in sorted(glob.glob(camp + "/records/*.jsonl")):
-            lines = [json.loads(x) for x in open(f, encoding="utf-8") if x.strip()]
-            if lines[0].get("status") != "ok":
-                continue
-            for r in lines[1:]:
-                if r.get("kind") != "chain":
-                    continue
-                st = r["record"]["steps"]
-                fin = next((s for s in st if s["camera"] == "hazcam" and s["extra"].get("final")), None)
-                row = {"family": family_of(lines[0], dirs), "handoff_px": math.inf, "answer_px": math.inf,
-                       "reference": None, "closure": None, "p": None, "go": bool(r["record"].get("go"))}
-                if fin is not None and fin.get("mark_uv") is not None:
-                    mk = fin["mark_uv"]
-                    x = fin["extra"]
-                    cl = x.get("closure") or {}
-                    h_uv = x["handoff"]["uv"] if isinstance(x.get("handoff"), dict) else fin["tracked_uv"]
-                    row["handoff_px"] = math.dist(h_uv, mk) if h_uv else math.inf
-                    row["closure"] = cl.get("status")
-                    adopt = cl.get("status") == "confirmed" and cl.get("uv") is not None
-                    row["answer_px"] = math.dist(cl["uv"], mk) if adopt else row["handoff_px"]
-                    if adopt:
-                        row["reference"] = st[cl["reference_step"]]["camera"]
-                        row["p"] = fin.get("p_success") if x.get("answer") == "closure" else None
-                rows.append(row)
+    for fam, _, record in campaign_chains(campaigns, dirs):
+        st = record["steps"]
+        fin = next((s for s in st if s["camera"] == "hazcam" and s["extra"].get("final")), None)
+        row = {"family": fam, "handoff_px": math.inf, "answer_px": math.inf, "reference": None, "closure": None,
+               "p": None, "go": bool(record.get("go"))}
+        if fin is not None and fin.get("mark_uv") is not None:
+            mk = fin["mark_uv"]
+            x = fin["extra"]
+            cl = x.get("closure") or {}
+            h_uv = x["handoff"]["uv"] if isinstance(x.get("handoff"), dict) else fin["tracked_uv"]
+            row["handoff_px"] = math.dist(h_uv, mk) if h_uv else math.inf
+            row["closure"] = cl.get("status")
+            adopt = cl.get("status") == "confirmed" and cl.get("uv") is not None
+            row["answer_px"] = math.dist(cl["uv"], mk) if adopt else row["handoff_px"]
+            if adopt:
+                row["reference"] = st[cl["reference_step"]]["camera"]
+                row["p"] = fin.get("p_success") if x.get("answer") == "closure" else None
+        rows.append(row)
     return rows
 
 

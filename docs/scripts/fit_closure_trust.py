@@ -26,35 +26,17 @@ from pathlib import Path
 import numpy as np
 
 
-def family_of(header: dict, dirs: dict) -> str:
-    """The family of a campaign record's downlink: the first ``dirs`` entry naming a component of its path, else the
-    header's ``family``."""
-    path = (header.get("job") or {}).get("path")
-    for part in Path(path).parts if path else ():
-        if part in dirs:
-            return dirs[part]
-    return str(header.get("family") or "default")
-
-
 def cmd_table(args) -> None:
+    from campaign_chains import campaign_chains
     from scipctl.pipeline.closure_trust_fit import closure_row
 
     dirs = dict(x.split("=", 1) for x in args.family_dir)
     rows, chains = [], 0
-    for out in args.campaigns:
-        for f in sorted(Path(out, "records").glob("*.jsonl")):
-            lines = [json.loads(line) for line in f.read_text(encoding="utf-8").splitlines() if line.strip()]
-            header = lines[0]
-            if header.get("status") != "ok":
-                continue
-            path = (header.get("job") or {}).get("path")
-            name = f"{Path(path).parent.name}/{Path(path).name}" if path else str(header.get("downlink"))
-            for rec in lines[1:]:
-                if rec.get("kind") == "chain":
-                    chains += 1
-                    row = closure_row(rec["record"], family_of(header, dirs), name)
-                    if row is not None:
-                        rows.append(row)
+    for fam, name, record in campaign_chains(args.campaigns, dirs):
+        chains += 1
+        row = closure_row(record, fam, name)
+        if row is not None:
+            rows.append(row)
     # the same downlink in two campaigns: its first campaign's rows only
     seen, unique = set(), []
     for r in rows:

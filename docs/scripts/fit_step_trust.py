@@ -22,36 +22,16 @@ from pathlib import Path
 import numpy as np
 
 
-def _family(header: dict, dirs: dict) -> str:
-    job = header.get("job") or {}
-    path = job.get("path")
-    if path:
-        for part in Path(path).parts:
-            if part in dirs:
-                return dirs[part]
-    return str(header.get("family") or "default")
-
-
 def cmd_table(args) -> None:
+    from campaign_chains import campaign_chains
     from scipctl.pipeline.step_trust_fit import chain_row
 
     dirs = dict(x.split("=", 1) for x in args.family_dir)
     rows = []
-    for out in args.campaigns:
-        for f in sorted(Path(out, "records").glob("*.jsonl")):
-            lines = [json.loads(line) for line in f.read_text(encoding="utf-8").splitlines() if line.strip()]
-            header = lines[0]
-            if header.get("status") != "ok":
-                continue
-            fam = _family(header, dirs)
-            path = (header.get("job") or {}).get("path")
-            # a downlink file is named by its folder too (scenes/def1/paper-s1-arc.mcap and def2's differ)
-            name = f"{Path(path).parent.name}/{Path(path).name}" if path else str(header.get("downlink"))
-            for rec in lines[1:]:
-                if rec.get("kind") == "chain":
-                    row = chain_row(rec["record"], fam)
-                    row.downlink = name
-                    rows.append(row)
+    for fam, name, record in campaign_chains(args.campaigns, dirs):
+        row = chain_row(record, fam)
+        row.downlink = name
+        rows.append(row)
     rows.sort(key=lambda c: (c.family, c.downlink, c.target))
     # the same downlink run by two campaigns: its first chains only
     seen, unique = set(), []

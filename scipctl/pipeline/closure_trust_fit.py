@@ -64,7 +64,7 @@ def closure_row(record: dict, family: str, downlink: str) -> Optional[ClosureRow
     handoff = final.extra.get("handoff")
     h_uv = handoff.get("uv") if isinstance(handoff, dict) else final.tracked_uv
     he = None if (mk is None or h_uv is None) else float(math.dist(h_uv, mk))
-    return ClosureRow(family, downlink, str(record.get("target_id") or record.get("target") or ""),
+    return ClosureRow(family, downlink, str(record.get("target") or ""),
                       closure_evidence(steps, cl).to_dict(), ce, he)
 
 
