@@ -20,12 +20,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .handoff.trust_model import evidence_from_dict, evidence_to_dict
+from .handoff.trust_model import EvidenceRecord
 from .logistic_model import SingleLogistic
 
 
 @dataclass
-class ClosureEvidence:
+class ClosureEvidence(EvidenceRecord):
     """What a closure knows about itself (NaN: unknown). ``from_pancam``: 1 when it started from the 4.5 m pancam
     track, 0 from the navcam handoff; ``ref_p_success``: the reference step's own probability (step model);
     ``handoff_px``: distance (hazcam px) from the closure pixel to the handoff path's answer (``closure_px``)."""
@@ -38,13 +38,6 @@ class ClosureEvidence:
     from_pancam: float = 0.0
     ref_p_success: float = math.nan
     handoff_px: float = math.nan
-
-    def to_dict(self) -> dict:
-        return evidence_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "ClosureEvidence":
-        return evidence_from_dict(cls, d)
 
 
 # feature name -> (ClosureEvidence attribute, transform of core.handoff.trust_model.transform)

@@ -22,14 +22,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from .handoff.trust_model import evidence_from_dict, evidence_to_dict
+from .handoff.trust_model import EvidenceRecord
 from .logistic_model import SingleLogistic
 
 STEP_KINDS = ("pancam-track", "navcam-handoff", "navcam-track")
 
 
 @dataclass
-class StepEvidence:
+class StepEvidence(EvidenceRecord):
     """What one tracking step knows about itself (NaN: unknown). ``kind``: one of :data:`STEP_KINDS` (or another
     string: none of the kind indicators is set)."""
 
@@ -60,13 +60,6 @@ class StepEvidence:
     @property
     def is_navcam_handoff(self) -> float:
         return 1.0 if self.kind == "navcam-handoff" else 0.0
-
-    def to_dict(self) -> dict:
-        return evidence_to_dict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "StepEvidence":
-        return evidence_from_dict(cls, d)
 
 
 # feature name -> (StepEvidence attribute, transform of core.handoff.trust_model.transform)

@@ -96,6 +96,17 @@ def evidence_from_dict(cls, d: dict):
     return cls(**kw)
 
 
+class EvidenceRecord:
+    """Mixin for an evidence dataclass: its JSON form (:func:`evidence_to_dict` / :func:`evidence_from_dict`)."""
+
+    def to_dict(self) -> dict:
+        return evidence_to_dict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        return evidence_from_dict(cls, d)
+
+
 def feature_matrix(evidence: list, spec: dict) -> np.ndarray:
     """(N, F) raw features of ``evidence`` (list of :class:`~scipctl.core.handoff.evidence.Evidence`) for ``spec``
     (feature name -> (Evidence field, transform)); NaN where unknown."""
