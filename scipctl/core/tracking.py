@@ -149,6 +149,7 @@ def track(
     exclusion_px: Optional[float] = None,
     min_template_std: Optional[float] = None,
     subpixel_iterations: int = 4,
+    accept_border_peak: bool = True,
 ) -> TrackResult:
     """Find ``template`` in ``image`` near ``predicted_uv`` by zero-mean NCC.
 
@@ -185,6 +186,14 @@ def track(
     subpixel_iterations : int
         Resample-and-refit iterations that remove the bias of the 3x3
         quadratic peak fit (0: plain fit).
+    accept_border_peak : bool
+        ``False``: a peak where the template touches the image's edge (the
+        last placement inside the image) is ``ok=False`` ("peak at the image
+        border"), since the correlation may still rise towards a match that
+        lies partly outside the image. For whole templates (rendered or
+        warped windows); a window clipped at the image's edge
+        (:func:`~scipctl.core.windows.crop_window`) belongs there, hence the
+        default ``True``.
 
     Returns
     -------
@@ -307,10 +316,17 @@ def track(
     on_limit = (
         abs(peak_xy[0] - p0[0]) > search_radius_px + 1.0 or abs(peak_xy[1] - p0[1]) > search_radius_px + 1.0
     )
+    # for a whole template, a maximum where it touches the image's edge is the end of the placements, not a peak:
+    # the NCC surface may still be rising towards a match that lies partly outside the image (a target 2.5 px from
+    # the edge of a 41 px pancam window was "found" 17 px inside it; docs/stereo-and-tracking.md, "Reproducibility")
+    place = peak_xy + np.array([ox, oy], dtype=float)
+    at_border = not accept_border_peak and (place[0] <= 0 or place[1] <= 0 or place[0] >= W - tw or place[1] >= H - th)
     if score < min_score:
         ok, reason = False, f"no match above threshold (peak NCC {score:.3f} < {min_score:.3f})"
     elif on_limit:
         ok, reason = False, "peak outside the search region"
+    elif at_border:
+        ok, reason = False, "peak at the image border (the match may lie beyond it)"
     elif ratio < min_ratio:
         ok, reason = False, f"ambiguous match (peak ratio {ratio:.3f} < {min_ratio:.3f})"
     return TrackResult(ok, reason, uv, score, second, ratio, sharp, levels)

@@ -93,8 +93,9 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                 if np.isfinite(tpl).mean() < 0.9:
                     continue
                 tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
+                # a whole rendered window: a peak where it touches the image's edge confirms nothing
                 tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
-                           min_score=0.3)
+                           min_score=0.3, accept_border_peak=False)
                 cands.append((loc, tr, k, reach, factor))
     if not cands:
         info["feature_status"] = "failed"

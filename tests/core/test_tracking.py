@@ -188,6 +188,33 @@ def test_target_near_border_with_clipped_window():
     assert np.abs(res.uv - (target + s)).max() < 0.05
 
 
+def test_whole_template_whose_match_lies_beyond_the_border():
+    """A whole window around a point 2.5 px inside the image's left edge (8 of its 21 columns outside the image):
+    the best placement inside the image is the last one, where the window touches the edge, ~8 px from the truth.
+    By default (a window clipped at the edge belongs there) it is a match; with ``accept_border_peak=False`` it is
+    flagged, since the correlation may still rise beyond the edge. An interior match gives the same bits either
+    way."""
+    tex = Texture(fmax=0.05, seed=3)  # smooth enough that the partial overlap still correlates (NCC ~0.57)
+    base = tex.render(SIZE, SIZE)
+    big = tex.render(SIZE + 40, SIZE, origin_xy=(-40.0, 0.0))  # big pixel (u + 40, v) = base pixel (u, v)
+    target = np.array([2.5, 120.0])  # in base
+    tpl = big[120 - 10 : 120 + 11, 40 + 2 - 10 : 40 + 2 + 11]  # 21 x 21 around base (2, 120)
+    c_tpl = np.array([10.5, 10.0])  # the target in the template
+    kw = dict(template_center_uv=c_tpl, min_score=0.3)
+    default = track(tpl, base, target + (6.0, 0.0), 8, **kw)
+    whole = track(tpl, base, target + (6.0, 0.0), 8, accept_border_peak=False, **kw)
+    assert default.ok, default.reason
+    assert default.uv[0] - c_tpl[0] <= 0.5  # the template's left column at (sub-pixel) image column <= 0.5
+    assert np.linalg.norm(default.uv - target) > 5.0  # the wrong answer the flag keeps from being trusted
+    assert not whole.ok and whole.reason.startswith("peak at the image border"), whole.reason
+    assert np.array_equal(whole.uv, default.uv)  # reported, flagged
+    interior = np.array([120.3, 117.6])
+    tpl_in = BASE[117 - 10 : 117 + 11, 120 - 10 : 120 + 11]
+    a = track(tpl_in, _shifted((0.3, 0.6)), interior, 6, template_center_uv=(10.0, 10.0))
+    b = track(tpl_in, _shifted((0.3, 0.6)), interior, 6, template_center_uv=(10.0, 10.0), accept_border_peak=False)
+    assert a.ok and b.ok and np.array_equal(a.uv, b.uv) and a.score == b.score
+
+
 def test_scale_handoff_tracks_into_coarser_camera():
     """A window from a fine camera, shrunk by 1/3, found in a camera with 3x coarser pixels."""
     tex = Texture(n=80, fmax=0.12, seed=8)
