@@ -18,10 +18,10 @@ refitted by ``docs/scripts/fit_closure_trust.py``; docs/stereo-and-tracking.md, 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from .handoff.trust_model import EvidenceRecord
-from .logistic_model import SingleLogistic
+from .logistic_model import PixelLogistic
 
 
 @dataclass
@@ -54,22 +54,10 @@ CLOSURE_FEATURES: dict[str, tuple[str, str]] = {
 
 
 @dataclass
-class ClosureTrustModel(SingleLogistic):
+class ClosureTrustModel(PixelLogistic):
     """A fitted closure model (see the module docstring). ``features``: name -> [ClosureEvidence attribute,
     transform]; ``fill``/``mean``/``scale``/``coef``: one value per feature; ``go_min_p``: the GO threshold;
     ``success_px``: the radius (final hazcam image pixels) the probability is for. Evaluation and file form:
     :class:`~scipctl.core.logistic_model.SingleLogistic`."""
 
-    RADIUS = "success_px"
     WHAT = "closure trust model"
-
-    features: dict
-    fill: list
-    mean: list
-    scale: list
-    coef: list
-    intercept: float
-    go_min_p: float
-    success_px: float
-    provenance: dict = field(default_factory=dict)
-    clip_z: float = 5.0

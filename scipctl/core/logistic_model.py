@@ -8,6 +8,8 @@ arithmetic and file form of the chain's step model (:mod:`scipctl.core.step_trus
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from .handoff.trust_model import TRANSFORMS, logistic_probability
@@ -62,3 +64,21 @@ class SingleLogistic:
                        clip_z=float(d.get("clip_z", 5.0)))
         except (KeyError, TypeError, IndexError, AttributeError) as e:
             raise ValueError(f"{cls.WHAT}: missing or malformed field ({e})") from None
+
+
+@dataclass
+class PixelLogistic(SingleLogistic):
+    """A :class:`SingleLogistic` with its fields declared, for models whose radius is in image pixels
+    (``success_px``): the closure's (:mod:`scipctl.core.closure_trust`) and the prediction's calibration
+    (:mod:`scipctl.core.prediction_calibration`). Subclasses set :attr:`WHAT`."""
+
+    features: dict
+    fill: list
+    mean: list
+    scale: list
+    coef: list
+    intercept: float
+    go_min_p: float
+    success_px: float
+    provenance: dict = field(default_factory=dict)
+    clip_z: float = 5.0
