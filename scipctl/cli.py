@@ -210,7 +210,9 @@ def sequence(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading noise per stop, relative to the previous stop, degrees (default: the rules file's default_sigma_yaw_deg)."),
     rules: Optional[Path] = _rules_option(),
     min_p_success: Optional[float] = typer.Option(
-        None, "--min-p-success", help="Flight rule prediction-confidence: minimum predicted P(success) (overrides the rules file)."),
+        None, "--min-p-success", help="Flight rule prediction-confidence: minimum predicted P(success), calibrated (overrides the rules file)."),
+    min_p_simulated: Optional[float] = typer.Option(
+        None, "--min-p-simulated", help="Flight rule simulated-risk: minimum simulated P (geometry x tracking on expected views; overrides the rules file)."),
     rock_keep_out_m: Optional[float] = typer.Option(
         None, "--rock-keep-out-m", help="Flight rule rock-keep-out, metres (overrides the rules file)."),
     target_keep_out_m: Optional[float] = typer.Option(
@@ -227,7 +229,8 @@ def sequence(
 
     command.sequence(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
         products_root=products_dir, rules_path=rules,
-        rule_options={"--min-p-success": min_p_success, "--rock-keep-out-m": rock_keep_out_m,
+        rule_options={"--min-p-success": min_p_success, "--min-p-simulated": min_p_simulated,
+                      "--rock-keep-out-m": rock_keep_out_m,
                       "--target-keep-out-m": target_keep_out_m, "--max-drive-m": max_drive_m,
                       "--standoff-m": standoff_m})
 

@@ -140,7 +140,7 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
         rec = _plain(record)
         res.predictions.append({
             "target": t.id, "designated_now": rec.get("designated_from") == "mark", "confidence": pred.confidence,
-            "sequence_written": doc is not None, "rules": [c.to_dict() for c in checks],
+            "p_simulated": pred.p_simulated, "sequence_written": doc is not None, "rules": [c.to_dict() for c in checks],
             "broken_rules": [c.rule for c in broken(checks)],
             "commands": None if doc is None else len(doc["commands"]),
             "total_duration_s": None if doc is None else doc["total_duration_s"],

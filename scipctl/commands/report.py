@@ -65,6 +65,7 @@ def _summary(data, sequences) -> dict:
             "chain_final_error_px": None if fin is None else fin.error_px,
             "best_near_handoff": None if best is None else {"method": best.method, "error_px": best.error_px},
             "predicted_success": None if pred is None else pred.confidence,
+            "predicted_p_simulated": None if pred is None else pred.p_simulated,
             "risks": None if pred is None else len(pred.risks),
             "rules_broken": None if not seq else [c["rule"] for c in seq["checks"] if c["blocking"] and not c["ok"]],
         })

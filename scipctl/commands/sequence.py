@@ -34,7 +34,8 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
                                               rules_used=rule_set.to_dict(), render_views=False)
     summary = {
         "target": target, "designated_now": record.designated_from == "mark",
-        "confidence": pred.confidence, "rules": [c.to_dict() for c in checks],
+        "confidence": pred.confidence, "p_simulated": pred.p_simulated, "calibration": pred.calibration,
+        "rules": [c.to_dict() for c in checks],
         "risks": [r.to_dict() for r in pred.risks], "path_length_m": pred.plan.path_length_m,
         "stops": len(pred.plan.stops) - 1, "seconds": pred.seconds,
         "products_read": {k: str(v) for k, v in source.read_from.items()},
@@ -70,7 +71,8 @@ def _print(checks, pred, target):
     from rich.table import Table
 
     con = stderr_console()
-    t = Table(title=f"flight rules for target {target} (predicted P(success) {pred.confidence:.2f})")
+    t = Table(title=f"flight rules for target {target} (predicted P(success) {pred.confidence:.2f}; "
+                    f"simulated {pred.p_simulated:.2f})")
     for c in ("rule", "ok", "detail"):
         t.add_column(c)
     for c in checks:

@@ -428,7 +428,8 @@ def _prediction_html(pred, chips, palette) -> str:
                f"(detour {math.degrees(plan.detour_rad):+.0f}°), {len(plan.stops) - 1} stops. Pose-error sigma: "
                f"{_e(pred.sigma_source)} ({pred.mc.sigma_position_m:.3f} m, {math.degrees(pred.mc.sigma_yaw_rad):.2f}°); "
                f"{pred.mc.n_samples} Monte Carlo samples, {len([s for s in pred.chain.samples if s.sample >= 0]) if pred.chain else 0} "
-               f"tracked on expected views. <b>P(success) {pred.confidence:.2f}</b>; P(arm reaches) "
+               f"tracked on expected views: simulated P {pred.p_simulated:.2f}. <b>P(success) {pred.confidence:.2f}</b> "
+               f"({_e(pred.calibration or 'not calibrated')}); P(arm reaches) "
                f"{_f(pred.mc.p_arm_workspace, 2)}; predicted final error (nominal) "
                f"{_f(None if acc.get('nominal_final_error_m') is None else 100 * acc['nominal_final_error_m'], 1)} cm "
                f"(goal {_f(100 * acc.get('goal_m', 0.01), 1)} cm).</p>")

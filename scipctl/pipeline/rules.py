@@ -18,6 +18,7 @@ from ..errors import InputError
 SPEC = {
     "flight_rules": {"max_drive_m": "number", "min_standoff_m": "number", "target_keep_out_m": "number",
                      "rock_keep_out_m": "number", "max_tilt_deg": "number", "min_p_success": "number",
+                     "min_p_simulated": "number",
                      "hazcam_fov_margin_px": "number", "min_terrain_known_fraction": "number"},
     "approach": {"stop_fraction": "number", "min_leg_m": "number", "merge_m": "number", "pancam_handoff_m": "number",
                  "hazcam_handoff_m": "number", "hazcam_stops_m": "numbers", "standoff_m": "number?", "standoff_step_m": "number",
@@ -39,6 +40,7 @@ SPEC = {
 # the operator's options that override a key of the file: option -> (section, key)
 OPTIONS = {
     "--min-p-success": ("flight_rules", "min_p_success"),
+    "--min-p-simulated": ("flight_rules", "min_p_simulated"),
     "--rock-keep-out-m": ("flight_rules", "rock_keep_out_m"),
     "--target-keep-out-m": ("flight_rules", "target_keep_out_m"),
     "--max-drive-m": ("flight_rules", "max_drive_m"),
@@ -158,6 +160,7 @@ def build(values: dict, label: str, origin: Optional[dict] = None):
         flight = FlightRules(max_drive_m=f["max_drive_m"], min_standoff_m=f["min_standoff_m"],
                              target_keep_out_m=f["target_keep_out_m"], rock_keep_out_m=f["rock_keep_out_m"],
                              max_tilt_rad=math.radians(f["max_tilt_deg"]), min_confidence=f["min_p_success"],
+                             min_p_simulated=f["min_p_simulated"],
                              hazcam_fov_margin_px=f["hazcam_fov_margin_px"],
                              min_terrain_known_fraction=f["min_terrain_known_fraction"]).check()
         approach = ApproachParams(

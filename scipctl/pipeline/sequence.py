@@ -48,7 +48,8 @@ class FlightRules:
     target_keep_out_m: float = 0.25  # footprint -> target, whole path
     rock_keep_out_m: float = 0.15  # footprint -> rock cells, whole path
     max_tilt_rad: float = math.radians(15.0)  # terrain tilt at the final pose
-    min_confidence: float = 0.7  # predicted P(success)
+    min_confidence: float = 0.5  # calibrated predicted P(success): uplink when success is more likely than not
+    min_p_simulated: float = 0.7  # the prediction's simulated P (geometry Monte Carlo x tracking on expected views)
     hazcam_fov_margin_px: float = 20.0
     min_terrain_known_fraction: float = 0.5  # advisory: share of the path under today's stereo
 
@@ -63,6 +64,7 @@ class FlightRules:
         _check_number(c, "rock_keep_out_m", self.rock_keep_out_m, 0.0)
         _check_number(c, "max_tilt_rad", self.max_tilt_rad, 0.0, math.pi / 2)
         _check_number(c, "min_confidence", self.min_confidence, 0.0, 1.0)
+        _check_number(c, "min_p_simulated", self.min_p_simulated, 0.0, 1.0)
         _check_number(c, "hazcam_fov_margin_px", self.hazcam_fov_margin_px, 0.0)
         _check_number(c, "min_terrain_known_fraction", self.min_terrain_known_fraction, 0.0, 1.0)
         return self
@@ -164,8 +166,13 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
                          else "no stereo terrain under the final pose: tilt unknown"))
     conf_ok = pred.confidence >= r.min_confidence
     out.append(RuleCheck("prediction-confidence", conf_ok, pred.confidence, r.min_confidence,
-                         "", f"predicted P(success) {pred.confidence:.2f} (minimum {r.min_confidence:.2f})"
+                         "", f"predicted P(success) {pred.confidence:.2f} (minimum {r.min_confidence:.2f}; "
+                         + ("calibrated against the chain" if pred.calibration else "not calibrated") + ")"
                          + ("" if conf_ok else _weakest(pred))))
+    sim_ok = pred.p_simulated >= r.min_p_simulated
+    out.append(RuleCheck("simulated-risk", sim_ok, pred.p_simulated, r.min_p_simulated,
+                         "", f"simulated P(geometry and tracking on expected views) {pred.p_simulated:.2f} "
+                         f"(minimum {r.min_p_simulated:.2f})" + ("" if sim_ok else _weakest(pred))))
     kf = plan.clearance.get("terrain_known_fraction", 0.0)
     out.append(RuleCheck("terrain-known-along-path", kf >= r.min_terrain_known_fraction, kf,
                          r.min_terrain_known_fraction, "",
@@ -175,7 +182,7 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
 
 
 def _weakest(pred) -> str:
-    """For a broken prediction-confidence: the stop that costs most (the lowest-probability risk) and what would
+    """For a broken prediction-confidence or simulated-risk: the stop that costs most (the lowest-probability risk) and what would
     raise it."""
     risks = [k for k in pred.risks if k.probability is not None]
     if not risks:
@@ -408,7 +415,8 @@ def sequence_document(pred: Prediction, record: Designation, checks: list, comma
                                                              "margin_binding": plan.search.margin_binding()},
                  "arm_margin": None if plan.arm_margin is None else plan.arm_margin.to_dict()},
         "handoff": handoff,
-        "prediction": {"confidence": pred.confidence, "sigma_source": pred.sigma_source,
+        "prediction": {"confidence": pred.confidence, "p_simulated": pred.p_simulated,
+                       "calibration": pred.calibration, "sigma_source": pred.sigma_source,
                        "p_arm_workspace": None if pred.mc is None else pred.mc.p_arm_workspace,
                        "risks": [r.to_dict() for r in pred.risks]},
         "rules": [c.to_dict() for c in checks],

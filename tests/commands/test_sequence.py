@@ -127,7 +127,8 @@ def test_rules_file_and_options_decide_and_are_recorded(tmp_path, slab_dir):
     used = meta["rules_used"]
     assert used["file"] == str(rules) and used["sha256"] == hashlib.sha256(rules.read_bytes()).hexdigest()
     assert used["overrides"] == {"--max-drive-m": 50.0} and used["values"]["flight_rules"]["max_drive_m"] == 50.0
-    assert used["values"]["flight_rules"]["min_p_success"] == 0.7  # the default file's value for keys not given
+    assert used["values"]["flight_rules"]["min_p_success"] == 0.5  # the default file's value for keys not given
+    assert used["values"]["flight_rules"]["min_p_simulated"] == 0.7
     assert meta["provenance"]["inputs"]["rules_file"]["sha256"] == used["sha256"]
     # the same through --format seqjson: valid against Aerie's SeqJSON schema, the same metadata
     import jsonschema

@@ -52,11 +52,14 @@ def test_options_override_the_file_and_are_recorded(tmp_path):
     assert rs.flight.min_confidence == 0.5 and rs.predict.approach.standoff_m == 0.7
     assert rs.overrides == {"--min-p-success": 0.5, "--standoff-m": 0.7}
     assert rs.to_dict()["values"]["flight_rules"]["min_p_success"] == 0.5
-    assert set(OPTIONS) >= {"--min-p-success", "--rock-keep-out-m"}
+    assert set(OPTIONS) >= {"--min-p-success", "--min-p-simulated", "--rock-keep-out-m"}
+    rs = load_rules(None, {"--min-p-simulated": 0.2})
+    assert rs.flight.min_p_simulated == 0.2 and rs.to_dict()["values"]["flight_rules"]["min_p_simulated"] == 0.2
 
 
 @pytest.mark.parametrize("text, key", [
     ("flight_rules:\n  min_p_success: 1.5\n", "flight_rules.min_p_success"),
+    ("flight_rules:\n  min_p_simulated: -0.1\n", "flight_rules.min_p_simulated"),
     ("flight_rules:\n  max_tilt_deg: -1\n", "flight_rules.max_tilt_deg"),
     ("approach:\n  detour_bearings_deg: [15, 0]\n", "approach.detour_bearings_deg"),
     ("approach:\n  hazcam_stops_m: [1.4, -1]\n", "approach.hazcam_stops_m"),

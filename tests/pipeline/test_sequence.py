@@ -23,13 +23,15 @@ def test_a_good_approach_breaks_no_rule(rc, flat_terrain):
     checks = Q.check_rules(prediction(rc, flat_terrain), rc)
     assert Q.broken(checks) == []
     assert {c.rule for c in checks} >= {"max-drive-distance", "min-standoff", "target-keep-out", "rock-keep-out",
-                                        "hazcam-fov-final", "arm-workspace", "final-tilt", "prediction-confidence"}
+                                        "hazcam-fov-final", "arm-workspace", "final-tilt", "prediction-confidence",
+                                        "simulated-risk"}
 
 
 def test_each_rule_can_be_broken_alone(rc, flat_terrain):
     base = prediction(rc, flat_terrain)
     assert broken_names(base, rc, Q.FlightRules(max_drive_m=5.0)) == ["max-drive-distance"]
     assert broken_names(base, rc, Q.FlightRules(min_confidence=0.99)) == ["prediction-confidence"]
+    assert broken_names(base, rc, Q.FlightRules(min_p_simulated=0.99)) == ["simulated-risk"]
     assert broken_names(base, rc, Q.FlightRules(min_standoff_m=0.9)) == ["min-standoff"]
     short_arm = prediction(rc, flat_terrain, approach=P.ApproachParams(standoff_m=0.8, arm=P.ArmWorkspace(0.9, 1.2, 0.4)))
     assert broken_names(short_arm, rc) == ["arm-workspace"]
@@ -211,6 +213,24 @@ def test_a_low_confidence_refusal_names_the_weakest_stop_and_what_would_raise_it
     fine = next(c for c in Q.check_rules(replace(pred, confidence=0.9, risks=risks), rc)
                 if c.rule == "prediction-confidence")
     assert fine.ok and "weakest" not in fine.message
+
+
+def test_the_two_probability_rules_read_their_own_probability(rc, flat_terrain):
+    """prediction-confidence reads the calibrated P(success) (``confidence``), simulated-risk the prediction's own
+    simulated P (``p_simulated``), each against its own limit; a refusal of the second names the weakest stop."""
+    from dataclasses import replace
+
+    pred = prediction(rc, flat_terrain)
+    risks = [P.Risk(4, "navcam", "view", 0.35, ["out of field of view (P in view 0.40)"])]
+    calibrated_low = replace(pred, confidence=0.45, p_simulated=0.99, calibration="test")
+    assert broken_names(calibrated_low, rc) == ["prediction-confidence"]
+    chk = next(c for c in Q.check_rules(calibrated_low, rc) if c.rule == "prediction-confidence")
+    assert "calibrated against the chain" in chk.message
+    simulated_low = replace(pred, confidence=0.6, p_simulated=0.3, risks=risks)
+    assert broken_names(simulated_low, rc) == ["simulated-risk"]
+    chk = next(c for c in Q.check_rules(simulated_low, rc) if c.rule == "simulated-risk")
+    assert chk.value == 0.3 and chk.limit == 0.7 and "weakest: stop 4 navcam view P 0.35" in chk.message
+    assert broken_names(simulated_low, rc, Q.FlightRules(min_p_simulated=0.25)) == []
 
 
 def test_the_arm_margin_rule_is_advisory_and_names_what_the_candidates_with_the_margin_broke(rc, flat_terrain):

@@ -251,6 +251,9 @@ class PredictParams:
     # "downlink" (the downlink's own later stops, :func:`~.route.route_from_downlink`; for validating the prediction
     # against the chain run over those stops)
     route: str = "plan"
+    # Prediction.confidence calibrated against the chain by the packaged model of the route
+    # (core/prediction_calibration.py; docs/sequence.md, "Calibrated against the chain"); False: the simulated P
+    calibrate: bool = True
     # the tracker's reach in the Monte Carlo (montecarlo.TRACKER_REACHES): "image" for the plane chain, whose
     # feature-guided step matches the whole image (543 chain steps of 49 rendered downlinks: of the steps whose
     # pointing offset was beyond the search radius, 71 of 142 were still within 4 px, against 292 of 401 inside it;

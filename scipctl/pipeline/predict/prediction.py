@@ -10,6 +10,7 @@ import numpy as np
 
 from ...core.camera import CameraModel
 from ...core.kinematics import RoverConfig
+from ...core.prediction_calibration import PredictionCalibration
 from ..designate import Designation
 from .chain_sim import ChainResult, simulate_chain
 from .from_downlink import sigmas_for, target_context, terrain_sources
@@ -30,12 +31,18 @@ class Prediction:
     risks: list
     views: dict  # (stop, camera) -> RenderedView (reduced size)
     surface_point_site: np.ndarray
-    confidence: float  # P(success): geometry MC x tracking on expected views (given visible)
+    confidence: float  # P(success): p_simulated calibrated against the chain (== p_simulated when not calibrated)
     sigma_source: str
     notes: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
     accuracy: dict = field(default_factory=dict)  # predicted final placement error (m): nominal, mean, max over kept samples
     terrain: Optional[Terrain] = field(default=None, repr=False)  # today's terrain the views were rendered from
+    p_simulated: Optional[float] = None  # geometry MC x tracking on expected views (confidence_of); None: = confidence
+    calibration: Optional[str] = None  # what calibrated confidence (the model file and its population); None: nothing
+
+    def __post_init__(self):
+        if self.p_simulated is None:
+            self.p_simulated = self.confidence
 
     def to_dict(self) -> dict:
         return {
@@ -43,6 +50,7 @@ class Prediction:
             "monte_carlo": None if self.mc is None else self.mc.to_dict(),
             "chain": None if self.chain is None else self.chain.to_dict(),
             "risks": [r.to_dict() for r in self.risks], "confidence": self.confidence,
+            "p_simulated": self.p_simulated, "calibration": self.calibration,
             "surface_point_site_m": self.surface_point_site.tolist(), "sigma_source": self.sigma_source,
             "notes": self.notes, "seconds": self.seconds,
         }
@@ -75,7 +83,8 @@ class PoseSigmas:
 
 def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConfig, designation: Designation,
                    image: np.ndarray, model_site: CameraModel, sigmas: PoseSigmas,
-                   params: Optional[PredictParams] = None, render_views: bool = True) -> Prediction:
+                   params: Optional[PredictParams] = None, render_views: bool = True,
+                   calibration: Optional[PredictionCalibration] = None) -> Prediction:
     """Views, Monte Carlo, chain simulation and risks for a planned approach (pure: arrays in, results out).
 
     ``designation``: today's designation (its pixel, its 3-D point ``xyz_site_m`` and ``range_sigma_m``, the
@@ -83,6 +92,8 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
     left image it was designated in; ``model_site``: that image's camera model in the site frame.
     ``params`` (default :class:`PredictParams`) is checked first. ``render_views``: render the reduced-size
     expected views (``Prediction.views``, for the report); no figure of the prediction depends on them.
+    ``calibration``: maps the simulated probability (:func:`confidence_of`, kept as ``Prediction.p_simulated``)
+    to ``Prediction.confidence`` (None: ``confidence`` is the simulated probability).
     """
     import time
 
@@ -123,7 +134,8 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
             else:
                 r.reasons.append(msg)
     risks.sort(key=lambda r: (r.stop, r.camera))
-    conf = confidence_of(mc, chain)
+    p_sim = confidence_of(mc, chain)
+    conf = p_sim if calibration is None else calibration.p_success(p_sim)
     acc = {}
     if chain is not None:
         nom = [s for s in chain.samples if s.sample < 0]
@@ -133,7 +145,15 @@ def run_prediction(plan: ApproachPlan, terrain: Terrain, rover_config: RoverConf
                "max_final_error_m": float(np.max(kept)) if kept else None, "samples_kept": len(kept),
                "goal_m": params.success_of("hazcam")}
     return Prediction(designation.id, plan, mc, chain, risks, views, np.asarray(Xs, float), conf, sigmas.source, notes,
-                      secs, acc, terrain)
+                      secs, acc, terrain, p_sim, None if calibration is None else calibration_label(calibration))
+
+
+def calibration_label(calibration: PredictionCalibration) -> str:
+    """One line naming a calibration: its route, how many approaches and families it was fitted on."""
+    pv = calibration.provenance
+    fams = pv.get("training_families") or []
+    return (f"{pv.get('route', '?')} route: fitted on {pv.get('n_rows', '?')} approaches of {len(fams)} families "
+            f"(chain within {calibration.success_px:g} px for {pv.get('n_success', '?')})")
 
 
 def predict_target(dl, record: Designation, params: Optional[PredictParams] = None, designated_now: bool = False,
@@ -143,7 +163,9 @@ def predict_target(dl, record: Designation, params: Optional[PredictParams] = No
     (:func:`~.route.route_from_downlink`; only today's images are read, the later positions' recorded poses give
     the route).
 
-    ``render_views``: as in :func:`run_prediction` (False: ``Prediction.views`` is empty)."""
+    ``render_views``: as in :func:`run_prediction` (False: ``Prediction.views`` is empty). With ``params.calibrate``
+    the confidence is calibrated by the packaged model of ``params.route``
+    (:mod:`scipctl.core.prediction_calibration`; none packaged: not calibrated)."""
     import time
 
     params = (params or PredictParams()).check()
@@ -166,8 +188,13 @@ def predict_target(dl, record: Designation, params: Optional[PredictParams] = No
                              uncertainty=params.uncertainty)
     t_plan = time.perf_counter() - t0
     sp, sy, src = sigmas_for(ctx.product, params.uncertainty)
+    calibration = None
+    if params.calibrate:
+        from ...io.prediction_calibration import load_packaged_prediction_calibration
+
+        calibration = load_packaged_prediction_calibration(params.route)
     pred = run_prediction(plan, terrain, dl.rover_config, record, ctx.product.pixels_float(),
                           ctx.product.camera_model.transformed(ctx.start.T_site_rover), PoseSigmas(sp, sy, src), params,
-                          render_views=render_views)
+                          render_views=render_views, calibration=calibration)
     pred.seconds.update({"terrain": t_terrain, "plan": t_plan})
     return pred

@@ -21,15 +21,19 @@ def test_chain_on_exact_terrain_keeps_the_slab_target(slab_case):
     # the surface point is the true target (exact terrain)
     assert np.linalg.norm(pred.surface_point_site - S.TARGET_SLAB_SITE) < 0.01
     assert pred.accuracy["nominal_final_error_m"] < 0.02
-    # confidence = P(geometry ok) x fraction of the geometrically ok rendered chains that kept the target
+    # simulated P = P(geometry ok) x fraction of the geometrically ok rendered chains that kept the target
     runs = [c for c in pred.chain.samples if c.sample >= 0 and pred.mc.samples_ok[c.sample]] or \
         [c for c in pred.chain.samples if c.sample < 0]
-    assert pred.confidence == pytest.approx(pred.mc.p_success_geometry * np.mean([c.ok for c in runs]))
+    assert pred.p_simulated == pytest.approx(pred.mc.p_success_geometry * np.mean([c.ok for c in runs]))
+    # the confidence is that, calibrated by the packaged model of the planner's route
+    from scipctl.io.prediction_calibration import load_packaged_prediction_calibration
+    assert pred.confidence == load_packaged_prediction_calibration("plan").p_success(pred.p_simulated)
+    assert pred.calibration.startswith("plan route")
     # without pose error every sample is the nominal approach: certain success on exact terrain
     exact = P.UncertaintyParams(sigma_position_m=0.0, sigma_yaw_rad=0.0, drive_error_frac=0.0, yaw_error_rad_per_m=0.0,
                                 disparity_sigma_px=0.0, n_samples=100, n_track_samples=1)
     p0 = P.predict_target(dl, replace(rec, range_sigma_m=0.0), P.PredictParams(uncertainty=exact), terrain=ter)
-    assert p0.mc.p_success_geometry == 1.0 and p0.confidence == 1.0
+    assert p0.mc.p_success_geometry == 1.0 and p0.p_simulated == 1.0
     assert all(reason.startswith("drift") for r in p0.risks for reason in r.reasons)  # accuracy notes only
     kinds = [s["kind"] for s in nominal.steps]
     assert "handoff pancam->navcam" in kinds and "handoff navcam->hazcam" in kinds
@@ -73,6 +77,6 @@ def test_a_view_todays_terrain_cannot_render_is_not_simulated_rather_than_lost(s
     assert all(v["n_simulated"] == 0 for v in pred.chain.per_view)
     runs = [c for c in pred.chain.samples if c.sample >= 0 and pred.mc.samples_ok[c.sample]]
     assert all(c.ok for c in runs)
-    assert pred.confidence == pytest.approx(pred.mc.p_success_geometry, abs=0)
+    assert pred.p_simulated == pytest.approx(pred.mc.p_success_geometry, abs=0)
     full = P.predict_target(dl, rec, P.PredictParams(uncertainty=up), terrain=ter, render_views=False)
     assert any(v["n_simulated"] > 0 for v in full.chain.per_view)

@@ -13,8 +13,11 @@ def test_run_prediction_on_a_designation_and_sigmas_is_predict_target(slab_case)
     plan = P.plan_approach(ctx.start, ctx.target_site_m, ter, dl.rover_config, params.approach,
                            designation_camera=ctx.product.camera, uncertainty=params.uncertainty)
     sig = P.PoseSigmas(*P.sigmas_for(ctx.product, params.uncertainty))
+    from scipctl.io.prediction_calibration import load_packaged_prediction_calibration
+
     direct = P.run_prediction(plan, ter, dl.rover_config, rec, ctx.product.pixels_float(),
-                              ctx.product.camera_model.transformed(ctx.start.T_site_rover), sig, params)
+                              ctx.product.camera_model.transformed(ctx.start.T_site_rover), sig, params,
+                              calibration=load_packaged_prediction_calibration(params.route))
     a, b = via_target.to_dict(), direct.to_dict()
     a.pop("seconds"), b.pop("seconds")
     assert a == b
