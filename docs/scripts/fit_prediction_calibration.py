@@ -10,6 +10,9 @@
         -o scipctl/data --report r.json [--markdown]
     # 3. another table scored by the packaged (or given) models: nothing refitted
     python docs/scripts/fit_prediction_calibration.py score OTHER.jsonl.gz [--models DIR] [--markdown]
+    # 4. the reliability diagram of one route: the simulated P and the calibrated one (each family held out) on
+    #    the table, and on another table scored by the packaged model
+    python docs/scripts/fit_prediction_calibration.py plot OUT.png TABLE [--new OTHER.jsonl.gz] [--route plan]
 
 The fit needs scikit-learn; the models it writes are evaluated with numpy only. Same table, same bytes.
 """
@@ -130,6 +133,32 @@ def cmd_score(args) -> None:
     print("\n".join(md) if args.markdown else json.dumps(report, indent=1, sort_keys=True))
 
 
+def cmd_plot(args) -> None:
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from prediction_reliability_plot import reliability_axes, reliability_series, save
+
+    from scipctl.io.prediction_calibration import load_packaged_prediction_calibration
+    from scipctl.pipeline.prediction_calibration_fit import SUCCESS_PX, held_out
+
+    rows = [r for r in read_table(args.table) if r.route == args.route]
+    fig, ax = reliability_axes()
+    y = [r.success(SUCCESS_PX) for r in rows]
+    reliability_series(ax, "simulated P", [r.p_simulated for r in rows], y)
+    pairs = held_out(rows, SUCCESS_PX)
+    reliability_series(ax, "calibrated, family held out", [p for _, p, _ in pairs], [s for _, _, s in pairs])
+    if args.new:
+        new = [r for r in read_table(args.new) if r.route == args.route]
+        model = load_packaged_prediction_calibration(args.route)
+        yn = [r.success(SUCCESS_PX) for r in new]
+        reliability_series(ax, "new scenes: simulated P", [r.p_simulated for r in new], yn)
+        reliability_series(ax, "new scenes: calibrated (packaged)", [model.p_success(r.p_simulated) for r in new], yn)
+    save(fig, ax, Path(args.out), f"Pre-uplink prediction against the chain ({args.route} route)",
+         float(np.mean(y)))
+    print(args.out)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -146,8 +175,13 @@ def main():
     s.add_argument("table")
     s.add_argument("--models", help="folder of prediction_calibration_<route>.json (default: the packaged ones)")
     s.add_argument("--markdown", action="store_true")
+    g = sub.add_parser("plot")
+    g.add_argument("out")
+    g.add_argument("table")
+    g.add_argument("--new", help="another table, scored by the packaged model")
+    g.add_argument("--route", default="plan", choices=ROUTES)
     a = ap.parse_args()
-    {"table": cmd_table, "fit": cmd_fit, "score": cmd_score}[a.cmd](a)
+    {"table": cmd_table, "fit": cmd_fit, "score": cmd_score, "plot": cmd_plot}[a.cmd](a)
 
 
 if __name__ == "__main__":

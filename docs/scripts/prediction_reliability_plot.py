@@ -21,13 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from prediction_vs_chain import approaches  # noqa: E402
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", type=Path)
-    ap.add_argument("preds", nargs="+")
-    ap.add_argument("--chains", nargs="+", type=Path, required=True)
-    ap.add_argument("--success-px", type=float, default=4.0)
-    a = ap.parse_args(argv)
+def reliability_axes():
+    """``(fig, ax)``: the diagonal, the +-0.1 band of issue #15, the axes labelled."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -36,31 +31,51 @@ def main(argv=None) -> None:
     fig, ax = plt.subplots(figsize=(5.5, 5.0), dpi=110)
     ax.plot([0, 1], [0, 1], color="0.6", lw=1, ls="--", label="perfect calibration")
     ax.fill_between([0, 1], [-0.1, 0.9], [0.1, 1.1], color="0.9", label="+-0.1 (issue #15)")
-    for spec in a.preds:
-        label, folder = spec.split("=", 1)
-        rows = [r for f in folder.split(",") for r in approaches(a.chains, Path(f), a.success_px, {})]
-        P = np.array([r["P"] for r in rows])
-        y = np.array([r["success"] for r in rows], float)
-        edges = np.linspace(0, 1, 11)
-        idx = np.clip(np.digitize(P, edges) - 1, 0, 9)
-        xs, ys, ns = [], [], []
-        for b in range(10):
-            m = idx == b
-            if m.any():
-                xs.append(P[m].mean()), ys.append(y[m].mean()), ns.append(int(m.sum()))
-        brier = float(np.mean((P - y) ** 2))
-        line, = ax.plot(xs, ys, "-", lw=1, label=f"{label}: {len(rows)} approaches, Brier {brier:.3f}")
-        ax.scatter(xs, ys, s=[8 + 3 * n for n in ns], color=line.get_color(), zorder=3)
-    base = float(np.mean(y))
-    ax.axhline(base, color="0.3", lw=0.8, ls=":", label=f"chain success rate {base:.2f}")
     ax.set_xlim(0, 1), ax.set_ylim(0, 1)
     ax.set_xlabel("predicted P(success) (bin mean)")
     ax.set_ylabel("chain's final hazcam answer within 4 px (fraction)")
-    ax.set_title("Pre-uplink prediction against the chain")
+    return fig, ax
+
+
+def reliability_series(ax, label: str, P, y) -> None:
+    """One series: ``P`` ``(N,)`` against the outcomes ``y`` ``(N,)`` in bins of width 0.1, points sized by their
+    counts, the Brier score in the label."""
+    P, y = np.asarray(P, float), np.asarray(y, float)
+    edges = np.linspace(0, 1, 11)
+    idx = np.clip(np.digitize(P, edges) - 1, 0, 9)
+    xs, ys, ns = [], [], []
+    for b in range(10):
+        m = idx == b
+        if m.any():
+            xs.append(P[m].mean()), ys.append(y[m].mean()), ns.append(int(m.sum()))
+    brier = float(np.mean((P - y) ** 2))
+    line, = ax.plot(xs, ys, "-", lw=1, label=f"{label}: {len(P)} approaches, Brier {brier:.3f}")
+    ax.scatter(xs, ys, s=[8 + 3 * n for n in ns], color=line.get_color(), zorder=3)
+
+
+def save(fig, ax, out: Path, title: str, base: float) -> None:
+    ax.axhline(base, color="0.3", lw=0.8, ls=":", label=f"chain success rate {base:.2f}")
+    ax.set_title(title)
     ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(a.out, metadata={"Software": None})
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, metadata={"Software": None})
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path)
+    ap.add_argument("preds", nargs="+")
+    ap.add_argument("--chains", nargs="+", type=Path, required=True)
+    ap.add_argument("--success-px", type=float, default=4.0)
+    a = ap.parse_args(argv)
+    fig, ax = reliability_axes()
+    for spec in a.preds:
+        label, folder = spec.split("=", 1)
+        rows = [r for f in folder.split(",") for r in approaches(a.chains, Path(f), a.success_px, {})]
+        y = np.array([r["success"] for r in rows], float)
+        reliability_series(ax, label, [r["P"] for r in rows], y)
+    save(fig, ax, a.out, "Pre-uplink prediction against the chain", float(np.mean(y)))
     print(a.out)
 
 
