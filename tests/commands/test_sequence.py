@@ -57,6 +57,28 @@ def test_json_format_and_summary_on_stdout(slab_dir):
     assert sum((a - b) ** 2 for a, b in zip(doc["target"]["xyz_site_m"], truth)) ** 0.5 < 0.05
 
 
+def test_the_summary_and_the_document_carry_the_calibrated_and_the_simulated_probability(slab_dir):
+    """P(success) is the packaged planner's-route calibration of the simulated P; both are in the --json summary and
+    in the sequence's prediction block, each checked by its own rule; an out-of-range --min-p-simulated is exit 2
+    naming the option."""
+    from scipctl.io.prediction_calibration import load_packaged_prediction_calibration
+
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--format", "json", "--json"])
+    assert r.exit_code == 0, r.stderr
+    summary = json.loads(r.stdout)
+    model = load_packaged_prediction_calibration("plan")
+    assert summary["confidence"] == model.p_success(summary["p_simulated"])
+    assert summary["calibration"].startswith("plan route: fitted on")
+    rules = {c["rule"]: c for c in summary["rules"]}
+    assert rules["prediction-confidence"]["value"] == summary["confidence"] and rules["prediction-confidence"]["limit"] == 0.5
+    assert rules["simulated-risk"]["value"] == summary["p_simulated"] and rules["simulated-risk"]["limit"] == 0.7
+    pred = json.loads(summary["sequence"])["prediction"]
+    # the document's floats are rounded to 6 decimals (pipeline/sequence.py _round)
+    assert pred["confidence"] == round(summary["confidence"], 6) and pred["p_simulated"] == round(summary["p_simulated"], 6)
+    bad = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--min-p-simulated", "2"])
+    assert bad.exit_code == 2 and "--min-p-simulated" in bad.stderr.strip().splitlines()[-1]
+
+
 def test_a_broken_rule_means_no_sequence_and_exit_1(tmp_path, slab_dir):
     src = tmp_path / "sol7"
     shutil.copytree(slab_dir, src)
