@@ -144,7 +144,8 @@ BINS = ((0.0, 0.2), (0.2, 0.5), (0.5, 0.7), (0.7, 0.9), (0.9, 1.0001))
 
 
 def scores(pairs: list) -> dict:
-    """Brier score (and the base rate's, the pairs' own), ROC AUC and the reliability of ``[(row, p, success)]``."""
+    """Brier score (and the base rate's, the pairs' own), ROC AUC (scikit-learn's) and the reliability of
+    ``[(row, p, success)]``."""
     p = np.array([x[1] for x in pairs], float)
     y = np.array([x[2] for x in pairs], bool)
     out = {"n": int(len(p)), "success": int(y.sum()), "mean_p": float(p.mean()) if len(p) else None,
@@ -152,10 +153,9 @@ def scores(pairs: list) -> dict:
            "brier_base_rate": float(np.mean((y.mean() - y) ** 2)) if len(p) else None, "auc": None,
            "reliability": []}
     if 0 < y.sum() < len(y):
-        # the Mann-Whitney form of the ROC AUC (ties count one half), numpy only
-        pos, neg = p[y], p[~y]
-        out["auc"] = float(((pos[:, None] > neg[None, :]).sum() + 0.5 * (pos[:, None] == neg[None, :]).sum())
-                           / (len(pos) * len(neg)))
+        from sklearn.metrics import roc_auc_score
+
+        out["auc"] = float(roc_auc_score(y, p))
     for lo, hi in BINS:
         m = (p >= lo) & (p < hi)
         out["reliability"].append({"lo": lo, "hi": min(hi, 1.0), "n": int(m.sum()),
