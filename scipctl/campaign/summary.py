@@ -120,7 +120,8 @@ def _section(results: list, success_px: float) -> dict:
             fs = final_step(ch.get("steps") or [])
             finals[(res.job.job_id, ch["target"])] = fs
             for s in ch.get("steps") or []:
-                # the hazcam handoffs' p_success is for success_px (scip's); the tracking steps' is for the step
+                # the hazcam handoffs' p_success is for success_px (scip's x its input navcam step's, or the closure
+                # model's); the tracking steps' is for the step
                 # model's success_mm (pipeline/chain_trust.py), not comparable with success_px
                 if s.get("p_success") is not None and s.get("camera") == "hazcam":
                     rel_steps.append((s["p_success"], step_success(s, success_px)))

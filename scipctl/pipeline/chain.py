@@ -254,7 +254,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     ``params``: window sizes and feature settings (:class:`ChainParams`, checked).
     Every step gets ``p_success``/``go`` (and ``advice`` when NO-GO): the tracking steps from ``step_model``
     (:class:`~scipctl.core.step_trust.StepTrustModel`; None: the packaged one), the hazcam handoff from
-    ``scip`` (:mod:`scipctl.pipeline.chain_trust`). ``setups``: a dict shared by the chains of one downlink,
+    ``scip``'s times its input navcam step's (:func:`~scipctl.pipeline.chain_trust.score_hazcam_handoffs`).
+    ``setups``: a dict shared by the chains of one downlink,
     where the hazcam handoffs keep their :class:`~scipctl.pipeline.handoff.HandoffSetup` by product ids (dense
     stereo and registrations do not depend on the target: computed once, the same answers).
     ``closure_model``: the :class:`~scipctl.core.closure_trust.ClosureTrustModel` of an adopted closure answer
@@ -463,13 +464,14 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         from .chain_closure import closure_check
 
         handoffs[-1].extra["closure"] = closure_check(dl, steps, params, feats).to_dict()
-    from .chain_trust import advice_for, score_steps
+    from .chain_trust import advice_for, score_hazcam_handoffs, score_steps
 
     if step_model is None:
         from ..io.step_trust_model import load_packaged_step_trust_model
 
         step_model = load_packaged_step_trust_model()
     score_steps(steps, step_model)
+    score_hazcam_handoffs(steps)
     if params.answer == "closure" and handoffs and "closure" in handoffs[-1].extra:
         # after the scoring: the closure's evidence includes its reference step's own p_success
         final = steps.index(handoffs[-1])
@@ -499,9 +501,11 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
     uv = np.asarray(cl["uv"], float)
     ps = stereo_at(dl, haz, uv, params)
     ok = ps is not None and ps.ok
+    own = ("scip_p_success", "scip_go", "navcam_p_success")  # the handoff's trust (chain_trust.score_hazcam_handoffs)
     handoff = {"uv": H.tracked_uv, "error_px": H.error_px, "p_success": H.p_success, "go": H.go,
-               "go_min_p": H.extra.get("go_min_p"), "ncc_peak": H.ncc_peak, "ok": H.ok, "reason": H.reason}
-    extra = {k: v for k, v in H.extra.items() if k not in ("px_mm", "go_min_p")}
+               "go_min_p": H.extra.get("go_min_p"), "ncc_peak": H.ncc_peak, "ok": H.ok, "reason": H.reason,
+               **{k: H.extra[k] for k in own if k in H.extra}}
+    extra = {k: v for k, v in H.extra.items() if k not in ("px_mm", "go_min_p") + own}
     extra.update({"answer": "closure", "handoff": handoff, "go_min_p": None if model is None else model.go_min_p})
     reason = "" if ok else ("no right eye" if ps is None else f"stereo: {ps.reason}")
     new = make_step(haz, H.kind, H.predicted_uv, uv, ps, cl.get("ncc_peak"), ok=ok, reason=reason, extra=extra)

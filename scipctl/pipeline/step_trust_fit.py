@@ -90,8 +90,10 @@ def chain_row(record: dict, family: str) -> ChainRow:
         kind = k or ("designate" if s.kind == "designate" else f"{s.camera}-{s.kind}")
         rows.append(StepRow(i, kind, list(s.position), s.error_px, s.mark_uv is not None, s.tracked_uv is not None,
                             (s.extra or {}).get("px_mm"), None if k is None else step_evidence(steps, i),
-                            s.p_success if s.camera == "hazcam" else None,
-                            s.go if s.camera == "hazcam" else None, bool((s.extra or {}).get("final"))))
+                            # scip's own (chain_trust.score_hazcam_handoffs keeps it beside the chain's product)
+                            (s.extra or {}).get("scip_p_success", s.p_success) if s.camera == "hazcam" else None,
+                            (s.extra or {}).get("scip_go", s.go) if s.camera == "hazcam" else None,
+                            bool((s.extra or {}).get("final"))))
     return ChainRow(family, str(record.get("downlink", "")), str(record["target"]), rows, record.get("error"))
 
 

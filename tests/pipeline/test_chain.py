@@ -126,8 +126,9 @@ def test_chain_steps_read_back_from_json(chains):
 
 def test_every_step_has_p_success_and_go(chains):
     """The designation is taken as given (GO, unscored); every tracking step has the step model's probability
-    and GO; the hazcam handoff is scip's, with its p_success and GO; every NO-GO step says what to do."""
-    from scipctl.pipeline.chain_trust import ADVICE, chain_verdict
+    and GO; the hazcam handoff's is scip's times its input navcam step's (scip's own kept), GO when both are;
+    every NO-GO step says what to do."""
+    from scipctl.pipeline.chain_trust import ADVICE, chain_verdict, handoff_input
 
     for tid, steps in chains.items():
         assert steps[0].kind == "designate" and steps[0].p_success is None and steps[0].go
@@ -137,7 +138,11 @@ def test_every_step_has_p_success_and_go(chains):
             assert (s.advice is None) == s.go and (s.go or s.advice in ADVICE), (tid, s.product_id, s.advice)
         haz = steps[-1]
         assert haz.camera == "hazcam" and haz.extra["method"] == "scip"
-        assert haz.go == (haz.p_success >= haz.extra["go_min_p"])
+        assert haz.extra["scip_go"] == (haz.extra["scip_p_success"] >= haz.extra["go_min_p"])
+        src = handoff_input(steps, len(steps) - 1)
+        assert src is not None and src.camera == "navcam" and haz.extra["navcam_p_success"] == src.p_success
+        assert haz.p_success == haz.extra["scip_p_success"] * src.p_success
+        assert haz.go == (haz.extra["scip_go"] and src.go)
         v = chain_verdict(steps)
         assert v.go == all(s.go for s in steps)
 
@@ -199,7 +204,9 @@ def test_an_unverified_navcam_at_the_hazcam_stop_hands_off_from_the_earlier_navc
                          navcams=tuple(setup.cases), only=set())
     # the registration's Open3D ICP differs between runs by ~1e-15 relative (docs/campaign.md): 1e-9 px
     assert np.allclose(haz.tracked_uv, rec.predicted_uv, rtol=0, atol=1e-9)
-    assert haz.p_success == pytest.approx(rec.p_success, abs=1e-9) and haz.go == rec.go
+    assert haz.extra["scip_p_success"] == pytest.approx(rec.p_success, abs=1e-9) and haz.extra["scip_go"] == rec.go
+    # the chain's answer carries its input's trust too: the far pixel's step probability
+    assert haz.p_success == pytest.approx(rec.p_success * far.p_success, abs=1e-9)
     v = chain_verdict(steps)
     assert not v.go and v.step is not None and v.step <= i
 

@@ -6,7 +6,8 @@ import pytest
 
 from scipctl.core.step_trust import STEP_FEATURES, StepTrustModel
 from scipctl.pipeline.chain import ChainStep
-from scipctl.pipeline.chain_trust import (FALL_BACK, NEW_IMAGE, REDESIGNATE, advice_for, chain_verdict, score_steps,
+from scipctl.pipeline.chain_trust import (FALL_BACK, NEW_IMAGE, REDESIGNATE, advice_for, chain_verdict,
+                                          score_hazcam_handoffs, score_steps,
                                           step_evidence)
 
 
@@ -134,3 +135,56 @@ def test_a_closure_answer_is_judged_without_the_navcam_steps_it_skips():
     steps = _score(_chain(), haz_go=False)
     steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
     assert chain_verdict(steps).step == 5
+
+
+def _haz_chain(navcam="near"):
+    """_chain() with the hazcam handoff's record naming its input: the near navcam track at its stop (step 4) or,
+    from far, the navcam track at stop 2 (step 3), as chain_handoff.hazcam_handoff records them."""
+    steps = _chain()
+    steps[-1].extra.update({"method": "scip", "navcam": navcam, "reference": "navcam-3",
+                            "far_reference": "navcam-2" if navcam in ("far", "both") else None})
+    return steps
+
+
+@pytest.mark.parametrize("navcam, src", [("near", 4), ("far", 3)])
+def test_hazcam_handoff_p_is_scips_times_its_navcam_inputs(navcam, src):
+    """The chain's hazcam handoff answers for the target, not for the navcam pixel it was given: p = scip's x the
+    input navcam step's, GO only when both are; scip's own kept in extra."""
+    steps = _score(_haz_chain(navcam))
+    steps[src].p_success = 0.6  # the input step, as the step model might score it (still GO in the verdict's eyes)
+    score_hazcam_handoffs(steps)
+    h = steps[-1]
+    assert h.extra["scip_p_success"] == 0.99 and h.extra["scip_go"] is True
+    assert h.extra["navcam_p_success"] == 0.6
+    assert h.p_success == pytest.approx(0.99 * 0.6, rel=1e-15)
+    assert h.go  # both GO
+    steps[src].go = False
+    h.extra.pop("scip_p_success")  # score afresh
+    h.p_success, h.go = 0.99, True
+    score_hazcam_handoffs(steps)
+    assert not h.go and h.advice == FALL_BACK  # its input is NO-GO: so is the answer
+
+
+def test_hazcam_handoff_from_both_views_takes_the_better_input():
+    steps = _score(_haz_chain("both"))
+    steps[3].p_success, steps[4].p_success = 0.3, 0.8
+    score_hazcam_handoffs(steps)
+    assert steps[-1].extra["navcam_p_success"] == 0.8 and steps[-1].p_success == pytest.approx(0.99 * 0.8)
+
+
+def test_hazcam_handoff_without_a_scored_input_is_unknown_and_no_go():
+    steps = _haz_chain("near")
+    steps[-1].p_success, steps[-1].go = 0.99, True
+    score_steps(steps, None)  # no step model: the navcam steps have no p
+    score_hazcam_handoffs(steps)
+    assert steps[-1].p_success is None and not steps[-1].go and steps[-1].extra["scip_p_success"] == 0.99
+    # scored once: a second call leaves it as it is
+    score_hazcam_handoffs(steps)
+    assert steps[-1].extra["scip_p_success"] == 0.99
+
+
+def test_a_handoff_scip_did_not_score_is_left_alone():
+    steps = _chain()  # no method / navcam recorded, p None (another method)
+    score_steps(steps, OK_MODEL)
+    score_hazcam_handoffs(steps)
+    assert steps[-1].p_success is None and "scip_p_success" not in steps[-1].extra
