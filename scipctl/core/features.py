@@ -182,7 +182,7 @@ def to_uint8(image, valid: Optional[np.ndarray] = None) -> np.ndarray:
 
 
 def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float = 1.0,
-                    contrast_threshold: float = 0.02, max_features: int = 0) -> Features:
+                    contrast_threshold: float = 0.02, max_features: int = 0, median_px: int = 0) -> Features:
     """SIFT keypoints and descriptors of ``image`` ``(H, W)``.
 
     ``valid`` ``(H, W)`` bool (default: the finite pixels): keypoints are kept
@@ -192,7 +192,10 @@ def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float
     and a way to match the blur of a coarser reference); ``uv`` is still
     returned in full-resolution pixels (detection pixel ``i`` is centred on
     full-resolution ``s (i + 0.5) - 0.5``, ``s = W / round(W / f)``). ``max_features``: keep the
-    strongest this many (0: all).
+    strongest this many (0: all). ``median_px``: an odd kernel size (detection pixels) of a median filter applied
+    after the downsampling, before detection (0 or 1: none). It removes isolated specks one or two detection pixels
+    across (bright grains, pits): texture a coarser view of the same ground does not resolve, and whose keypoints
+    therefore match nothing in it; the keypoints left are those of structure both views show.
     """
     import cv2
 
@@ -202,6 +205,9 @@ def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float
     f = float(downsample)
     if not (np.isfinite(f) and f >= 1.0):
         raise ValueError(f"downsample: must be a finite factor >= 1, got {downsample}")
+    if not (isinstance(median_px, (int, np.integer)) and not isinstance(median_px, bool)
+            and (median_px in (0, 1) or (median_px >= 3 and median_px % 2 == 1))):
+        raise ValueError(f"median_px: must be 0, 1 or an odd integer >= 3, got {median_px!r}")
     ok = np.isfinite(a) if valid is None else np.asarray(valid, bool) & np.isfinite(a)
     if ok.shape != a.shape:
         raise ValueError(f"valid: expected shape {a.shape}, got {ok.shape}")
@@ -213,6 +219,8 @@ def detect_features(image, valid: Optional[np.ndarray] = None, downsample: float
     if f > 1.0:
         img8 = cv2.resize(img8, (w2, h2), interpolation=cv2.INTER_AREA)
         okf = cv2.resize(okf, (w2, h2), interpolation=cv2.INTER_AREA)
+    if median_px > 1:
+        img8 = cv2.medianBlur(img8, int(median_px))
     sift = cv2.SIFT_create(nfeatures=int(max_features), contrastThreshold=float(contrast_threshold))
     kps, desc = sift.detectAndCompute(img8, None)
     empty = Features(np.zeros((0, 2)), np.zeros((0, 128), np.float32), np.zeros(0), tuple(a.shape))

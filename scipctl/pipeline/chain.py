@@ -70,6 +70,10 @@ class ChainParams:
     # the rendering's pixel = this many previous-image pixels (1: its own resolution); the coarser one is tried
     # when nothing was confirmed at the finer one (smooth 10 m sand against the 4.5 m image's fine speckle)
     feature_step_factors: tuple = (1.0, 1.5)
+    # a median filter of this odd size (detection pixels; 0: none) on both images before SIFT: the nearer camera
+    # resolves grains and pits the farther one averages away, and their keypoints match nothing there
+    # (detect_features; docs/stereo-and-tracking.md, "Grains")
+    feature_median_px: int = 3
     # candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
     # the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
     feature_candidates: tuple = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
@@ -121,6 +125,9 @@ class ChainParams:
                                  f"'homography', min inliers >= 2), got {cand!r}")
         if not self.feature_candidates:
             raise ValueError("ChainParams.feature_candidates: must not be empty")
+        m = self.feature_median_px
+        if not (isinstance(m, int) and not isinstance(m, bool) and (m in (0, 1) or (m >= 3 and m % 2 == 1))):
+            raise ValueError(f"ChainParams.feature_median_px: must be 0, 1 or an odd integer >= 3, got {m!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:

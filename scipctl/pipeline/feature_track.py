@@ -23,7 +23,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     perspective changes are taken out by the geometry and what is left is the
     pose-estimate error (a shift and a small rotation). Its SIFT keypoints
     near the target are matched against those of the whole new image
-    (area-downsampled by the same factor, so that both have the same blur) and
+    (area-downsampled by the same factor, so that both have the same blur; both median-filtered,
+    ``params.feature_median_px``, so that grains only the nearer view resolves make no keypoints) and
     a homography ``G`` (pose-estimate pixels of ``prod`` -> real pixels) is
     fitted by RANSAC, with keypoints from a few reaches and models (``params.feature_candidates``)
     around the target. For each ``G``, the template (half-size ``half``) is
@@ -53,9 +54,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             break  # a coarser rendering only when nothing was confirmed at the finer one
         step_px = float(np.clip(scale * factor, 1.0, 4.0 * factor))
         vhalf = int(round(params.view_reach_px / step_px))
-        key = (prod.product_id, step_px)  # exact: a cache shared by chains gives each the keypoints it would compute
+        # exact: a cache shared by chains gives each the keypoints it would compute
+        key = (prod.product_id, step_px, params.feature_median_px)
         if key not in feats:
-            feats[key] = detect_features(prod.pixels_float(), downsample=step_px)
+            feats[key] = detect_features(prod.pixels_float(), downsample=step_px, median_px=params.feature_median_px)
         # pose-estimate pixels of prod -> rendering pixels
         S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px],
                       [0, 0, 1.0]])
@@ -64,7 +66,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             if np.isfinite(view).mean() < 0.2:
                 reasons.append(f"plane {k}: the previous view does not cover the prediction")
                 continue
-            ref = detect_features(view)
+            ref = detect_features(view, median_px=params.feature_median_px)
             # the keypoints within the largest reach, matched once: each candidate takes its reach's rows
             reach_max = max(cand[0] for cand in params.feature_candidates)
             if len(ref):

@@ -483,6 +483,13 @@ def test_chain_params_refuse_an_unknown_answer():
         ChainParams(answer="scip").check()
 
 
+@pytest.mark.parametrize("bad", [2, -1, 3.0, True])
+def test_chain_params_refuse_a_median_that_is_not_an_odd_size(bad):
+    with pytest.raises(ValueError, match="ChainParams.feature_median_px"):
+        ChainParams(feature_median_px=bad).check()
+    assert ChainParams(feature_median_px=0).check() and ChainParams(feature_median_px=5).check()
+
+
 def test_a_feature_cache_shared_by_the_chains_of_a_downlink_changes_no_answer(dl, chains):
     """run_marked_chains shares the feature step's keypoints between the chains of one downlink (each image's,
     by its exact downsampling): the second chain gets the same keypoints it would compute, so the same pixels, bit
@@ -494,7 +501,8 @@ def test_a_feature_cache_shared_by_the_chains_of_a_downlink_changes_no_answer(dl
     for tid in ("t1", "t2"):
         mk = dl.target(tid).mark_in(start.product_id)
         steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=HANDOFF, feature_cache=cache)
-    assert any(pid.startswith("s1-straight") and ds == 1.0 for pid, ds in cache)  # keyed by the exact downsampling
+    # keyed by the exact downsampling and the median filter
+    assert any(pid.startswith("s1-straight") and ds == 1.0 and med == HANDOFF.feature_median_px for pid, ds, med in cache)
     alone = chains["t2"]
     assert [s.product_id for s in steps] == [s.product_id for s in alone]
     for s, a in zip(steps, alone):
