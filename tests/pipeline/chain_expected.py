@@ -8,32 +8,33 @@
 # docs/scripts/chain_perturb.py (run_chain from the first pancam mark; `handoff` for EXPECTED_ERROR_PX, the default
 # answer for EXPECTED_FINAL_PX), re-measured in session 13 after the feature step stopped taking an NCC peak at the
 # image's edge as a confirmation (core/tracking.py accept_border_peak; docs/stereo-and-tracking.md,
-# "Reproducibility"). The ranges are beside each bound: OpenCV 5.0.0 | 4.14.0.
+# "Reproducibility") and in session 15 after it median-filtered its images (ChainParams.feature_median_px;
+# "Grains"). The ranges are beside each bound: OpenCV 5.0.0 | 4.14.0.
 # None: that step is not checked (flagged unverified; see the flags test).
 EXPECTED_ERROR_PX = {
     "paper-s1-straight": {
-        # pancam 21 px, flagged unverified; the handoff starts from 10 m. Measured: -, 0.25-0.46 | 0.05-0.23,
-        # 0.57-0.70 | 0.43-0.75, 1.23-2.09 | 1.08-1.57 px, hazcam (scip) 0.75-1.77 | 0.46-0.78 px
-        "t1": [None, 1.0, 1.0, 3.0, 2.5],
-        # measured: 1.20-1.28 | 1.29-1.89, 0.31-0.34 | 0.37-0.55, 1.25-1.41 | 1.48-1.90, 3.68-4.67 | 4.70-5.66 px,
-        # hazcam 1.80-2.17 | 2.52-3.13 px (OpenCV 4.14 tracks the 4.5 m pancam 0.3-0.6 px further off, and every
-        # later step carries it with its zoom)
-        "t2": [2.5, 1.0, 2.5, 7.5, 4.0],
+        # pancam 21 px, flagged unverified; the handoff starts from 10 m. Measured (session 15, with the feature
+        # step's median filter): -, 0.12-0.33 | 0.08-0.25, 0.67-0.86 | 0.51-0.66, 1.43-2.13 | 1.10-1.42 px,
+        # hazcam (scip) 0.63-1.19 | 0.53-0.63 px
+        "t1": [None, 0.5, 1.5, 3.0, 1.5],
+        # measured: 1.30-1.36 | 1.21-1.42, 0.36-0.37 | 0.33-0.39, 1.30-1.88 | 1.56-2.00, 3.92-5.20 | 4.87-5.52 px,
+        # hazcam 1.84-2.52 | 2.18-3.08 px (the 4.5 m pancam track's ~1.3 px, carried with each zoom)
+        "t2": [2.0, 0.5, 3.0, 7.0, 4.0],
     },
     "paper-s1-arc": {
-        # pancam: the feature match alone, flagged (5.6-11.1 | 4.0-9.7 px); the handoff starts from 10 m, and its
-        # 1-3 px grow with each zoom. Measured: -, 1.92-2.49 | 0.81-2.89, 3.13-4.05 | 1.38-4.55, 7.72-9.84 |
-        # 2.41-10.11 px, hazcam 5.43-6.78 | 1.94-7.32 px. Before session 13, OpenCV 4.14 confirmed an NCC peak at the
-        # image's edge there (the target is 2.5 px from it) and reached 14.3-17.4 px at the hazcam
-        "t1": [None, 4.0, 6.0, 13.0, 9.5],
+        # pancam: flagged (the feature match alone before session 15; 4.88-5.54 | 3.67-6.10 px now); the handoff
+        # starts from 10 m, and its 1-2 px grow with each zoom. Measured: -, 0.78-1.33 | 0.82-1.49, 1.11-2.29 |
+        # 1.31-2.39, 2.10-6.15 | 2.19-5.95 px, hazcam 1.52-3.89 | 1.75-3.95 px. Before session 13, OpenCV 4.14
+        # confirmed an NCC peak at the image's edge there (the target is 2.5 px from it) and reached 14.3-17.4 px at
+        # the hazcam; before session 15 (no median) 5.43-6.78 | 1.94-7.32 px
+        "t1": [None, 2.0, 3.0, 8.0, 5.0],
     },
 }
 
 # The final hazcam answer of the default chain (ChainParams.answer "closure": the closure's pixel when it is
-# confirmed, else the handoff's), the same eight runs, times 1.25, rounded up to 0.5 px. s1-straight t1's closure
-# is unconfirmed in most runs (the handoff's answer).
+# confirmed, else the handoff's), the same eight runs, times 1.25, rounded up to 0.5 px.
 EXPECTED_FINAL_PX = {
-    "paper-s1-straight": {"t1": 3.0,   # measured 0.55-1.28 | 0.68-2.00 px
-                          "t2": 3.0},  # measured 1.57-2.00 | 1.73-2.35 px
-    "paper-s1-arc": {"t1": 10.0},      # measured 4.48-6.98 | 0.92-7.65 px (from the navcam handoff: its error carried)
+    "paper-s1-straight": {"t1": 2.0,   # measured 0.62-1.24 | 0.30-1.16 px
+                          "t2": 3.0},  # measured 1.86-2.03 | 1.58-1.98 px
+    "paper-s1-arc": {"t1": 4.0},       # measured 0.83-2.94 | 1.55-2.74 px (before session 15: 4.48-6.98 | 0.92-7.65)
 }
