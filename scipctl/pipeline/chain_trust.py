@@ -13,8 +13,9 @@ chain's own GO (docs/stereo-and-tracking.md, "Trust along the chain").
   (:mod:`scipctl.core.closure_trust`);
 - the designation: not scored here (``p_success`` None, ``go`` True: the chain starts from what the operator
   designated; the designation's own trust is ``designate``'s);
-- the chain is GO only when every step up to the final hazcam handoff is GO and there is a final hazcam answer
-  (:func:`chain_verdict`); each NO-GO step carries ``advice`` (:data:`ADVICE`).
+- the chain is GO when every step up to the final hazcam handoff is GO and there is a final hazcam answer, or when
+  its answer is an adopted closure that is GO (the closure model's p is for the answer itself and weighs its
+  reference step's own p) (:func:`chain_verdict`); each NO-GO step carries ``advice`` (:data:`ADVICE`).
 """
 
 from __future__ import annotations
@@ -175,8 +176,16 @@ class ChainVerdict:
 def chain_verdict(steps: list) -> ChainVerdict:
     """The :class:`ChainVerdict` of a scored chain (steps after the final hazcam handoff are not part of it; when
     the final answer is the chain's closure, ``extra["answer"] == "closure"``, neither are the steps between the
-    closure's reference and the final one: the answer does not depend on them)."""
+    closure's reference and the final one: the answer does not depend on them).
+
+    A chain whose answer is an adopted closure that is GO is GO: the closure model answers P(the final pixel is
+    within 4 px) from the closure's own evidence and its reference step's ``p_success``, so a reference below the
+    step model's GO threshold is already weighed there (session 15: held out, the 13 closures at p >= 0.9 were all
+    within 4 px; docs/stereo-and-tracking.md, "The chain's verdict follows a GO closure"). Otherwise the first
+    NO-GO step decides, as for every NO-GO chain."""
     final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
+    if final is not None and steps[final].extra.get("answer") == "closure" and steps[final].go:
+        return ChainVerdict(True, None, None, "")
     upto = steps if final is None else steps[: final + 1]
     skip = set()
     if final is not None and steps[final].extra.get("answer") == "closure":

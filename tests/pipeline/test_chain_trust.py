@@ -120,7 +120,8 @@ def test_evidence_counts_the_earlier_steps():
 def test_a_closure_answer_is_judged_without_the_navcam_steps_it_skips():
     """When the final answer is the closure's (``extra["answer"] == "closure"``, found from its reference step
     across the navcam tracks), a NO-GO navcam track between the reference and the final step does not decide the
-    chain; a NO-GO step up to the reference still does, and so does the final step itself."""
+    chain. A GO closure makes the chain GO even below a NO-GO reference (the closure model weighs the reference's
+    own p); a NO-GO closure leaves the verdict to the first NO-GO step, the reference's if it is one."""
     steps = _chain()
     steps[3] = _step(2, "navcam", "track", status="failed", ok=False)
     _score(steps)
@@ -128,10 +129,13 @@ def test_a_closure_answer_is_judged_without_the_navcam_steps_it_skips():
     steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
     v = chain_verdict(steps)
     assert v.go and v.step is None
-    steps[1] = _step(1, "pancam", "track", status="failed", ok=False)  # the reference itself
+    steps[1] = _step(1, "pancam", "track", status="unconfirmed", ok=False)  # the reference itself NO-GO
     _score(steps)
     steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
-    assert chain_verdict(steps).step == 1
+    assert not steps[1].go and chain_verdict(steps).go  # the closure is GO: its model weighed the reference
+    steps[-1].go = False
+    v = chain_verdict(steps)
+    assert not v.go and v.step == 1 and v.advice == REDESIGNATE  # a NO-GO closure: the first NO-GO step decides
     steps = _score(_chain(), haz_go=False)
     steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1, "status": "confirmed"}})
     assert chain_verdict(steps).step == 5
