@@ -112,7 +112,8 @@ def subpixel_peak(score_map: np.ndarray, iy: int, ix: int) -> tuple[float, float
     return para(n[1, 0], n[1, 1], n[1, 2]), para(n[0, 1], n[1, 1], n[2, 1]), sharp
 
 
-def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iterations: int = 4):
+def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iterations: int = 4,
+                         mask: Optional[np.ndarray] = None):
     """Refine the sub-pixel offset ``d0`` of the NCC peak at integer top-left ``peak_xy``.
 
     A quadratic fitted to NCC samples 1 px apart is biased towards the
@@ -124,7 +125,8 @@ def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iteratio
     and the NCC at the refined position, or ``None`` when the template does
     not fit in the image at ``peak_xy`` or the refinement wanders off by more
     than a pixel. Near the image border the missing neighbourhood repeats the
-    edge pixels.
+    edge pixels. ``mask``: the template pixels that count (``uint8`` (th, tw),
+    nonzero: counted; :func:`masked_template`); None: all.
     """
     import cv2
 
@@ -159,7 +161,7 @@ def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iteratio
         patches = shifted([d[0] + (i - 1) * h for i in range(3)], [d[1] + (j - 1) * h for j in range(3)])
         for j in range(3):
             for i in range(3):
-                m3[j, i] = cv2.matchTemplate(patches[j, i], tpl, cv2.TM_CCOEFF_NORMED)[0, 0]
+                m3[j, i] = cv2.matchTemplate(patches[j, i], tpl, cv2.TM_CCOEFF_NORMED, mask=mask)[0, 0]
         dx, dy, sharp = subpixel_peak(m3, 1, 1)
         sharp /= h * h
         d += (dx * h, dy * h)
@@ -168,7 +170,7 @@ def refine_subpixel_peak(tpl: np.ndarray, img: np.ndarray, peak_xy, d0, iteratio
         if h <= 0.25 and abs(dx * h) < 1e-3 and abs(dy * h) < 1e-3:
             break
     patch = shifted([d[0]], [d[1]])[0, 0]
-    score = float(cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED)[0, 0])
+    score = float(cv2.matchTemplate(patch, tpl, cv2.TM_CCOEFF_NORMED, mask=mask)[0, 0])
     return d, sharp, score
 
 
@@ -186,9 +188,12 @@ def local_maxima(m: np.ndarray, valid: Optional[np.ndarray] = None) -> tuple[np.
     return ys[order], xs[order]
 
 
-def ncc_region(tpl: np.ndarray, img: np.ndarray, x0: int, x1: int, y0: int, y1: int):
+def ncc_region(tpl: np.ndarray, img: np.ndarray, x0: int, x1: int, y0: int, y1: int,
+               mask: Optional[np.ndarray] = None):
     """NCC for top-left placements ``x0..x1``, ``y0..y1`` (inclusive), clipped to the image.
 
+    ``mask``: the template pixels that count (``uint8`` (th, tw), nonzero: counted; the means and norms of
+    both windows are then taken over those pixels only, :func:`masked_template`); None: all.
     Returns ``(map, x0c, y0c)`` or ``None`` when no placement fits.
     """
     import cv2
@@ -201,4 +206,19 @@ def ncc_region(tpl: np.ndarray, img: np.ndarray, x0: int, x1: int, y0: int, y1: 
         return None
     crop = img[y0c : y1c + th, x0c : x1c + tw]
     crop = crop - np.float32(crop.mean())
-    return cv2.matchTemplate(crop, tpl, cv2.TM_CCOEFF_NORMED), x0c, y0c
+    return cv2.matchTemplate(crop, tpl, cv2.TM_CCOEFF_NORMED, mask=mask), x0c, y0c
+
+
+def masked_template(tpl: np.ndarray, keep: np.ndarray):
+    """A template whose pixels ``keep`` (bool (th, tw)) alone count in the NCC: ``(template, mask)``, the template
+    zero-mean over the kept pixels and 0 elsewhere (float32), the mask ``uint8`` (1: kept) as OpenCV's
+    ``matchTemplate`` takes it (with ``TM_CCOEFF_NORMED`` it takes each window's mean and norm over the kept pixels,
+    OpenCV 4.x and 5.x alike). Raises ValueError on a shape mismatch or when nothing is kept."""
+    t = as_float_image(tpl, "template")
+    k = np.asarray(keep)
+    if k.shape != t.shape or k.dtype != bool:
+        raise ValueError(f"keep: bool {t.shape} expected, got {k.dtype} {k.shape}")
+    if not k.any():
+        raise ValueError("keep: no template pixel kept")
+    t = np.where(k, t - np.float32(t[k].mean()), np.float32(0.0)).astype(np.float32)
+    return t, k.astype(np.uint8)

@@ -32,7 +32,7 @@ from typing import Optional
 import numpy as np
 
 from .image import as_float_image, as_uv
-from .ncc import default_min_std, local_maxima, ncc_region, refine_subpixel_peak, subpixel_peak
+from .ncc import default_min_std, local_maxima, masked_template, ncc_region, refine_subpixel_peak, subpixel_peak
 
 __all__ = ["TrackResult", "track"]
 
@@ -109,8 +109,9 @@ def _auto_levels(search_radius_px: float, th: int, tw: int) -> int:
     return levels
 
 
-def _refine(tpl, img, p_xy, rad: int, max_moves: int = 4):
-    """Hill-climb a local NCC search of radius ``rad`` around integer top-left ``p_xy``.
+def _refine(tpl, img, p_xy, rad: int, max_moves: int = 4, mask=None):
+    """Hill-climb a local NCC search of radius ``rad`` around integer top-left ``p_xy`` (``mask``: the template's
+    counted pixels, :func:`~scipctl.core.ncc.ncc_region`).
 
     Returns ``(map, x0, y0, iy, ix)`` of the local map containing the peak in
     its interior (or on the image-clipped border), or ``None``.
@@ -118,7 +119,7 @@ def _refine(tpl, img, p_xy, rad: int, max_moves: int = 4):
     px, py = int(p_xy[0]), int(p_xy[1])
     res = None
     for _ in range(max_moves):
-        res = ncc_region(tpl, img, px - rad, px + rad, py - rad, py + rad)
+        res = ncc_region(tpl, img, px - rad, px + rad, py - rad, py + rad, mask=mask)
         if res is None:
             return None
         m, x0, y0 = res
@@ -150,6 +151,7 @@ def track(
     min_template_std: Optional[float] = None,
     subpixel_iterations: int = 4,
     accept_border_peak: bool = True,
+    template_mask=None,
 ) -> TrackResult:
     """Find ``template`` in ``image`` near ``predicted_uv`` by zero-mean NCC.
 
@@ -194,6 +196,12 @@ def track(
         warped windows); a window clipped at the image's edge
         (:func:`~scipctl.core.windows.crop_window`) belongs there, hence the
         default ``True``.
+    template_mask : (h, w) bool array, optional
+        The template pixels that count (True); the NCC then takes the
+        means and norms of the template and of each image window over
+        those pixels only (e.g. a rendered template's pixels that lie off
+        the surface it was rendered through,
+        :mod:`scipctl.core.relief_mask`). None: every pixel counts.
 
     Returns
     -------
@@ -216,7 +224,14 @@ def track(
         return TrackResult.failed("template contains NaN or infinity")
     if not np.all(np.isfinite(img)):
         img = np.nan_to_num(img, nan=float(np.nanmean(img)) if np.any(np.isfinite(img)) else 0.0)
-    if float(tpl.std()) < min_template_std:
+    keep = None
+    if template_mask is not None:
+        keep = np.asarray(template_mask)
+        if keep.shape != tpl.shape or keep.dtype != bool:
+            raise ValueError(f"template_mask: bool {tpl.shape} expected, got {keep.dtype} {keep.shape}")
+        if keep.sum() < 9:
+            return TrackResult.failed("template mask keeps fewer than 9 pixels")
+    if float(tpl.std() if keep is None else tpl[keep].std()) < min_template_std:
         return TrackResult.failed("low texture")
     if th > img.shape[0] or tw > img.shape[1]:
         return TrackResult.failed("template larger than image")
@@ -246,7 +261,17 @@ def track(
         return TrackResult.failed("search region outside image", levels=levels)
     img = img[oy:ey, ox:ex]
     p0 = p0 - np.array([ox, oy], dtype=float)
-    tpls = _pyramid(tpl - np.float32(tpl.mean()), levels)
+    if keep is None:
+        tpls = _pyramid(tpl - np.float32(tpl.mean()), levels)
+        masks = [None] * (levels + 1)
+    else:
+        # the masked template is 0 off the mask; a coarser level counts the pixels that are mostly kept
+        t0, m0 = masked_template(tpl, keep)
+        tpls = _pyramid(t0, levels)
+        masks = [m0] + [(m >= 0.5).astype(np.uint8) for m in _pyramid(m0.astype(np.float32), levels)[1:]]
+        while levels > 0 and int(masks[levels].sum()) < 9:
+            levels -= 1
+        tpls, masks = tpls[:levels + 1], masks[:levels + 1]
     imgs = _pyramid(img, levels)
     s = 2.0**levels
     r_c = search_radius_px / s
@@ -254,7 +279,7 @@ def track(
     res = ncc_region(
         tpls[levels], imgs[levels],
         int(math.floor(pc[0] - r_c)), int(math.ceil(pc[0] + r_c)),
-        int(math.floor(pc[1] - r_c)), int(math.ceil(pc[1] + r_c)),
+        int(math.floor(pc[1] - r_c)), int(math.ceil(pc[1] + r_c)), mask=masks[levels],
     )
     if res is None:
         return TrackResult.failed("search region outside image", levels=levels)
@@ -275,12 +300,12 @@ def track(
         out = None
         for lev in range(levels - 1, -1, -1):
             q = 2.0 * q  # pyrDown: coarse pixel centre i sits on fine pixel centre 2 i
-            out = _refine(tpls[lev], imgs[lev], np.round(q), 2)
+            out = _refine(tpls[lev], imgs[lev], np.round(q), 2, mask=masks[lev])
             if out is None:
                 break
             q = np.array([out[1] + out[4], out[2] + out[3]], dtype=float)
         if levels == 0:  # make sure the peak is interior (hill-climb past the search square's edge)
-            out = _refine(tpls[0], imgs[0], q, 1)
+            out = _refine(tpls[0], imgs[0], q, 1, mask=masks[0])
         if out is not None:
             refined.append(out)
     if not refined:
@@ -305,7 +330,7 @@ def track(
             break
     dx, dy, sharp = subpixel_peak(mb, biy, bix)
     if subpixel_iterations > 0:
-        it = refine_subpixel_peak(tpls[0], img, peak_xy, (dx, dy), subpixel_iterations)
+        it = refine_subpixel_peak(tpls[0], img, peak_xy, (dx, dy), subpixel_iterations, mask=masks[0])
         if it is not None:
             (dx, dy), sharp, score_sub = it
             score = max(score, score_sub)

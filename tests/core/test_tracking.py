@@ -249,3 +249,55 @@ def test_bad_inputs_raise():
 def test_failed_result_shape():
     r = TrackResult.failed("x")
     assert not r.ok and r.uv.shape == (2,) and np.all(np.isnan(r.uv))
+
+
+def test_template_mask_ignores_a_misplaced_part():
+    """A template whose corner shows a patch that in the image lies elsewhere (parallax): counting every pixel
+    pulls the peak towards the patch; masking the patch out recovers the exact shift."""
+    shift = np.array([3.4, -2.3])
+    img = _shifted(shift)
+    other = Texture(seed=11, fmax=0.1)
+    c = np.array([120.0, 120.0])
+    half = 20
+    tpl = extract_window(BASE, c, half).copy()
+    img = img.copy()
+    # a strong patch (a "rock": 4x the texture's contrast) in the template's lower-left quarter, drawn in the image
+    # 6 px further down-left than where the template has it
+    patch = 80.0 * (other.render(18, 18) - 100.0) / 20.0 + 100.0
+    tpl[half + 3:half + 21, 0:18] = patch[:, :18]
+    pu, pv = int(c[0] + shift[0]) - half - 6, int(c[1] + shift[1]) + 3 + 6
+    img[pv:pv + 18, pu:pu + 18] = patch
+    plain = track(tpl, img, c, 10.0, min_score=0.1)
+    keep = np.ones(tpl.shape, bool)
+    keep[half + 3:, :18] = False
+    masked = track(tpl, img, c, 10.0, min_score=0.1, template_mask=keep)
+    assert masked.ok
+    # the masked template is the texture alone: its sub-pixel accuracy (test_recovers_subpixel_shift's bound)
+    assert np.linalg.norm(masked.uv - (c + shift)) < 0.05
+    assert np.linalg.norm(plain.uv - (c + shift)) > 0.5  # the patch drags the unmasked peak
+
+
+def test_template_mask_all_true_matches_unmasked():
+    """Every pixel kept: the masked NCC is the plain NCC (OpenCV's masked and unmasked paths agree to float32
+    rounding, far below the 1e-3 px asserted)."""
+    shift = np.array([1.3, 0.6])
+    img = _shifted(shift)
+    c = np.array([120.0, 120.0])
+    tpl = extract_window(BASE, c, 15)
+    a = track(tpl, img, c, 30.0)
+    b = track(tpl, img, c, 30.0, template_mask=np.ones(tpl.shape, bool))
+    assert a.ok and b.ok
+    assert np.linalg.norm(a.uv - b.uv) < 1e-3
+    assert abs(a.score - b.score) < 1e-4
+
+
+def test_template_mask_bad_inputs():
+    tpl = extract_window(BASE, (120.0, 120.0), 10)
+    with pytest.raises(ValueError, match="template_mask"):
+        track(tpl, BASE, (120.0, 120.0), 5.0, template_mask=np.ones((3, 3), bool))
+    with pytest.raises(ValueError, match="template_mask"):
+        track(tpl, BASE, (120.0, 120.0), 5.0, template_mask=np.ones(tpl.shape, np.uint8))
+    few = np.zeros(tpl.shape, bool)
+    few[0, :5] = True
+    r = track(tpl, BASE, (120.0, 120.0), 5.0, template_mask=few)
+    assert not r.ok and "fewer than 9" in r.reason
