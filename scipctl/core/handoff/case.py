@@ -109,7 +109,8 @@ class HandoffCase:
         affine-refined NCC keeps sharp relief (corners) that the dense
         stereo's smoothing rounds; ``range_hint_m`` bounds the search to
         +-``haz_point_stereo_range_frac`` of it. Returns the 3-D point ``(3,)``
-        (hazcam rover frame) or None.
+        (hazcam rover frame) or None (also when that band lies outside the
+        hazcam view's own range window: nothing there to find).
         """
         p = self.params
         uv = np.asarray(haz_uv, float).reshape(2)
@@ -121,6 +122,9 @@ class HandoffCase:
             if range_hint_m is not None and np.isfinite(range_hint_m):
                 f = p.haz_point_stereo_range_frac
                 lo, hi = max(lo, (1 - f) * range_hint_m), min(hi, (1 + f) * range_hint_m)
+            if not lo < hi:  # a hint beyond the window (a candidate from a wrong navcam pixel): no point there
+                self._cache[key] = None
+                return None
             ps = point_stereo(
                 self.haz.left_img, self.haz.right_img, self.haz.left_model, self.haz.right_model, uv,
                 band_px=p.point_stereo_band_px, window_px=p.haz_point_stereo_window_px,

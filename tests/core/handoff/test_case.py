@@ -69,3 +69,15 @@ def test_params_defaults_and_fast_pass_and_a_case_checks_them(handoff_scene):
     with pytest.raises(ValueError, match="label"):
         HandoffCase("middle", case.nav, case.haz, case.T_haz_nav)
 
+
+
+def test_haz_point_with_a_range_hint_beyond_the_hazcam_window_is_none(handoff_scene):
+    """A candidate whose range hint lies outside the hazcam view's range window (0.3-6 m here; on a fresh
+    population a chain handing off from a wrong navcam pixel gave a 10.5 m hint, and point stereo refused the
+    empty band with a ValueError that stopped the downlink) has no hazcam point: None, not an error."""
+    case = handoff_scene.cases["near"]
+    t = handoff_scene.targets[0]
+    assert case.haz_point(t.haz_uv, range_hint_m=10.5) is None
+    assert case.haz_point(np.asarray(t.haz_uv) + 0.5, range_hint_m=0.1) is None  # below the window: likewise
+    X = case.haz_point(np.asarray(t.haz_uv) + 1.0)  # no hint: the point is found
+    assert X is not None and np.all(np.isfinite(X))
