@@ -29,7 +29,7 @@ import numpy as np
 from ..core.point_stereo import PointStereoParams, on_left_ray
 from ..model import Downlink, ImageProduct, InputError
 from .feature_track import feature_track
-from .plane_warp import local_normals_site, plane_warped_template
+from .plane_warp import local_normals_site, near_dense_stereo, plane_warped_template
 from ..jsonutil import finite_or_none
 
 def _per_camera(name: str, values: dict, fallback, minimum, integer: bool = False) -> None:
@@ -74,6 +74,17 @@ class ChainParams:
     # resolves grains and pits the farther one averages away, and their keypoints match nothing there
     # (detect_features; docs/stereo-and-tracking.md, "Grains")
     feature_median_px: int = 3
+    # the tracking steps' NCC refinement can count only the template pixels the plane places where the new image's
+    # dense stereo puts them (core/relief_mask.py): within relief_max_parallax_px new pixels, given the stereo's
+    # disparity error bound relief_disparity_error_px (half-resolution pixels; SGBM's measured p99 there is 0.45 px).
+    # None (the default): every pixel counts. Measured on 187 held-out chains (docs/stereo-and-tracking.md,
+    # "Relief"): with 1.0 px the tracking steps are right a little more often, the final answer is not (122 -> 124
+    # within 4 px, its median better on one population and worse on the other), for a dense stereo pair per step
+    # (0.15-0.20 CPU s each); the closure check never uses it (it confirmed more wrong closures)
+    relief_max_parallax_px: Optional[float] = None
+    relief_disparity_error_px: float = 0.45
+    # ... unless fewer than this part of the template is kept (then every pixel counts)
+    relief_min_kept: float = 0.25
     # candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
     # the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
     feature_candidates: tuple = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
@@ -128,6 +139,15 @@ class ChainParams:
         m = self.feature_median_px
         if not (isinstance(m, int) and not isinstance(m, bool) and (m in (0, 1) or (m >= 3 and m % 2 == 1))):
             raise ValueError(f"ChainParams.feature_median_px: must be 0, 1 or an odd integer >= 3, got {m!r}")
+        r = self.relief_max_parallax_px
+        if r is not None and not (isinstance(r, (int, float)) and not isinstance(r, bool) and np.isfinite(r) and r > 0):
+            raise ValueError(f"ChainParams.relief_max_parallax_px: must be a number > 0 or None, got {r!r}")
+        e = self.relief_disparity_error_px
+        if not (isinstance(e, (int, float)) and not isinstance(e, bool) and np.isfinite(e) and e >= 0):
+            raise ValueError(f"ChainParams.relief_disparity_error_px: must be a number >= 0, got {e!r}")
+        k = self.relief_min_kept
+        if not (isinstance(k, (int, float)) and not isinstance(k, bool) and 0 <= k <= 1):
+            raise ValueError(f"ChainParams.relief_min_kept: must be a number in [0, 1], got {k!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:
@@ -373,7 +393,10 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 planes = [n_view]
                 if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > 5.0:
                     planes.append(ground)
-                tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params)
+                # the new image's own stereo says which template pixels the plane misplaces (relief_mask)
+                new_stereo = None if params.relief_max_parallax_px is None else near_dense_stereo(dl, prod, rng_new)
+                tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params,
+                                          new_stereo)
                 extra.update(finfo)
                 if tr is not None:
                     mode = "plane, feature-guided"

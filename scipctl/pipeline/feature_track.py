@@ -8,11 +8,11 @@ import numpy as np
 
 from ..jsonutil import finite_or_none as _f
 from ..model import ImageProduct
-from .plane_warp import plane_warped_view, render_through_plane
+from .plane_warp import plane_points_in_prev, plane_warped_view
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
-                  half: int, feats: dict, params):
+                  half: int, feats: dict, params, new_stereo=None):
     """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
 
     For each plane normal in ``view_normals`` (site frame, planes through
@@ -31,15 +31,29 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     rendered through the target's plane ``n_site`` at the pixels ``G^-1``
     maps the new image's to, so that it carries the rotation of the pose
     error too, and NCC-tracked within ``params.feature_fine_radius_px`` of the mapped
-    prediction; the best NCC wins. ``feats`` caches the new images' keypoints
+    prediction; the best NCC wins. With ``new_stereo`` (``prod``'s
+    :class:`~scipctl.core.dense_stereo.DenseStereo`) and ``params.relief_max_parallax_px`` set, the NCC counts
+    only the template pixels the plane places where that stereo says they are (:mod:`scipctl.core.relief_mask`;
+    all of them when fewer than ``params.relief_min_kept`` of the template would be left). ``feats`` caches the new images' keypoints
     by ``(product id, downsampling)`` (the chains of one downlink may share it: same image, same downsampling, same
     keypoints). ``info`` records the path, the
     winner's inlier counts and the coarse position.
     """
+    from ..core.expected import bilinear_sample
     from ..core.features import detect_features, knn_matches, locate_by_features
+    from ..core.relief_mask import relief_keep
     from ..core.tracking import TrackResult, track
 
     info = {"coarse": "features", "feature_inliers": 0, "feature_local_inliers": 0}
+    relief = new_stereo is not None and params.relief_max_parallax_px is not None
+    if relief:
+        T_roverprev_rovernew = prev.pose.T_site_rover.inverse() @ prod.pose.T_site_rover
+        T_rovernew_site = prod.pose.T_site_rover.inverse()
+        X_new = T_rovernew_site.apply(np.asarray(X_site, float))
+        n_new = T_rovernew_site.rotate(np.asarray(n_site, float))
+        # the relief mask's reference pixels: the template's centre (the target's own surface), a quarter of its size
+        gg = np.abs(np.stack(np.meshgrid(np.arange(-half, half + 1), np.arange(-half, half + 1)), -1)).max(-1)
+        centre = (gg <= max(1, half // 4)).reshape(-1)
     img = prod.pixels_float()
     g = np.arange(-half, half + 1, dtype=float)
     c = np.round(np.asarray(pred_uv, float))
@@ -91,14 +105,31 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                 yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
                 with np.errstate(divide="ignore", invalid="ignore"):
                     ys = yh[:, :2] / yh[:, 2:3]
-                tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+                # the template: prev's image through the target's plane (plane_warp.render_through_plane)
+                uv_prev, _ = plane_points_in_prev(prev, prod, X_site, n_site, ys)
+                tpl = bilinear_sample(prev.pixels_float(), uv_prev).reshape(2 * half + 1, 2 * half + 1)
                 if np.isfinite(tpl).mean() < 0.9:
                     continue
+                keep, kept = None, None
+                if relief:
+                    # the template's pixels are prod's pixels xs: the plane's points on their rays (pose estimate)
+                    o, d = prod.camera_model.unproject(xs)
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        t = ((X_new - o) @ n_new) / (d @ n_new)
+                    X_on = o + t[:, None] * d
+                    X_on[~(t > 0)] = np.nan
+                    on_plane = relief_keep(new_stereo, xs, X_on, T_roverprev_rovernew, prev.camera_model, centre,
+                                           params.relief_disparity_error_px, params.relief_max_parallax_px,
+                                           other_px_scale=max(float(scale), 1e-6))
+                    on_plane = on_plane.reshape(tpl.shape) & np.isfinite(tpl)
+                    kept = float(on_plane.mean())
+                    if kept >= params.relief_min_kept and not on_plane.all():
+                        keep = on_plane
                 tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
                 # a whole rendered window: a peak where it touches the image's edge confirms nothing
                 tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
-                           min_score=0.3, accept_border_peak=False)
-                cands.append((loc, tr, k, reach, factor))
+                           min_score=0.3, accept_border_peak=False, template_mask=keep)
+                cands.append((loc, tr, k, reach, factor, kept, keep is not None))
     if not cands:
         info["feature_status"] = "failed"
         info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
@@ -114,7 +145,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= params.feature_agree_px]
         w = np.array([max(cd[1].score, 1e-3) for cd in near])
         uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
-        loc, tr, k, reach, factor = best
+        loc, tr, k, reach, factor, kept, masked = best
         info["feature_status"] = "confirmed"
         info["feature_pooled"] = len(near)
         out = TrackResult(True, "", uv, best[1].score, best[1].second_score, best[1].ratio, best[1].sharpness,
@@ -123,7 +154,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         pts = np.array([cd[0].uv for cd in cands])
         w = np.array([max(cd[0].n_inliers, 1) for cd in cands], float)
         uv = geometric_median(pts, w)
-        loc, tr, k, reach, factor = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv), -cd[0].n_inliers))
+        loc, tr, k, reach, factor, kept, masked = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv),
+                                                                            -cd[0].n_inliers))
         info["feature_status"] = "unconfirmed"
         info["feature_pooled"] = len(cands)
         # the NCC peak found elsewhere is not this position's score: recorded in info only
@@ -133,6 +165,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                  "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
                  "feature_shift_px": float(np.linalg.norm(out.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
+    if relief:
+        info.update({"relief_kept": _f(kept), "relief_masked": masked})
     return out, info
 
 

@@ -8,23 +8,33 @@ import numpy as np
 from ..model import Downlink, ImageProduct
 
 
+def near_dense_stereo(dl: Downlink, prod: ImageProduct, range_m: float):
+    """Half-resolution dense stereo of ``prod``'s pair around a target ``range_m`` from its camera (ranges
+    ``max(0.3, 0.6 range)`` to ``1.6 range + 0.5`` m): a :class:`~scipctl.core.dense_stereo.DenseStereo`, or None
+    when ``prod`` has no right eye or stereo fails."""
+    from ..core.dense_stereo import dense_stereo
+
+    right = dl.stereo_pair(prod)
+    if right is None:
+        return None
+    try:
+        return dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
+                            min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
+    except Exception:
+        return None
+
+
 def local_normals_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, range_m: float):
-    """Surface normals (site frame) at ``X_rover`` from half-resolution dense stereo of ``prod``'s pair.
+    """Surface normals (site frame) at ``X_rover`` from :func:`near_dense_stereo` of ``prod``.
 
     Returns ``(local, ground)``: the plane fitted within ``max(0.05, 0.025
     range)`` m (the target's own surface, e.g. a rock face) and within
     ``max(0.2, 0.1 range)`` m (mostly the surrounding ground); each ``(3,)`` or None.
     """
-    from ..core.dense_stereo import dense_stereo
     from .designate import surface_normal
 
-    right = dl.stereo_pair(prod)
-    if right is None:
-        return None, None
-    try:
-        ds = dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
-                          min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
-    except Exception:
+    ds = near_dense_stereo(dl, prod, range_m)
+    if ds is None:
         return None, None
     xyz = ds.xyz.reshape(-1, 3)
     out = []
@@ -32,6 +42,21 @@ def local_normals_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, ra
         n, npts = surface_normal(xyz, X_rover, radius_m=radius_m)
         out.append(None if n is None else prod.pose.T_site_rover.rotate(n))
     return tuple(out)
+
+
+def plane_points_in_prev(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv):
+    """Where ``prod``'s pixels ``uv`` (N, 2) see the plane (X_site, n_site), site frame, in ``prev``:
+    ``(uv_prev (N, 2), X_roverprev (N, 3))``, the point's pixel in ``prev`` and the point in ``prev``'s rover frame
+    (each image through its pose estimate); NaN where the ray does not meet the plane in front of ``prod``."""
+    o, d = prod.camera_model.unproject(np.asarray(uv, float).reshape(-1, 2))
+    T_site_rovernew = prod.pose.T_site_rover
+    o_s, d_s = T_site_rovernew.apply(o), T_site_rovernew.rotate(d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
+    P_s = o_s + t[:, None] * d_s
+    P_s[~(t > 0)] = np.nan
+    P_roverprev = prev.pose.T_site_rover.inverse().apply(P_s)
+    return prev.camera_model.project(P_roverprev), P_roverprev
 
 
 def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
@@ -45,17 +70,8 @@ def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site,
     from ..core.expected import bilinear_sample
 
     uv = np.asarray(uv, float)
-    shape = uv.shape[:-1]
-    o, d = prod.camera_model.unproject(uv.reshape(-1, 2))
-    T_site_rovernew = prod.pose.T_site_rover
-    o_s, d_s = T_site_rovernew.apply(o), T_site_rovernew.rotate(d)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
-    P_s = o_s + t[:, None] * d_s
-    P_s[~(t > 0)] = np.nan
-    P_roverprev = prev.pose.T_site_rover.inverse().apply(P_s)
-    uv_prev = prev.camera_model.project(P_roverprev)
-    return bilinear_sample(prev.pixels_float(), uv_prev).reshape(shape)
+    uv_prev, _ = plane_points_in_prev(prev, prod, X_site, n_site, uv)
+    return bilinear_sample(prev.pixels_float(), uv_prev).reshape(uv.shape[:-1])
 
 
 def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,

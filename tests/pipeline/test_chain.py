@@ -510,3 +510,40 @@ def test_a_feature_cache_shared_by_the_chains_of_a_downlink_changes_no_answer(dl
             assert np.allclose(s.tracked_uv, a.tracked_uv, rtol=0, atol=1e-9)
         else:
             assert s.tracked_uv == a.tracked_uv and s.extra == a.extra, s.product_id
+
+
+@pytest.mark.parametrize("field, bad", [("relief_max_parallax_px", 0.0), ("relief_max_parallax_px", -1.0),
+                                        ("relief_max_parallax_px", True), ("relief_disparity_error_px", -0.1),
+                                        ("relief_disparity_error_px", float("nan")), ("relief_min_kept", 1.5)])
+def test_chain_params_refuse_bad_relief_settings(field, bad):
+    with pytest.raises(ValueError, match=f"ChainParams.{field}"):
+        ChainParams(**{field: bad}).check()
+    assert ChainParams(relief_max_parallax_px=None).check()
+
+
+def test_the_relief_mask_is_an_option_that_changes_only_the_tracking_steps(dl, chains):
+    """ChainParams.relief_max_parallax_px (off by default: every template pixel counts, and nothing is recorded):
+    set, each feature-guided tracking step records the part of its winning template the relief mask kept
+    (core/relief_mask.py) and whether it was applied (not below ChainParams.relief_min_kept, nor when it keeps every
+    pixel); the designation is untouched and the steps stay within the chain's measured bounds' reach (the same
+    steps found, none lost)."""
+    if _stem(dl) != "paper-s1-straight":
+        pytest.skip("one sol is enough (a whole chain, ~10 s)")
+    assert ChainParams().relief_max_parallax_px is None
+    base = chains["t1"]
+    assert all(s.extra.get("relief_kept") is None for s in base)
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target("t1").mark_in(start.product_id)
+    params = ChainParams(answer="handoff", relief_max_parallax_px=1.0)
+    steps = run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=params)
+    assert [(s.camera, s.kind) for s in steps] == [(s.camera, s.kind) for s in base]
+    assert steps[0].tracked_uv == base[0].tracked_uv
+    seen = 0
+    for s in steps:
+        if s.extra.get("coarse") != "features" or s.extra.get("feature_status") in (None, "failed"):
+            continue
+        kept = s.extra["relief_kept"]
+        assert kept is not None and 0.0 <= kept <= 1.0
+        assert s.extra["relief_masked"] == (params.relief_min_kept <= kept < 1.0)
+        seen += 1
+    assert seen >= 3
