@@ -34,8 +34,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     prediction; the best NCC wins. With ``new_stereo`` (``prod``'s
     :class:`~scipctl.core.dense_stereo.DenseStereo`) and ``params.relief_max_parallax_px`` set, the NCC counts
     only the template pixels the plane places where that stereo says they are (:mod:`scipctl.core.relief_mask`;
-    all of them when fewer than ``params.relief_min_kept`` of the template would be left). ``feats`` caches the new images' keypoints
-    by ``(product id, downsampling)`` (the chains of one downlink may share it: same image, same downsampling, same
+    all of them when fewer than ``params.relief_min_kept`` of the template would be left). ``feats`` caches the
+    new images' keypoints by ``(product id, downsampling)`` (the chains of one downlink may share it: same image, same downsampling, same
     keypoints). ``info`` records the path, the
     winner's inlier counts and the coarse position.
     """
