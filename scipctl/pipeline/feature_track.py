@@ -8,7 +8,7 @@ import numpy as np
 
 from ..jsonutil import finite_or_none as _f
 from ..model import ImageProduct
-from .plane_warp import plane_points_in_prev, plane_warped_view
+from .plane_warp import plane_points_site, plane_warped_view, render_through_plane
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
@@ -39,7 +39,6 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     keypoints). ``info`` records the path, the
     winner's inlier counts and the coarse position.
     """
-    from ..core.expected import bilinear_sample
     from ..core.features import detect_features, knn_matches, locate_by_features
     from ..core.relief_mask import relief_keep
     from ..core.tracking import TrackResult, track
@@ -49,8 +48,6 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     if relief:
         T_roverprev_rovernew = prev.pose.T_site_rover.inverse() @ prod.pose.T_site_rover
         T_rovernew_site = prod.pose.T_site_rover.inverse()
-        X_new = T_rovernew_site.apply(np.asarray(X_site, float))
-        n_new = T_rovernew_site.rotate(np.asarray(n_site, float))
         # the relief mask's reference pixels: the template's centre (the target's own surface), a quarter of its size
         gg = np.abs(np.stack(np.meshgrid(np.arange(-half, half + 1), np.arange(-half, half + 1)), -1)).max(-1)
         centre = (gg <= max(1, half // 4)).reshape(-1)
@@ -105,19 +102,13 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                 yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
                 with np.errstate(divide="ignore", invalid="ignore"):
                     ys = yh[:, :2] / yh[:, 2:3]
-                # the template: prev's image through the target's plane (plane_warp.render_through_plane)
-                uv_prev, _ = plane_points_in_prev(prev, prod, X_site, n_site, ys)
-                tpl = bilinear_sample(prev.pixels_float(), uv_prev).reshape(2 * half + 1, 2 * half + 1)
+                tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
                 if np.isfinite(tpl).mean() < 0.9:
                     continue
                 keep, kept = None, None
                 if relief:
                     # the template's pixels are prod's pixels xs: the plane's points on their rays (pose estimate)
-                    o, d = prod.camera_model.unproject(xs)
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        t = ((X_new - o) @ n_new) / (d @ n_new)
-                    X_on = o + t[:, None] * d
-                    X_on[~(t > 0)] = np.nan
+                    X_on = T_rovernew_site.apply(plane_points_site(prod, X_site, n_site, xs))
                     on_plane = relief_keep(new_stereo, xs, X_on, T_roverprev_rovernew, prev.camera_model, centre,
                                            params.relief_disparity_error_px, params.relief_max_parallax_px,
                                            other_px_scale=max(float(scale), 1e-6))

@@ -44,10 +44,10 @@ def local_normals_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, ra
     return tuple(out)
 
 
-def plane_points_in_prev(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv):
-    """Where ``prod``'s pixels ``uv`` (N, 2) see the plane (X_site, n_site), site frame, in ``prev``:
-    ``(uv_prev (N, 2), X_roverprev (N, 3))``, the point's pixel in ``prev`` and the point in ``prev``'s rover frame
-    (each image through its pose estimate); NaN where the ray does not meet the plane in front of ``prod``."""
+def plane_points_site(prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
+    """Where the rays of ``prod``'s pixels ``uv`` (N, 2) (its camera at its pose estimate) meet the plane through
+    ``X_site`` (3,) with normal ``n_site`` (3,), site frame: ``(N, 3)``, NaN where a ray does not meet it in front
+    of the camera."""
     o, d = prod.camera_model.unproject(np.asarray(uv, float).reshape(-1, 2))
     T_site_rovernew = prod.pose.T_site_rover
     o_s, d_s = T_site_rovernew.apply(o), T_site_rovernew.rotate(d)
@@ -55,22 +55,22 @@ def plane_points_in_prev(prev: ImageProduct, prod: ImageProduct, X_site, n_site,
         t = ((np.asarray(X_site) - o_s) @ n_site) / (d_s @ n_site)
     P_s = o_s + t[:, None] * d_s
     P_s[~(t > 0)] = np.nan
-    P_roverprev = prev.pose.T_site_rover.inverse().apply(P_s)
-    return prev.camera_model.project(P_roverprev), P_roverprev
+    return P_s
 
 
 def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
     """``prev``'s image seen at ``prod``'s pixels ``uv`` (..., 2) through the plane (X_site, n_site), site frame.
 
     Each pixel's ray (``prod``'s camera at its pose estimate) meets the plane
-    through ``X_site`` (3,) with normal ``n_site`` (3,); the point is projected
+    through ``X_site`` (3,) with normal ``n_site`` (3,) (:func:`plane_points_site`); the point is projected
     into ``prev`` (its pose estimate) and ``prev``'s image is sampled there
     (bilinear). Returns float32 (...) with NaN where ``prev`` did not see it.
     """
     from ..core.expected import bilinear_sample
 
     uv = np.asarray(uv, float)
-    uv_prev, _ = plane_points_in_prev(prev, prod, X_site, n_site, uv)
+    P_roverprev = prev.pose.T_site_rover.inverse().apply(plane_points_site(prod, X_site, n_site, uv))
+    uv_prev = prev.camera_model.project(P_roverprev)
     return bilinear_sample(prev.pixels_float(), uv_prev).reshape(uv.shape[:-1])
 
 
