@@ -28,7 +28,7 @@ import numpy as np
 
 from ..core.point_stereo import PointStereoParams, on_left_ray
 from ..model import Downlink, ImageProduct, InputError
-from .feature_track import feature_track
+from .feature_track import feature_track, vo_correction
 from .plane_warp import local_normals_site, near_dense_stereo, plane_warped_template
 from ..jsonutil import finite_or_none
 
@@ -85,6 +85,15 @@ class ChainParams:
     relief_disparity_error_px: float = 0.45
     # ... unless fewer than this part of the template is kept (then every pixel counts)
     relief_min_kept: float = 0.25
+    # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
+    # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
+    # image's keypoints, placed in 3-D by its stereo, matched to the new image's; PnP RANSAC within vo_threshold_px,
+    # at least vo_min_inliers; 2-NN ratio vo_ratio) and the target seen through it is one more candidate of the
+    # feature step (docs/stereo-and-tracking.md, "Visual odometry")
+    vo_cameras: tuple = ()
+    vo_threshold_px: float = 2.0
+    vo_min_inliers: int = 20
+    vo_ratio: float = 0.8
     # candidates: (keypoints of the rendering within this part of its half-size, RANSAC model, inliers needed);
     # the smallest reach follows a target off the ground (a rock), whose image moves unlike the ground's (parallax)
     feature_candidates: tuple = ((0.15, "similarity", 6), (0.3, "homography", 12), (0.5, "homography", 12),
@@ -148,6 +157,17 @@ class ChainParams:
         k = self.relief_min_kept
         if not (isinstance(k, (int, float)) and not isinstance(k, bool) and 0 <= k <= 1):
             raise ValueError(f"ChainParams.relief_min_kept: must be a number in [0, 1], got {k!r}")
+        if not (isinstance(self.vo_cameras, tuple) and all(isinstance(c, str) for c in self.vo_cameras)):
+            raise ValueError(f"ChainParams.vo_cameras: must be a tuple of camera names, got {self.vo_cameras!r}")
+        t = self.vo_threshold_px
+        if not (isinstance(t, (int, float)) and not isinstance(t, bool) and np.isfinite(t) and t > 0):
+            raise ValueError(f"ChainParams.vo_threshold_px: must be a number > 0, got {t!r}")
+        n = self.vo_min_inliers
+        if not (isinstance(n, int) and not isinstance(n, bool) and n >= 6):
+            raise ValueError(f"ChainParams.vo_min_inliers: must be an integer >= 6, got {n!r}")
+        q = self.vo_ratio
+        if not (isinstance(q, (int, float)) and not isinstance(q, bool) and 0 < q <= 1):
+            raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:
@@ -395,8 +415,11 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     planes.append(ground)
                 # the new image's own stereo says which template pixels the plane misplaces (relief_mask)
                 new_stereo = None if params.relief_max_parallax_px is None else near_dense_stereo(dl, prod, rng_new)
+                vo = None
+                if kind == "track" and c in params.vo_cameras:
+                    vo = vo_correction(dl, prev, prod, prev_range, feats, params)
                 tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params,
-                                          new_stereo)
+                                          new_stereo, vo=vo)
                 extra.update(finfo)
                 if tr is not None:
                     mode = "plane, feature-guided"

@@ -12,7 +12,7 @@ from .plane_warp import plane_points_site, plane_warped_view, render_through_pla
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
-                  half: int, feats: dict, params, new_stereo=None):
+                  half: int, feats: dict, params, new_stereo=None, vo=None):
     """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
 
     For each plane normal in ``view_normals`` (site frame, planes through
@@ -36,8 +36,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     only the template pixels the plane places where that stereo says they are (:mod:`scipctl.core.relief_mask`;
     all of them when fewer than ``params.relief_min_kept`` of the template would be left). ``feats`` caches the
     new images' keypoints by ``(product id, downsampling)`` (the chains of one downlink may share it: same image, same downsampling, same
-    keypoints). ``info`` records the path, the
-    winner's inlier counts and the coarse position.
+    keypoints). ``vo``: a :class:`~scipctl.core.visual_odometry.CameraCorrection` of ``prod`` (whole-image visual
+    odometry, :func:`vo_correction`) or None: when given, it is one more candidate after the features', its
+    coarse position the target seen through it and its ``G`` the plane's homography under it, NCC-refined and
+    confirmed like the others. ``info`` records the path, the winner's inlier counts and the coarse position.
     """
     from ..core.features import detect_features, knn_matches, locate_by_features
     from ..core.relief_mask import relief_keep
@@ -55,6 +57,34 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     g = np.arange(-half, half + 1, dtype=float)
     c = np.round(np.asarray(pred_uv, float))
     cands, seen, reasons = [], [], []
+
+    def refine(loc, Gi, k, reach, factor):
+        """NCC of the template rendered at the pixels ``Gi`` (real pixels of prod -> pose-estimate pixels) maps prod's
+        pixels around ``loc.uv`` to; appended to ``cands`` unless the rendering misses the previous view."""
+        cc = np.round(loc.uv)
+        xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
+        yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ys = yh[:, :2] / yh[:, 2:3]
+        tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+        if np.isfinite(tpl).mean() < 0.9:
+            return
+        keep, kept = None, None
+        if relief:
+            # the template's pixels are prod's pixels xs: the plane's points on their rays (pose estimate)
+            X_on = T_rovernew_site.apply(plane_points_site(prod, X_site, n_site, xs))
+            on_plane = relief_keep(new_stereo, xs, X_on, T_roverprev_rovernew, prev.camera_model, centre,
+                                   params.relief_disparity_error_px, params.relief_max_parallax_px,
+                                   other_px_scale=max(float(scale), 1e-6))
+            on_plane = on_plane.reshape(tpl.shape) & np.isfinite(tpl)
+            kept = float(on_plane.mean())
+            if kept >= params.relief_min_kept and not on_plane.all():
+                keep = on_plane
+        tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
+        # a whole rendered window: a peak where it touches the image's edge confirms nothing
+        tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
+                   min_score=0.3, accept_border_peak=False, template_mask=keep)
+        cands.append((loc, tr, k, reach, factor, kept, keep is not None))
 
     def confirmed(cd):
         loc, tr = cd[0], cd[1]
@@ -97,30 +127,13 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                     Gi = np.linalg.inv(loc.transform @ S)
                 except np.linalg.LinAlgError:
                     continue
-                cc = np.round(loc.uv)
-                xs = np.stack(np.meshgrid(cc[0] + g, cc[1] + g), -1).reshape(-1, 2)
-                yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    ys = yh[:, :2] / yh[:, 2:3]
-                tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
-                if np.isfinite(tpl).mean() < 0.9:
-                    continue
-                keep, kept = None, None
-                if relief:
-                    # the template's pixels are prod's pixels xs: the plane's points on their rays (pose estimate)
-                    X_on = T_rovernew_site.apply(plane_points_site(prod, X_site, n_site, xs))
-                    on_plane = relief_keep(new_stereo, xs, X_on, T_roverprev_rovernew, prev.camera_model, centre,
-                                           params.relief_disparity_error_px, params.relief_max_parallax_px,
-                                           other_px_scale=max(float(scale), 1e-6))
-                    on_plane = on_plane.reshape(tpl.shape) & np.isfinite(tpl)
-                    kept = float(on_plane.mean())
-                    if kept >= params.relief_min_kept and not on_plane.all():
-                        keep = on_plane
-                tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
-                # a whole rendered window: a peak where it touches the image's edge confirms nothing
-                tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
-                           min_score=0.3, accept_border_peak=False, template_mask=keep)
-                cands.append((loc, tr, k, reach, factor, kept, keep is not None))
+                refine(loc, Gi, k, reach, factor)
+    if vo is not None:
+        vo_loc = _vo_location(prod, X_site, n_site, pred_uv, half, vo, params.feature_local_px)
+        if vo_loc is not None:
+            info["vo_inliers"], info["vo_shift_px"] = vo.n_inliers, float(np.linalg.norm(vo_loc.uv - pred_uv))
+            if not any(np.linalg.norm(vo_loc.uv - q) < 1.0 for q in seen):
+                refine(vo_loc, np.linalg.inv(vo_loc.transform), 0, 0.0, 1.0)
     if not cands:
         info["feature_status"] = "failed"
         info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
@@ -154,11 +167,69 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
                  "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
                  "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
+                 **({"feature_vo": bool(reach == 0.0)} if vo is not None else {}),
                  "feature_shift_px": float(np.linalg.norm(out.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
     if relief:
         info.update({"relief_kept": _f(kept), "relief_masked": masked})
     return out, info
+
+
+def _vo_location(prod: ImageProduct, X_site, n_site, pred_uv, half: int, vo, local_px: float):
+    """The visual-odometry candidate: a :class:`~scipctl.core.features.FeatureLocation` at the target seen through
+    ``vo``, whose ``transform`` maps ``prod``'s pose-estimate pixels to its real ones for the target's plane (the
+    homography of the plane's points around the prediction, pose estimate -> through ``vo``); None when the
+    target or the plane is not in front of the camera."""
+    import cv2
+
+    from ..core.features import FeatureLocation
+
+    T_rovernew_site = prod.pose.T_site_rover.inverse()
+    uv = prod.camera_model.project(vo.apply(T_rovernew_site.apply(np.asarray(X_site, float)[None])))[0]
+    r = 2.0 * half
+    grid = np.asarray(pred_uv, float) + np.array([[i, j] for i in (-r, 0.0, r) for j in (-r, 0.0, r)])
+    P_site = plane_points_site(prod, X_site, n_site, grid)
+    real = prod.camera_model.project(vo.apply(T_rovernew_site.apply(P_site)))
+    ok = np.all(np.isfinite(real), 1) & np.all(np.isfinite(P_site), 1)
+    if not np.all(np.isfinite(uv)) or ok.sum() < 4:
+        return None
+    G, _ = cv2.findHomography(grid[ok], real[ok], 0)
+    if G is None or not np.all(np.isfinite(G)):
+        return None
+    local = int(np.sum(np.linalg.norm(vo.inlier_uv - uv, axis=1) <= local_px))
+    return FeatureLocation(True, "", uv, G, vo.n_points, vo.n_inliers, local, float("nan"))
+
+
+def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: float, feats: dict, params):
+    """Whole-image visual odometry of ``prod`` from ``prev`` (:mod:`scipctl.core.visual_odometry`): SIFT keypoints of
+    both whole images (full resolution, median-filtered as the feature step's; cached in ``feats`` under the
+    feature step's keys), matched (2-NN ratio ``params.vo_ratio``), ``prev``'s matched keypoints placed in 3-D by
+    its dense stereo around the target's range (:func:`~scipctl.pipeline.plane_warp.near_dense_stereo`) and
+    carried into ``prod``'s rover frame through the two pose estimates; then
+    :func:`~scipctl.core.visual_odometry.camera_correction`. None when stereo or the fit fails."""
+    from ..core.features import detect_features, knn_matches
+    from ..core.visual_odometry import camera_correction
+    from .plane_warp import near_dense_stereo
+
+    ds = near_dense_stereo(dl, prev, prev_range_m)
+    if ds is None:
+        return None
+    kps = []
+    for im in (prev, prod):
+        key = (im.product_id, 1.0, params.feature_median_px)
+        if key not in feats:
+            feats[key] = detect_features(im.pixels_float(), downsample=1.0, median_px=params.feature_median_px)
+        kps.append(feats[key])
+    f_prev, f_new = kps
+    if len(f_prev) < 2 or len(f_new) < 2:
+        return None
+    knn = knn_matches(f_prev, f_new)
+    good = np.isfinite(knn.best_d) & (knn.best_d < params.vo_ratio * knn.second_d)
+    X_roverprev = ds.xyz_at_left_uv(f_prev.uv[good])
+    fin = np.all(np.isfinite(X_roverprev), 1)
+    X_rovernew = prod.pose.T_site_rover.inverse().apply(prev.pose.T_site_rover.apply(X_roverprev[fin]))
+    uv_new = f_new.uv[knn.best[good]][fin]
+    return camera_correction(X_rovernew, uv_new, prod.camera_model, params.vo_threshold_px, params.vo_min_inliers)
 
 
 def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-6) -> np.ndarray:

@@ -1,0 +1,99 @@
+"""pipeline/feature_track.py's visual odometry (vo_correction and the chain's ChainParams.vo_cameras option) on the
+bundled sols; the numerics are tested on exact synthetic scenes in tests/core/test_visual_odometry.py."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scipctl.io.downlink import read_downlink
+from scipctl.pipeline.chain import ChainParams, run_chain
+from scipctl.pipeline.feature_track import vo_correction
+from scipctl.pipeline.plane_warp import near_dense_stereo
+
+SOLS = sorted((Path(__file__).resolve().parents[2] / "sample_sols" / "mcap").glob("paper-s1-*.mcap"))
+
+
+@pytest.fixture(scope="module", params=SOLS, ids=lambda p: p.stem)
+def dl(request):
+    return read_downlink(request.param)
+
+
+def _navcams(dl):
+    return sorted((im for im in dl.images if im.camera == "navcam" and im.eye == "left"), key=lambda i: i.time_s)
+
+
+def test_visual_odometry_corrects_the_drive_between_the_first_two_navcam_stops(dl):
+    """From the 4.5 m navcam to the 3 m one (a 1.5 m drive): the pose correction from the whole image (>= 500 RANSAC
+    inliers; measured 704-823 on OpenCV 5.0 and 4.14) puts each marked target's stereo point (the 4.5 m image's dense
+    stereo at its mark) within 5.5 px of its 3 m mark, where the pose estimate puts it 30-85 px away. Measured
+    0.32-4.34 px (OpenCV 5.0.0) and 0.32-3.64 px (4.14.0) over the five targets of the two sols (/tmp/vo_sample.py
+    of session 17); bound = the largest x 1.25, rounded up to 0.5 px. The error is the stereo point's and the fit's."""
+    a, b = _navcams(dl)[:2]
+    params = ChainParams()
+    seen = 0
+    for t in dl.targets:
+        ma, mb = t.mark_in(a.product_id), t.mark_in(b.product_id)
+        if ma is None or mb is None:
+            continue
+        X_a = near_dense_stereo(dl, a, 4.5).xyz_at_left_uv(np.array([[ma.u, ma.v]]))
+        rng = float(np.linalg.norm(X_a[0] - a.camera_model.C))
+        X_a = near_dense_stereo(dl, a, rng).xyz_at_left_uv(np.array([[ma.u, ma.v]]))
+        corr = vo_correction(dl, a, b, rng, {}, params)
+        assert corr is not None and corr.n_inliers >= 500
+        X_b = b.pose.T_site_rover.inverse().apply(a.pose.T_site_rover.apply(X_a))
+        pose_err = np.linalg.norm(b.camera_model.project(X_b)[0] - [mb.u, mb.v])
+        vo_err = np.linalg.norm(b.camera_model.project(corr.apply(X_b))[0] - [mb.u, mb.v])
+        assert pose_err > 25.0
+        assert vo_err < 5.5, f"{t.id}: {vo_err:.2f} px (pose estimate {pose_err:.1f} px)"
+        seen += 1
+    assert seen >= 2
+
+
+def test_visual_odometry_shares_the_feature_steps_keypoint_cache(dl):
+    """The whole images' keypoints go into the feature step's cache under its keys (product, 1.0, median): a second
+    call finds them there and gives the same correction bit for bit."""
+    a, b = _navcams(dl)[:2]
+    params = ChainParams()
+    feats = {}
+    c1 = vo_correction(dl, a, b, 4.5, feats, params)
+    assert set(feats) == {(a.product_id, 1.0, params.feature_median_px), (b.product_id, 1.0, params.feature_median_px)}
+    c2 = vo_correction(dl, a, b, 4.5, feats, params)
+    assert np.array_equal(c1.R_camtrue_camest, c2.R_camtrue_camest)
+    assert np.array_equal(c1.t_camtrue_camest_m, c2.t_camtrue_camest_m)
+
+
+@pytest.mark.parametrize("field, bad", [("vo_cameras", "navcam"), ("vo_cameras", (1,)), ("vo_threshold_px", 0.0),
+                                        ("vo_threshold_px", float("nan")), ("vo_min_inliers", 5),
+                                        ("vo_min_inliers", 20.0), ("vo_ratio", 0.0), ("vo_ratio", 1.5)])
+def test_chain_params_refuse_bad_vo_settings(field, bad):
+    with pytest.raises(ValueError, match=f"ChainParams.{field}"):
+        ChainParams(**{field: bad}).check()
+    assert ChainParams(vo_cameras=("navcam",)).check()
+
+
+def test_visual_odometry_is_an_option_of_the_navcam_tracks(dl):
+    """Off by default (nothing recorded); with vo_cameras=("navcam",) every navcam track records whether the
+    winning candidate was the odometry's (feature_vo), and where the fit held, its inliers and how far it moved the
+    prediction; the pancam steps and the handoff to the navcam are untouched (same pixels bit for bit)."""
+    assert ChainParams().vo_cameras == ()
+    if Path(dl.source).stem != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains, ~40 s)")
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    tid = dl.targets[0].id
+    mk = dl.target(tid).mark_in(start.product_id)
+    base = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="handoff"))
+    assert not any("feature_vo" in s.extra or "vo_inliers" in s.extra for s in base)
+    params = ChainParams(answer="handoff", vo_cameras=("navcam",))
+    steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=params)
+    assert [(s.camera, s.kind) for s in steps[:3]] == [(s.camera, s.kind) for s in base[:3]]
+    for s, s0 in zip(steps[:3], base[:3]):
+        assert s.tracked_uv == s0.tracked_uv
+    tracks = [s for s in steps if s.camera == "navcam" and s.kind == "track" and s.extra.get("coarse") == "features"]
+    assert tracks
+    for s in tracks:
+        if s.extra.get("feature_status") in ("confirmed", "unconfirmed"):
+            assert isinstance(s.extra["feature_vo"], bool)
+        if "vo_inliers" in s.extra:
+            assert s.extra["vo_inliers"] >= params.vo_min_inliers and s.extra["vo_shift_px"] >= 0.0
+    assert any("vo_inliers" in s.extra for s in tracks)
