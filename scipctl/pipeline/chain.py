@@ -93,6 +93,12 @@ class ChainParams:
     # on 187 held-out chains: navcam tracks right 162 -> 176 of 340, the final answer 122 -> 124 of 176 (it is mostly
     # the closure's), for +27-34 % chain CPU, so off by default
     vo_cameras: tuple = ()
+    # the closure check's feature step (pipeline/chain_closure.py) takes the visual-odometry candidate too: the pose
+    # error of the drive from the reference's stop to the final hazcam, fitted to the whole hazcam image. Measured by
+    # re-running the closures of recorded chains (docs/stereo-and-tracking.md, "Visual odometry for the closure"):
+    # the chain's final answer within 4 px 169 -> 179 of 244 (tuning) and 122 -> 131 of 176 (held out), for ~+70 %
+    # closure CPU; off by default until the closure's trust model has learnt from such closures
+    closure_vo: bool = False
     vo_threshold_px: float = 2.0
     vo_min_inliers: int = 20
     vo_ratio: float = 0.8
@@ -170,6 +176,8 @@ class ChainParams:
         q = self.vo_ratio
         if not (isinstance(q, (int, float)) and not isinstance(q, bool) and 0 < q <= 1):
             raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
+        if not isinstance(self.closure_vo, bool):
+            raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:

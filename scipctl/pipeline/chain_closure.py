@@ -49,6 +49,10 @@ class Closure:
     feature_local_inliers: int = 0
     feature_confirmed: int = 0
     feature_shift_px: Optional[float] = None
+    # with ChainParams.closure_vo: whether the visual-odometry candidate won, and its RANSAC inliers (None: not run
+    # or not solved)
+    feature_vo: Optional[bool] = None
+    vo_inliers: Optional[int] = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -82,7 +86,7 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     behind ``prod``'s camera. ``feats``: the feature step's keypoint cache (:func:`feature_track`; None: its own)."""
     from ..core.point_stereo import on_left_ray
     from ..core.windows import window_scale_for_handoff
-    from .feature_track import feature_track
+    from .feature_track import feature_track, vo_correction
     from .plane_warp import local_normals_site
 
     prev = dl.product(R.product_id)
@@ -102,8 +106,10 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
         return None, {}, float("nan"), None
     rng_new = float(np.linalg.norm(X_new - prod.camera_model.C))
     scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, rng_prev, 1.0 / prod.camera_model.hs, rng_new)
+    feats = {} if feats is None else feats
+    vo = vo_correction(dl, prev, prod, rng_prev, feats, params) if params.closure_vo else None
     tr, info = feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera),
-                             {} if feats is None else feats, params)
+                             feats, params, vo=vo)
     return tr, info, float(scale), pred
 
 
@@ -127,7 +133,8 @@ def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Clos
     out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale),
                   ncc_peak=info.get("ncc_score"), feature_local_inliers=int(info.get("feature_local_inliers", 0)),
                   feature_confirmed=int(info.get("feature_confirmed", 0)),
-                  feature_shift_px=info.get("feature_shift_px"))
+                  feature_shift_px=info.get("feature_shift_px"), feature_vo=info.get("feature_vo"),
+                  vo_inliers=info.get("vo_inliers"))
     if tr is not None and np.all(np.isfinite(tr.uv)):
         out.uv = [float(x) for x in tr.uv]
         out.closure_px = float(np.linalg.norm(np.asarray(tr.uv) - np.asarray(H.tracked_uv, float)))

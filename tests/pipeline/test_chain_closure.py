@@ -34,3 +34,29 @@ def test_closure_params_and_record():
     d = Closure("no reference").to_dict()
     assert d["status"] == "no reference" and d["uv"] is None and d["closure_px"] is None
     assert Closure("confirmed", closure_px=float("nan")).to_dict()["closure_px"] is None
+
+
+def test_visual_odometry_is_an_option_of_the_closure():
+    """ChainParams.closure_vo (off by default: the closure records nothing of it). On, the closure's feature step also
+    has the visual-odometry candidate (the drive's pose error from the reference's image to the whole final hazcam
+    image, pipeline/feature_track.py vo_correction), and on paper-s1-straight the default chain's final answers stay
+    within the bounds that chain is held to (tests/pipeline/chain_expected.py EXPECTED_FINAL_PX; measured with the
+    option on: t1 1.24 | 0.30 px, t2 1.91 | 1.87 px, OpenCV 5.0.0 | 4.14.0)."""
+    from pathlib import Path
+
+    from scipctl.io.downlink import read_downlink
+    from scipctl.pipeline.chain import run_chain
+    from tests.pipeline.chain_expected import EXPECTED_FINAL_PX
+
+    with pytest.raises(ValueError, match="closure_vo"):
+        ChainParams(closure_vo=1).check()
+    assert ChainParams().closure_vo is False and Closure("confirmed").to_dict()["vo_inliers"] is None
+    dl = read_downlink(Path(__file__).resolve().parents[2] / "sample_sols" / "mcap" / "paper-s1-straight.mcap")
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    for tid, bound in EXPECTED_FINAL_PX["paper-s1-straight"].items():
+        mk = dl.target(tid).mark_in(start.product_id)
+        steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(closure_vo=True))
+        cl = steps[-1].extra["closure"]
+        assert cl["vo_inliers"] is not None and cl["vo_inliers"] >= ChainParams().vo_min_inliers
+        assert isinstance(cl["feature_vo"], bool)
+        assert steps[-1].error_px <= bound, f"{tid}: {steps[-1].error_px:.2f} px"
