@@ -382,8 +382,9 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     X_site = start.pose.T_site_rover.apply(on_left_ray(start.camera_model, uv, ps.xyz))
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
-    normal, ground, normal_from = None, None, None
-    # (product_id, downsampling) -> keypoints of the whole image (each new image is searched once)
+    normal, ground, normal_from, prev_stereo = None, None, None, None
+    # (product_id, downsampling, median) -> keypoints of the whole image (each new image is searched once); the
+    # visual odometry's whole-image matches too (vo_correction)
     feats = {} if feature_cache is None else feature_cache
 
     positions = [p for p in dl.positions() if p != start.position]
@@ -415,7 +416,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
             if template_mode == "plane" and (kind == "track" or prev.position != prod.position):
                 if normal_from is not prev:
                     X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
-                    (normal, ground), normal_from = local_normals_site(dl, prev, X_prev, prev_range), prev
+                    prev_stereo = near_dense_stereo(dl, prev, prev_range)  # the normals' and the odometry's
+                    (normal, ground), normal_from = local_normals_site(dl, prev, X_prev, prev_range, prev_stereo), prev
                 # the surface plane at the target (or the rover's ground plane when dense stereo gave no normal)
                 # renders the template; the coarse step also tries the surrounding ground's plane
                 up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
@@ -427,7 +429,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 new_stereo = None if params.relief_max_parallax_px is None else near_dense_stereo(dl, prod, rng_new)
                 vo = None
                 if kind == "track" and c in params.vo_cameras:
-                    vo = vo_correction(dl, prev, prod, prev_range, feats, params)
+                    vo = vo_correction(dl, prev, prod, prev_range, feats, params, prev_stereo)
                 tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params,
                                           new_stereo, vo=vo)
                 extra.update(finfo)

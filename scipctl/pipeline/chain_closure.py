@@ -87,14 +87,15 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     from ..core.point_stereo import on_left_ray
     from ..core.windows import window_scale_for_handoff
     from .feature_track import feature_track, vo_correction
-    from .plane_warp import local_normals_site
+    from .plane_warp import local_normals_site, near_dense_stereo
 
     prev = dl.product(R.product_id)
     # the reference's estimate on its tracked pixel's ray, as the chain keeps it (on_left_ray)
     X_prev = on_left_ray(prev.camera_model, R.tracked_uv, prev.pose.T_site_rover.inverse().apply(np.asarray(R.xyz_site_m)))
     X_site = prev.pose.T_site_rover.apply(X_prev)
     rng_prev = float(np.linalg.norm(X_prev - prev.camera_model.C))
-    normal, ground = local_normals_site(dl, prev, X_prev, rng_prev)
+    prev_stereo = near_dense_stereo(dl, prev, rng_prev)  # the plane's normals and the odometry's 3-D points
+    normal, ground = local_normals_site(dl, prev, X_prev, rng_prev, stereo=prev_stereo)
     up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
     n_view = normal if normal is not None else (ground if ground is not None else up)
     planes = [n_view]
@@ -107,7 +108,7 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     rng_new = float(np.linalg.norm(X_new - prod.camera_model.C))
     scale = window_scale_for_handoff(1.0 / prev.camera_model.hs, rng_prev, 1.0 / prod.camera_model.hs, rng_new)
     feats = {} if feats is None else feats
-    vo = vo_correction(dl, prev, prod, rng_prev, feats, params) if params.closure_vo else None
+    vo = vo_correction(dl, prev, prod, rng_prev, feats, params, prev_stereo) if params.closure_vo else None
     tr, info = feature_track(prev, prod, X_site, planes, n_view, pred, scale, params.template_half(prod.camera),
                              feats, params, vo=vo)
     return tr, info, float(scale), pred

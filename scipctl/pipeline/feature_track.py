@@ -200,18 +200,22 @@ def _vo_location(prod: ImageProduct, X_site, n_site, pred_uv, half: int, vo, loc
     return FeatureLocation(True, "", uv, G, vo.n_points, vo.n_inliers, local, float("nan"))
 
 
-def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: float, feats: dict, params):
+def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: float, feats: dict, params,
+                  prev_stereo=None):
     """Whole-image visual odometry of ``prod`` from ``prev`` (:mod:`scipctl.core.visual_odometry`): SIFT keypoints of
     both whole images (full resolution, median-filtered as the feature step's; cached in ``feats`` under the
     feature step's keys), matched (2-NN ratio ``params.vo_ratio``), ``prev``'s matched keypoints placed in 3-D by
     its dense stereo around the target's range (:func:`~scipctl.pipeline.plane_warp.near_dense_stereo`) and
     carried into ``prod``'s rover frame through the two pose estimates; then
-    :func:`~scipctl.core.visual_odometry.camera_correction`. None when stereo or the fit fails."""
+    :func:`~scipctl.core.visual_odometry.camera_correction`. None when stereo or the fit fails. ``prev_stereo``:
+    ``near_dense_stereo(dl, prev, prev_range_m)`` when the caller has it (None: computed here). The whole images'
+    2-NN matches depend on the two images only: cached in ``feats`` under ``("knn", prev, prod, median)``, so the
+    targets of one downlink share them."""
     from ..core.features import detect_features, knn_matches
     from ..core.visual_odometry import camera_correction
     from .plane_warp import near_dense_stereo
 
-    ds = near_dense_stereo(dl, prev, prev_range_m)
+    ds = near_dense_stereo(dl, prev, prev_range_m) if prev_stereo is None else prev_stereo
     if ds is None:
         return None
     kps = []
@@ -223,7 +227,10 @@ def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: floa
     f_prev, f_new = kps
     if len(f_prev) < 2 or len(f_new) < 2:
         return None
-    knn = knn_matches(f_prev, f_new)
+    key = ("knn", prev.product_id, prod.product_id, params.feature_median_px)
+    if key not in feats:
+        feats[key] = knn_matches(f_prev, f_new)
+    knn = feats[key]
     good = np.isfinite(knn.best_d) & (knn.best_d < params.vo_ratio * knn.second_d)
     X_roverprev = ds.xyz_at_left_uv(f_prev.uv[good])
     fin = np.all(np.isfinite(X_roverprev), 1)

@@ -51,16 +51,20 @@ def test_visual_odometry_corrects_the_drive_between_the_first_two_navcam_stops(d
 
 
 def test_visual_odometry_shares_the_feature_steps_keypoint_cache(dl):
-    """The whole images' keypoints go into the feature step's cache under its keys (product, 1.0, median): a second
-    call finds them there and gives the same correction bit for bit."""
+    """The whole images' keypoints go into the feature step's cache under its keys (product, 1.0, median), their
+    2-NN matches under ("knn", prev, new, median): a second call finds them there, and a second call handed the
+    previous image's stereo, as the chain and the closure hand it, gives the same correction bit for bit."""
     a, b = _navcams(dl)[:2]
     params = ChainParams()
     feats = {}
     c1 = vo_correction(dl, a, b, 4.5, feats, params)
-    assert set(feats) == {(a.product_id, 1.0, params.feature_median_px), (b.product_id, 1.0, params.feature_median_px)}
+    m = params.feature_median_px
+    assert set(feats) == {(a.product_id, 1.0, m), (b.product_id, 1.0, m), ("knn", a.product_id, b.product_id, m)}
     c2 = vo_correction(dl, a, b, 4.5, feats, params)
-    assert np.array_equal(c1.R_camtrue_camest, c2.R_camtrue_camest)
-    assert np.array_equal(c1.t_camtrue_camest_m, c2.t_camtrue_camest_m)
+    c3 = vo_correction(dl, a, b, 4.5, {}, params, near_dense_stereo(dl, a, 4.5))
+    for c in (c2, c3):
+        assert np.array_equal(c1.R_camtrue_camest, c.R_camtrue_camest)
+        assert np.array_equal(c1.t_camtrue_camest_m, c.t_camtrue_camest_m)
 
 
 @pytest.mark.parametrize("field, bad", [("vo_cameras", "navcam"), ("vo_cameras", (1,)), ("vo_threshold_px", 0.0),
