@@ -96,8 +96,8 @@ class ChainParams:
     # the closure check's feature step (pipeline/chain_closure.py) takes the visual-odometry candidate too: the pose
     # error of the drive from the reference's stop to the final hazcam, fitted to the whole hazcam image. Measured on
     # whole chains (docs/stereo-and-tracking.md, "Visual odometry in the closure, the default"): the chain's final
-    # answer within 4 px 169 -> 179 of 260 chains (tuning) and 122 -> 131 of 186 (held out), for ~+70 % closure
-    # CPU; the closure trust model is fitted on such closures (session 18)
+    # answer within 4 px 169 -> 179 of 260 chains (tuning) and 122 -> 131 of 186 (held out), for +17-19 % of the
+    # chain's CPU on the bundled sols; the closure trust model is fitted on such closures (session 18)
     closure_vo: bool = True
     vo_threshold_px: float = 2.0
     vo_min_inliers: int = 20
