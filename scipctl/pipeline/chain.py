@@ -417,7 +417,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 if normal_from is not prev:
                     X_prev = prev.pose.T_site_rover.inverse().apply(X_site)
                     prev_stereo = near_dense_stereo(dl, prev, prev_range)  # the normals' and the odometry's
-                    (normal, ground), normal_from = local_normals_site(dl, prev, X_prev, prev_range, prev_stereo), prev
+                    (normal, ground), normal_from = local_normals_site(prev, X_prev, prev_range, prev_stereo), prev
                 # the surface plane at the target (or the rover's ground plane when dense stereo gave no normal)
                 # renders the template; the coarse step also tries the surrounding ground's plane
                 up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])

@@ -95,7 +95,7 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     X_site = prev.pose.T_site_rover.apply(X_prev)
     rng_prev = float(np.linalg.norm(X_prev - prev.camera_model.C))
     prev_stereo = near_dense_stereo(dl, prev, rng_prev)  # the plane's normals and the odometry's 3-D points
-    normal, ground = local_normals_site(dl, prev, X_prev, rng_prev, stereo=prev_stereo)
+    normal, ground = local_normals_site(prev, X_prev, rng_prev, prev_stereo)
     up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
     n_view = normal if normal is not None else (ground if ground is not None else up)
     planes = [n_view]

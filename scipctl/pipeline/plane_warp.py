@@ -24,9 +24,9 @@ def near_dense_stereo(dl: Downlink, prod: ImageProduct, range_m: float):
         return None
 
 
-def local_normals_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, range_m: float, stereo=None):
-    """Surface normals (site frame) at ``X_rover`` from :func:`near_dense_stereo` of ``prod`` (``stereo``: that
-    stereo when the caller has it, ``near_dense_stereo(dl, prod, range_m)``; None: computed here).
+def local_normals_site(prod: ImageProduct, X_rover: np.ndarray, range_m: float, stereo):
+    """Surface normals (site frame) at ``X_rover`` from ``stereo``, :func:`near_dense_stereo` of ``prod`` around
+    ``range_m`` (the caller's, which it also hands to the visual odometry; None: no stereo, no normals).
 
     Returns ``(local, ground)``: the plane fitted within ``max(0.05, 0.025
     range)`` m (the target's own surface, e.g. a rock face) and within
@@ -34,7 +34,7 @@ def local_normals_site(dl: Downlink, prod: ImageProduct, X_rover: np.ndarray, ra
     """
     from .designate import surface_normal
 
-    ds = near_dense_stereo(dl, prod, range_m) if stereo is None else stereo
+    ds = stereo
     if ds is None:
         return None, None
     xyz = ds.xyz.reshape(-1, 3)
