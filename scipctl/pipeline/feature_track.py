@@ -201,21 +201,22 @@ def _vo_location(prod: ImageProduct, X_site, n_site, pred_uv, half: int, vo, loc
 
 
 def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: float, feats: dict, params,
-                  prev_stereo=None):
+                  prev_stereo=...):
     """Whole-image visual odometry of ``prod`` from ``prev`` (:mod:`scipctl.core.visual_odometry`): SIFT keypoints of
     both whole images (full resolution, median-filtered as the feature step's; cached in ``feats`` under the
     feature step's keys), matched (2-NN ratio ``params.vo_ratio``), ``prev``'s matched keypoints placed in 3-D by
     its dense stereo around the target's range (:func:`~scipctl.pipeline.plane_warp.near_dense_stereo`) and
     carried into ``prod``'s rover frame through the two pose estimates; then
     :func:`~scipctl.core.visual_odometry.camera_correction`. None when stereo or the fit fails. ``prev_stereo``:
-    ``near_dense_stereo(dl, prev, prev_range_m)`` when the caller has it (None: computed here). The whole images'
+    ``near_dense_stereo(dl, prev, prev_range_m)`` when the caller has it, None included (its stereo failed: no
+    odometry, and no second try); left out (``...``): computed here. The whole images'
     2-NN matches depend on the two images only: cached in ``feats`` under ``("knn", prev, prod, median)``, so the
     targets of one downlink share them."""
     from ..core.features import detect_features, knn_matches
     from ..core.visual_odometry import camera_correction
     from .plane_warp import near_dense_stereo
 
-    ds = near_dense_stereo(dl, prev, prev_range_m) if prev_stereo is None else prev_stereo
+    ds = near_dense_stereo(dl, prev, prev_range_m) if prev_stereo is ... else prev_stereo
     if ds is None:
         return None
     kps = []

@@ -67,6 +67,17 @@ def test_visual_odometry_shares_the_feature_steps_keypoint_cache(dl):
         assert np.array_equal(c1.t_camtrue_camest_m, c.t_camtrue_camest_m)
 
 
+def test_a_caller_whose_stereo_failed_gets_no_odometry_and_no_second_stereo(dl, monkeypatch):
+    """prev_stereo=None is the caller's failed stereo: vo_correction answers None without running stereo again."""
+    import scipctl.pipeline.plane_warp as plane_warp
+
+    a, b = _navcams(dl)[:2]
+    calls = []
+    monkeypatch.setattr(plane_warp, "near_dense_stereo", lambda *args, **kw: calls.append(args))
+    assert vo_correction(dl, a, b, 4.5, {}, ChainParams(), None) is None
+    assert calls == []
+
+
 @pytest.mark.parametrize("field, bad", [("vo_cameras", "navcam"), ("vo_cameras", (1,)), ("vo_threshold_px", 0.0),
                                         ("vo_threshold_px", float("nan")), ("vo_min_inliers", 5),
                                         ("vo_min_inliers", 20.0), ("vo_ratio", 0.0), ("vo_ratio", 1.5)])
