@@ -2,7 +2,8 @@
 (docs/stereo-and-tracking.md, "Closure as the answer").
 
     # 1. the table: every confirmed closure of campaign folders run with --closure or --chain-answer closure
-    python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz [--family-dir DIR=FAMILY ...]
+    python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz [--family-dir DIR=FAMILY ...] \
+        [--step-model scipctl/data/step_trust_model.json]
     # 2. the model (scipctl/data/closure_trust_model.json) and the held-out report (one family out at a time)
     python docs/scripts/fit_closure_trust.py fit closures.jsonl.gz -o scipctl/data/closure_trust_model.json \
         --report r.json
@@ -31,10 +32,15 @@ def cmd_table(args) -> None:
     from scipctl.pipeline.closure_trust_fit import closure_row
 
     dirs = dict(x.split("=", 1) for x in args.family_dir)
+    step_model = None
+    if args.step_model:
+        from scipctl.io.step_trust_model import step_trust_model_from_text
+
+        step_model = step_trust_model_from_text(Path(args.step_model).read_text(encoding="utf-8"), args.step_model)
     rows, chains = [], 0
     for fam, name, record in campaign_chains(args.campaigns, dirs):
         chains += 1
-        row = closure_row(record, fam, name)
+        row = closure_row(record, fam, name, step_model)
         if row is not None:
             rows.append(row)
     # the same downlink in two campaigns: its first campaign's rows only
@@ -126,6 +132,8 @@ def main():
     t.add_argument("campaigns", nargs="+")
     t.add_argument("-o", "--out", required=True)
     t.add_argument("--family-dir", action="append", default=[], metavar="DIR=FAMILY")
+    t.add_argument("--step-model", metavar="FILE", help="score the chains' tracking steps with this step model "
+                   "(the reference's ref_p_success as a chain run with it would have it); default: as recorded")
     f = sub.add_parser("fit")
     f.add_argument("table")
     f.add_argument("-o", "--out", required=True)

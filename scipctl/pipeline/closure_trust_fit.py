@@ -45,14 +45,21 @@ class ClosureRow:
         return cls(**{k: d.get(k) for k in cls.__dataclass_fields__})
 
 
-def closure_row(record: dict, family: str, downlink: str) -> Optional[ClosureRow]:
+def closure_row(record: dict, family: str, downlink: str, step_model=None) -> Optional[ClosureRow]:
     """The :class:`ClosureRow` of one chain record (``campaign``'s ``record`` of kind ``chain``), or None when its
     closure was not confirmed with a pixel. Works on chains that adopted the closure as their answer (the handoff
-    path's pixel is then in the final step's ``extra["handoff"]``) and on chains that only checked it."""
+    path's pixel is then in the final step's ``extra["handoff"]``) and on chains that only checked it.
+
+    ``step_model``: a :class:`~scipctl.core.step_trust.StepTrustModel` that scores the chain's tracking steps
+    again (:func:`~scipctl.pipeline.chain_trust.score_steps`) before the evidence is read, so that the reference's
+    ``ref_p_success`` is that model's, as a chain run with it would have it; None: the ``p_success`` recorded."""
     from .chain import ChainStep
     from .chain_closure import closure_evidence
+    from .chain_trust import score_steps
 
     steps = [ChainStep.from_dict(s) for s in record.get("steps", [])]
+    if step_model is not None:
+        score_steps(steps, step_model)
     final = next((s for s in steps if s.camera == "hazcam" and s.extra.get("final")), None)
     if final is None:
         return None

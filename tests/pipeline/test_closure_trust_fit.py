@@ -87,3 +87,39 @@ def test_a_row_is_made_from_a_chain_record_with_a_confirmed_closure():
     for status in ("unconfirmed", "failed"):
         bad = dict(fin, extra={"final": True, "closure": dict(cl, status=status)})
         assert closure_row({"target": "t1", "steps": [ref, bad]}, "fam", "d") is None
+
+
+def test_a_step_model_scores_the_reference_again():
+    """With a step model, the row's ref_p_success is that model's p for the reference step (what a chain run with
+    it would have), not the p recorded; the rest of the evidence is the record's."""
+    from scipctl.core.step_trust import StepTrustModel
+    from scipctl.pipeline.chain import ChainStep
+    from scipctl.pipeline.chain_trust import step_evidence
+    from scipctl.pipeline.closure_trust_fit import closure_row
+    from scipctl.io.step_trust_model import load_packaged_step_trust_model
+
+    blank = {k: None for k in ("predicted_uv", "mark_uv", "error_px", "ncc_peak", "range_m", "truth_xyz_site_m",
+                               "error_3d_m", "p_success")}
+    blank.update(ok=True, reason="", go=False, advice=None)
+    des = dict(blank, camera="pancam", kind="designate", position=[1, 0], product_id="d", tracked_uv=[50.0, 60.0],
+               xyz_site_m=[10.0, 0.0, 0.0], extra={"px_mm": 2.8})
+    ref = dict(blank, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.123,
+               tracked_uv=[40.0, 70.0], xyz_site_m=[10.0, 0.0, 0.0], range_m=4.5, ncc_peak=0.9,
+               extra={"feature_status": "confirmed", "feature_local_inliers": 12, "feature_inliers": 30,
+                      "feature_confirmed": 3, "feature_shift_px": 20.0, "ncc_score": 0.9, "ncc_ratio": 1.3,
+                      "scale": 2.2, "px_mm": 1.3, "template": "plane, feature-guided"})
+    cl = {"status": "confirmed", "uv": [103.0, 204.0], "reference_step": 1, "ncc_peak": 0.8, "closure_px": 5.0,
+          "feature_local_inliers": 9, "feature_confirmed": 2, "feature_shift_px": 40.0, "scale": 0.6}
+    fin = dict(blank, camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
+               tracked_uv=[103.0, 209.0], xyz_site_m=[10.0, 0.0, 0.0], extra={"final": True, "closure": cl})
+    record = {"target": "t1", "steps": [des, ref, fin]}
+    model = load_packaged_step_trust_model()
+    assert isinstance(model, StepTrustModel)
+    recorded = closure_row(record, "fam", "d")
+    again = closure_row(record, "fam", "d", model)
+    steps = [ChainStep.from_dict(s) for s in record["steps"]]
+    want = float(model.probability([step_evidence(steps, 1)])[0])
+    assert recorded.evidence["ref_p_success"] == 0.123
+    assert again.evidence["ref_p_success"] == want != 0.123
+    assert {k: v for k, v in again.evidence.items() if k != "ref_p_success"} == \
+        {k: v for k, v in recorded.evidence.items() if k != "ref_p_success"}
