@@ -52,6 +52,8 @@ class StepEvidence(EvidenceRecord):
     prior_flagged: float = 0.0  # earlier tracking steps of the chain with ok False
     prior_min_ncc: float = math.nan  # lowest NCC peak of the earlier tracking steps
     prior_steps: float = 0.0  # earlier tracking steps (after the designation)
+    refine_px: float = math.nan  # confirmed: |NCC peak - the feature model's position| of the winning candidate
+    pooled: float = math.nan  # confirmed: how many candidates' NCC positions agreed and were pooled
 
     @property
     def is_pancam_track(self) -> float:
@@ -85,6 +87,8 @@ STEP_FEATURES: dict[str, tuple[str, str]] = {
     "prior_flagged": ("prior_flagged", "x"),
     "prior_min_ncc": ("prior_min_ncc", "x"),
     "prior_steps": ("prior_steps", "x"),
+    "log_refine": ("refine_px", "log1p"),
+    "log_pooled": ("pooled", "log1p"),
 }
 
 

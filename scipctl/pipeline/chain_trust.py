@@ -63,7 +63,13 @@ def step_evidence(steps: list, i: int) -> StepEvidence:
         stereo_ok=float(s.range_m is not None), ok=float(bool(s.ok)),
         follows_unverified=float(bool(x.get("follows_unverified"))), zoom=_num(x.get("scale")),
         px_mm=_num(x.get("px_mm")), prior_flagged=float(sum(1 for p in prior if not p.ok)),
-        prior_min_ncc=min(nccs) if nccs else math.nan, prior_steps=float(len(prior)))
+        prior_min_ncc=min(nccs) if nccs else math.nan, prior_steps=float(len(prior)),
+        refine_px=_dist(x.get("coarse_uv"), x.get("ncc_uv")) if status == "confirmed" else math.nan,
+        pooled=_num(x.get("feature_pooled")) if status == "confirmed" else math.nan)
+
+
+def _dist(a, b) -> float:
+    return math.nan if a is None or b is None else float(math.dist(a, b))
 
 
 def score_steps(steps: list, model: Optional[StepTrustModel]) -> None:

@@ -117,6 +117,20 @@ def test_evidence_counts_the_earlier_steps():
     assert advice_for(steps, 1) == NEW_IMAGE  # confirmed features, only the flag: not a re-designation
 
 
+def test_evidence_of_a_confirmed_step_says_how_far_ncc_moved_the_feature_position_and_how_many_agreed():
+    """refine_px: |NCC peak - feature model position| of the winning candidate; pooled: the candidates pooled. Only
+    a confirmed step has them (an unconfirmed step's NCC peak was elsewhere; NaN: the model's fill)."""
+    steps = _chain()
+    steps[1] = _step(1, "pancam", "track", coarse_uv=[100.0, 50.0], ncc_uv=[103.0, 54.0], feature_pooled=2)
+    ev = step_evidence(steps, 1)
+    assert ev.refine_px == 5.0 and ev.pooled == 2.0
+    steps[1] = _step(1, "pancam", "track", status="unconfirmed", coarse_uv=[100.0, 50.0], ncc_uv=[103.0, 54.0],
+                     feature_pooled=4)
+    ev = step_evidence(steps, 1)
+    assert np.isnan(ev.refine_px) and np.isnan(ev.pooled)
+    assert np.isnan(step_evidence(_chain(), 1).refine_px)  # no positions recorded
+
+
 def test_a_closure_answer_is_judged_without_the_navcam_steps_it_skips():
     """When the final answer is the closure's (``extra["answer"] == "closure"``, found from its reference step
     across the navcam tracks), a NO-GO navcam track between the reference and the final step does not decide the
