@@ -38,6 +38,8 @@ class ClosureEvidence(EvidenceRecord):
     from_pancam: float = 0.0
     ref_p_success: float = math.nan
     handoff_px: float = math.nan
+    refine_px: float = math.nan  # |NCC peak - feature position| of the winning candidate (hazcam px)
+    pooled: float = math.nan  # candidates whose NCC positions agreed
 
 
 # feature name -> (ClosureEvidence attribute, transform of core.handoff.trust_model.transform)
@@ -50,6 +52,8 @@ CLOSURE_FEATURES: dict[str, tuple[str, str]] = {
     "from_pancam": ("from_pancam", "x"),
     "ref_p_success": ("ref_p_success", "x"),
     "log_handoff_px": ("handoff_px", "log1p"),
+    "log_refine": ("refine_px", "log1p"),
+    "log_pooled": ("pooled", "log1p"),
 }
 
 

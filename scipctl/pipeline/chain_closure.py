@@ -53,10 +53,14 @@ class Closure:
     # or not solved)
     feature_vo: Optional[bool] = None
     vo_inliers: Optional[int] = None
+    # confirmed: how many candidates' NCC positions agreed (pooled), and how far NCC moved the winner's feature
+    # position (hazcam px)
+    feature_pooled: Optional[int] = None
+    feature_refine_px: Optional[float] = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
-        for k in ("closure_px", "scale", "ncc_peak", "feature_shift_px"):
+        for k in ("closure_px", "scale", "ncc_peak", "feature_shift_px", "feature_refine_px"):
             d[k] = finite_or_none(d[k])
         return d
 
@@ -136,6 +140,10 @@ def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Clos
                   feature_confirmed=int(info.get("feature_confirmed", 0)),
                   feature_shift_px=info.get("feature_shift_px"), feature_vo=info.get("feature_vo"),
                   vo_inliers=info.get("vo_inliers"))
+    if info.get("feature_status") == "confirmed":
+        out.feature_pooled = int(info.get("feature_pooled", 0))
+        if info.get("coarse_uv") is not None and info.get("ncc_uv") is not None:
+            out.feature_refine_px = float(np.linalg.norm(np.subtract(info["ncc_uv"], info["coarse_uv"])))
     if tr is not None and np.all(np.isfinite(tr.uv)):
         out.uv = [float(x) for x in tr.uv]
         out.closure_px = float(np.linalg.norm(np.asarray(tr.uv) - np.asarray(H.tracked_uv, float)))
@@ -157,4 +165,5 @@ def closure_evidence(steps: list, closure: dict):
         ncc_peak=num(closure.get("ncc_peak")), local_inliers=num(closure.get("feature_local_inliers")),
         confirmed=num(closure.get("feature_confirmed")), shift_px=num(closure.get("feature_shift_px")),
         scale=num(closure.get("scale")), from_pancam=float(R is not None and R.camera == "pancam"),
-        ref_p_success=num(None if R is None else R.p_success), handoff_px=num(closure.get("closure_px")))
+        ref_p_success=num(None if R is None else R.p_success), handoff_px=num(closure.get("closure_px")),
+        refine_px=num(closure.get("feature_refine_px")), pooled=num(closure.get("feature_pooled")))

@@ -34,6 +34,8 @@ def test_closure_params_and_record():
     d = Closure("no reference").to_dict()
     assert d["status"] == "no reference" and d["uv"] is None and d["closure_px"] is None
     assert Closure("confirmed", closure_px=float("nan")).to_dict()["closure_px"] is None
+    assert d["feature_pooled"] is None and Closure("confirmed", feature_refine_px=float("nan")).to_dict()[
+        "feature_refine_px"] is None
 
 
 def test_visual_odometry_in_the_closure_by_default():
@@ -57,6 +59,10 @@ def test_visual_odometry_in_the_closure_by_default():
     on = run_chain(dl, start, [mk.u, mk.v], target_id="t2", feature_cache=feats)[-1].extra["closure"]
     assert on["vo_inliers"] is not None and on["vo_inliers"] >= ChainParams().vo_min_inliers
     assert isinstance(on["feature_vo"], bool)
+    # a confirmed closure records its own consistency (the closure model's log_refine, log_pooled): how many
+    # candidates agreed, and how far NCC moved the winner from its feature position, which confirmation bounds
+    assert on["status"] == "confirmed" and on["feature_pooled"] >= 1
+    assert 0.0 <= on["feature_refine_px"] <= ChainParams().feature_confirm_px
     off = run_chain(dl, start, [mk.u, mk.v], target_id="t2", feature_cache=feats,
                     params=ChainParams(closure_vo=False))[-1].extra["closure"]
     assert off["vo_inliers"] is None and off["feature_vo"] is None

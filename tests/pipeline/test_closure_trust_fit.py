@@ -73,12 +73,14 @@ def test_a_row_is_made_from_a_chain_record_with_a_confirmed_closure():
     blank.update(ok=True, reason="", go=False, advice=None)
     ref = dict(blank, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.7, extra={})
     cl = {"status": "confirmed", "uv": [103.0, 204.0], "reference_step": 0, "ncc_peak": 0.8, "closure_px": 5.0,
-          "feature_local_inliers": 9, "feature_confirmed": 2, "feature_shift_px": 40.0, "scale": 0.6}
+          "feature_local_inliers": 9, "feature_confirmed": 2, "feature_shift_px": 40.0, "scale": 0.6,
+          "feature_pooled": 3, "feature_refine_px": 1.25}
     fin = dict(blank, camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
                tracked_uv=[103.0, 209.0], extra={"final": True, "closure": cl})
     row = closure_row({"target": "t1", "steps": [ref, fin]}, "fam", "d")
     assert row.closure_error_px == pytest.approx(5.0) and row.handoff_error_px == pytest.approx(3.0 * 10 ** 0.5)
     assert row.evidence["from_pancam"] == 1.0 and row.evidence["ref_p_success"] == 0.7
+    assert row.evidence["pooled"] == 3.0 and row.evidence["refine_px"] == 1.25
     assert row.evidence["handoff_px"] == 5.0 and row.target == "t1"
     adopted = dict(fin, tracked_uv=cl["uv"], extra={"final": True, "closure": cl, "answer": "closure",
                                                     "handoff": {"uv": [103.0, 209.0]}})
