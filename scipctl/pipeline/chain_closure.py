@@ -25,6 +25,7 @@ step's diagnostics.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass
 from typing import Optional
 
@@ -125,6 +126,8 @@ def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Clos
     :class:`~scipctl.pipeline.chain.ChainParams` (the feature step's settings, the hazcam template size); ``feats``:
     the feature step's keypoint cache (None: its own).
     """
+    from .feature_track import confirmed_consistency
+
     final = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
     if final is None or steps[final].tracked_uv is None:
         return Closure("no final answer")
@@ -140,10 +143,8 @@ def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Clos
                   feature_confirmed=int(info.get("feature_confirmed", 0)),
                   feature_shift_px=info.get("feature_shift_px"), feature_vo=info.get("feature_vo"),
                   vo_inliers=info.get("vo_inliers"))
-    if info.get("feature_status") == "confirmed":
-        out.feature_pooled = int(info.get("feature_pooled", 0))
-        if info.get("coarse_uv") is not None and info.get("ncc_uv") is not None:
-            out.feature_refine_px = float(np.linalg.norm(np.subtract(info["ncc_uv"], info["coarse_uv"])))
+    pooled, out.feature_refine_px = confirmed_consistency(info)
+    out.feature_pooled = None if math.isnan(pooled) else int(pooled)
     if tr is not None and np.all(np.isfinite(tr.uv)):
         out.uv = [float(x) for x in tr.uv]
         out.closure_px = float(np.linalg.norm(np.asarray(tr.uv) - np.asarray(H.tracked_uv, float)))

@@ -53,6 +53,9 @@ def step_evidence(steps: list, i: int) -> StepEvidence:
     status = x.get("feature_status")
     prior = [p for p in steps[:i] if step_kind(p) is not None]
     nccs = [p.ncc_peak for p in prior if p.ncc_peak is not None]
+    from .feature_track import confirmed_consistency
+
+    pooled, refine_px = confirmed_consistency(x)
     return StepEvidence(
         kind=step_kind(s) or "", same_stop=1.0 if x.get("template") == "scale" else 0.0,
         status_confirmed=float(status == "confirmed"), status_unconfirmed=float(status == "unconfirmed"),
@@ -64,12 +67,7 @@ def step_evidence(steps: list, i: int) -> StepEvidence:
         follows_unverified=float(bool(x.get("follows_unverified"))), zoom=_num(x.get("scale")),
         px_mm=_num(x.get("px_mm")), prior_flagged=float(sum(1 for p in prior if not p.ok)),
         prior_min_ncc=min(nccs) if nccs else math.nan, prior_steps=float(len(prior)),
-        refine_px=_dist(x.get("coarse_uv"), x.get("ncc_uv")) if status == "confirmed" else math.nan,
-        pooled=_num(x.get("feature_pooled")) if status == "confirmed" else math.nan)
-
-
-def _dist(a, b) -> float:
-    return math.nan if a is None or b is None else float(math.dist(a, b))
+        pooled=pooled, refine_px=refine_px)
 
 
 def score_steps(steps: list, model: Optional[StepTrustModel]) -> None:

@@ -4,6 +4,8 @@ a RANSAC model for the pose error, NCC to refine (docs/stereo-and-tracking.md, "
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..jsonutil import finite_or_none as _f
@@ -173,6 +175,20 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     if relief:
         info.update({"relief_kept": _f(kept), "relief_masked": masked})
     return out, info
+
+
+def confirmed_consistency(info: dict) -> tuple[float, float]:
+    """``(pooled, refine_px)`` of a :func:`feature_track` ``info`` (as recorded on a chain step or read by the
+    closure): how many candidates' NCC positions agreed and were pooled, and how far NCC moved the winning candidate
+    from its feature position (px of the new image). Both NaN unless the step was confirmed (an unconfirmed step's
+    NCC peak is elsewhere) or without the positions recorded. The step and closure trust models' ``pooled`` and
+    ``refine_px``."""
+    if info.get("feature_status") != "confirmed":
+        return math.nan, math.nan
+    pooled = info.get("feature_pooled")
+    a, b = info.get("coarse_uv"), info.get("ncc_uv")
+    return (math.nan if pooled is None else float(pooled),
+            math.nan if a is None or b is None else float(np.linalg.norm(np.subtract(b, a))))
 
 
 def _vo_location(prod: ImageProduct, X_site, n_site, pred_uv, half: int, vo, local_px: float):
