@@ -113,6 +113,9 @@ class ChainParams:
     feature_confirm_px: float = 8.0
     # confirmed candidates whose NCC positions lie within this of the best-scoring one are pooled (weighted by score)
     feature_agree_px: float = 2.0
+    # the feature step's NCC compares the template with the new image blurred to the template's resolution (the
+    # previous image's pixel footprint through the plane: core/matched_blur.py); False: the sharp image
+    ncc_matched_blur: bool = False
     # point stereo at each tracked pixel: the designation's band and window per camera
     point_stereo: PointStereoParams = field(default_factory=PointStereoParams)
     other_template_half_px: int = 15

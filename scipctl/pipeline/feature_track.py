@@ -4,13 +4,15 @@ a RANSAC model for the pose error, NCC to refine (docs/stereo-and-tracking.md, "
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 
 from ..jsonutil import finite_or_none as _f
 from ..model import ImageProduct
-from .plane_warp import plane_points_site, plane_warped_view, render_through_plane
+from ..core.matched_blur import blurred_crop, footprint_cov, gaussian_kernel
+from .plane_warp import plane_points_site, plane_warped_view, prev_pixels_through_plane, render_through_plane
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
@@ -83,9 +85,26 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             if kept >= params.relief_min_kept and not on_plane.all():
                 keep = on_plane
         tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
-        # a whole rendered window: a peak where it touches the image's edge confirms nothing
-        tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
-                   min_score=0.3, accept_border_peak=False, template_mask=keep)
+        kernel = None
+        if params.ncc_matched_blur:
+            # the template has the previous image's resolution, seen through the plane: the new image is blurred to
+            # it (core/matched_blur.py), from the map's Jacobian at the template's centre
+            cen = xs.reshape(2 * half + 1, 2 * half + 1, 2)[half - 1:half + 2, half - 1:half + 2]
+            P = prev_pixels_through_plane(prev, prod, X_site, n_site, ys.reshape(2 * half + 1, 2 * half + 1, 2)[
+                half - 1:half + 2, half - 1:half + 2].reshape(-1, 2)).reshape(3, 3, 2)
+            J = np.stack([(P[1, 2] - P[1, 0]) / (cen[1, 2, 0] - cen[1, 0, 0]),
+                          (P[2, 1] - P[0, 1]) / (cen[2, 1, 1] - cen[0, 1, 1])], axis=1)
+            cov = footprint_cov(J)
+            kernel = None if cov is None else gaussian_kernel(cov)
+        if kernel is None:
+            # a whole rendered window: a peak where it touches the image's edge confirms nothing
+            tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
+                       min_score=0.3, accept_border_peak=False, template_mask=keep)
+        else:
+            crop, o = blurred_crop(img, loc.uv, int(math.ceil(params.feature_fine_radius_px)) + half + 2, kernel)
+            tr = track(tpl, crop, loc.uv - o, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
+                       min_score=0.3, accept_border_peak=False, template_mask=keep)
+            tr = dataclasses.replace(tr, uv=tr.uv + o)
         cands.append((loc, tr, k, reach, factor, kept, keep is not None))
 
     def confirmed(cd):

@@ -70,9 +70,16 @@ def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site,
     from ..core.expected import bilinear_sample
 
     uv = np.asarray(uv, float)
-    P_roverprev = prev.pose.T_site_rover.inverse().apply(plane_points_site(prod, X_site, n_site, uv))
-    uv_prev = prev.camera_model.project(P_roverprev)
+    uv_prev = prev_pixels_through_plane(prev, prod, X_site, n_site, uv.reshape(-1, 2))
     return bilinear_sample(prev.pixels_float(), uv_prev).reshape(uv.shape[:-1])
+
+
+def prev_pixels_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
+    """Where ``prod``'s pixels ``uv`` (N, 2) fall in ``prev`` through the plane (X_site, n_site), site frame: each
+    ray (``prod``'s camera at its pose estimate) meets the plane (:func:`plane_points_site`) and the point is
+    projected into ``prev`` (its pose estimate). ``(N, 2)``, NaN where a ray misses the plane."""
+    P_roverprev = prev.pose.T_site_rover.inverse().apply(plane_points_site(prod, X_site, n_site, uv))
+    return prev.camera_model.project(P_roverprev)
 
 
 def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,
