@@ -42,15 +42,20 @@ def footprint_cov(J_prev_new, source_var_px2: float = SOURCE_VAR_PX2, own_var_px
     return (V * np.clip(w, 0.0, None)) @ V.T
 
 
-def gaussian_kernel(cov) -> np.ndarray | None:
+def gaussian_kernel(cov, max_sigma_px: float) -> np.ndarray | None:
     """A normalised (k, k) float32 kernel of the 2-D Gaussian with covariance ``cov`` (2, 2) (x = u across, y = v
     down), k = 2 ceil(3 sigma_max) + 1; None when its largest sigma is below :data:`MIN_SIGMA_PX`. A direction of
-    zero variance gets a floor of 0.05 px^2 (a kernel one pixel wide there)."""
+    zero variance gets a floor of 0.05 px^2 (a kernel one pixel wide there); no direction's sigma exceeds
+    ``max_sigma_px`` (a plane seen edge-on has an unbounded footprint; the caller passes a third of its template's
+    half-size, so that the kernel is never wider than the template: beyond that the template is flat along that
+    direction and more blur changes nothing NCC can use)."""
+    if not (max_sigma_px > 0 and math.isfinite(max_sigma_px)):
+        raise ValueError(f"max_sigma_px: must be a positive number, got {max_sigma_px!r}")
     C = np.asarray(cov, float)
     w, V = np.linalg.eigh(C)
     if not np.all(np.isfinite(w)) or math.sqrt(max(w.max(), 0.0)) < MIN_SIGMA_PX:
         return None
-    w = np.maximum(w, 0.05)
+    w = np.clip(w, 0.05, max_sigma_px ** 2)
     r = int(math.ceil(3.0 * math.sqrt(w.max())))
     g = np.arange(-r, r + 1, dtype=float)
     X = np.stack(np.meshgrid(g, g), -1)  # (k, k, 2): (u, v)
@@ -62,8 +67,9 @@ def gaussian_kernel(cov) -> np.ndarray | None:
 
 def blurred_crop(image, center_uv, reach_px: int, kernel, align: int = 64):
     """The part of ``image`` (H, W) within ``reach_px`` (plus the kernel's radius) of ``center_uv`` (2,), blurred by
-    ``kernel`` (edges replicated), as ``(crop float32 (h, w), origin_uv (2,))``: image pixel = crop pixel + origin.
-    The origin is a multiple of ``align`` (a tracker's pyramid stays aligned with the whole image's)."""
+    ``kernel`` (edges replicated), as ``(crop float32 (h, w), origin_uv (2,))``: image pixel = crop pixel + origin;
+    ``(None, origin)`` when that region lies wholly outside the image. The origin is a multiple of ``align`` (a
+    tracker's pyramid stays aligned with the whole image's)."""
     import cv2
 
     img = np.asarray(image, np.float32)

@@ -86,7 +86,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                 keep = on_plane
         tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
         kernel = None
-        if params.ncc_matched_blur:
+        if params.ncc_matched_blur and np.all(np.isfinite(loc.uv)):
             # the template has the previous image's resolution, seen through the plane: the new image is blurred to
             # it (core/matched_blur.py), from the map's Jacobian at the template's centre
             cen = xs.reshape(2 * half + 1, 2 * half + 1, 2)[half - 1:half + 2, half - 1:half + 2]
@@ -95,13 +95,16 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             J = np.stack([(P[1, 2] - P[1, 0]) / (cen[1, 2, 0] - cen[1, 0, 0]),
                           (P[2, 1] - P[0, 1]) / (cen[2, 1, 1] - cen[0, 1, 1])], axis=1)
             cov = footprint_cov(J)
-            kernel = None if cov is None else gaussian_kernel(cov)
-        if kernel is None:
+            kernel = None if cov is None else gaussian_kernel(cov, max_sigma_px=half / 3.0)
+        crop = None
+        if kernel is not None:
+            # None when the search region lies wholly outside the image (the plain track below says so)
+            crop, o = blurred_crop(img, loc.uv, int(math.ceil(params.feature_fine_radius_px)) + half + 2, kernel)
+        if crop is None:
             # a whole rendered window: a peak where it touches the image's edge confirms nothing
             tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
                        min_score=0.3, accept_border_peak=False, template_mask=keep)
         else:
-            crop, o = blurred_crop(img, loc.uv, int(math.ceil(params.feature_fine_radius_px)) + half + 2, kernel)
             tr = track(tpl, crop, loc.uv - o, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
                        min_score=0.3, accept_border_peak=False, template_mask=keep)
             tr = dataclasses.replace(tr, uv=tr.uv + o)

@@ -42,7 +42,7 @@ def test_kernel_moments_match_the_covariance():
     th = 0.4
     R = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
     C = R @ np.diag([4.0, 1.0]) @ R.T
-    K = gaussian_kernel(C).astype(float)
+    K = gaussian_kernel(C, max_sigma_px=10.0).astype(float)
     r = K.shape[0] // 2
     g = np.arange(-r, r + 1)
     U, V = np.meshgrid(g, g)
@@ -52,7 +52,18 @@ def test_kernel_moments_match_the_covariance():
     # a sampled Gaussian truncated at 3 sigma: its second moments are the covariance's within ~1 % (sampling adds
     # nothing for sigma >= 1; truncation at 3 sigma removes ~1.1 % of the variance)
     assert M == pytest.approx(C, rel=0.02, abs=0.02)
-    assert gaussian_kernel(np.eye(2) * (MIN_SIGMA_PX * 0.9) ** 2) is None
+    assert gaussian_kernel(np.eye(2) * (MIN_SIGMA_PX * 0.9) ** 2, max_sigma_px=10.0) is None
+
+
+def test_kernel_of_a_plane_seen_edge_on_is_capped():
+    # a previous view that saw the surface edge-on: its footprint along v is unbounded; the kernel stays within the
+    # cap (here 5 px: k = 2 * 15 + 1) instead of growing with it
+    C = footprint_cov(np.diag([1.0, 1e-7]))
+    assert C[1, 1] > 1e12
+    K = gaussian_kernel(C, max_sigma_px=5.0)
+    assert K.shape == (31, 31) and K.sum() == pytest.approx(1.0, abs=1e-6)
+    with pytest.raises(ValueError, match="max_sigma_px"):
+        gaussian_kernel(C, max_sigma_px=float("inf"))
 
 
 def test_blurred_crop_equals_the_whole_image_blurred():
@@ -60,7 +71,7 @@ def test_blurred_crop_equals_the_whole_image_blurred():
 
     rng = np.random.default_rng(1)
     img = rng.uniform(0, 255, (300, 400)).astype(np.float32)
-    K = gaussian_kernel(np.diag([2.0, 0.5]))
+    K = gaussian_kernel(np.diag([2.0, 0.5]), max_sigma_px=10.0)
     whole = cv2.filter2D(img, cv2.CV_32F, K, borderType=cv2.BORDER_REPLICATE)
     crop, o = blurred_crop(img, (201.3, 150.6), 40, K)
     assert o[0] % 64 == 0 and o[1] % 64 == 0
@@ -69,6 +80,9 @@ def test_blurred_crop_equals_the_whole_image_blurred():
     sl = (slice(150 - 40 - v0 + 1, 150 + 40 - v0 + 1), slice(201 - 40 - u0 + 1, 201 + 40 - u0 + 1))
     ref = whole[v0:v0 + crop.shape[0], u0:u0 + crop.shape[1]][sl]
     assert np.abs(crop[sl] - ref).max() <= 1e-3  # float32 sums of 0-255 values; a DFT path rounds differently
+    # a region wholly outside the image: no crop
+    assert blurred_crop(img, (-500.0, 150.0), 40, K)[0] is None
+    assert blurred_crop(img, (200.0, 900.0), 40, K)[0] is None
 
 
 class Texture:
@@ -110,7 +124,7 @@ def test_coarse_anisotropic_template_found_in_sharp_image(seed):
     start = true_uv + np.array([3.0, -2.0])
     tc = np.array([half, half], float)  # the template's centre pixel is true_uv
     sharp = track(tpl, new, start, 10.0, template_center_uv=tc, min_score=0.0)
-    K = gaussian_kernel(footprint_cov(np.diag([1 / sx, 1 / sy])))
+    K = gaussian_kernel(footprint_cov(np.diag([1 / sx, 1 / sy])), max_sigma_px=half / 3.0)
     crop, o = blurred_crop(new, start, 10 + half + 2, K)
     blurred = track(tpl, crop, start - o, 10.0, template_center_uv=tc, min_score=0.0)
     err_sharp = np.linalg.norm(sharp.uv - true_uv)
