@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Optional
 
 from ..core.step_trust import StepEvidence, StepTrustModel
+from .feature_track import confirmed_consistency
 
 REDESIGNATE = "re-designate"
 NEW_IMAGE = "new image at this stop"
@@ -53,8 +54,6 @@ def step_evidence(steps: list, i: int) -> StepEvidence:
     status = x.get("feature_status")
     prior = [p for p in steps[:i] if step_kind(p) is not None]
     nccs = [p.ncc_peak for p in prior if p.ncc_peak is not None]
-    from .feature_track import confirmed_consistency
-
     pooled, refine_px = confirmed_consistency(x)
     return StepEvidence(
         kind=step_kind(s) or "", same_stop=1.0 if x.get("template") == "scale" else 0.0,

@@ -87,15 +87,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         tpl = np.where(np.isfinite(tpl), tpl, np.nanmean(tpl)).astype(np.float32)
         kernel = None
         if params.ncc_matched_blur and np.all(np.isfinite(loc.uv)):
-            # the template has the previous image's resolution, seen through the plane: the new image is blurred to
-            # it (core/matched_blur.py), from the map's Jacobian at the template's centre
-            cen = xs.reshape(2 * half + 1, 2 * half + 1, 2)[half - 1:half + 2, half - 1:half + 2]
-            P = prev_pixels_through_plane(prev, prod, X_site, n_site, ys.reshape(2 * half + 1, 2 * half + 1, 2)[
-                half - 1:half + 2, half - 1:half + 2].reshape(-1, 2)).reshape(3, 3, 2)
-            J = np.stack([(P[1, 2] - P[1, 0]) / (cen[1, 2, 0] - cen[1, 0, 0]),
-                          (P[2, 1] - P[0, 1]) / (cen[2, 1, 1] - cen[0, 1, 1])], axis=1)
-            cov = footprint_cov(J)
-            kernel = None if cov is None else gaussian_kernel(cov, max_sigma_px=half / 3.0)
+            kernel = _matched_blur_kernel(prev, prod, X_site, n_site, ys, half)
         crop = None
         if kernel is not None:
             # None when the search region lies wholly outside the image (the plain track below says so)
@@ -197,6 +189,19 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     if relief:
         info.update({"relief_kept": _f(kept), "relief_masked": masked})
     return out, info
+
+
+def _matched_blur_kernel(prev: ImageProduct, prod: ImageProduct, X_site, n_site, ys, half: int):
+    """The kernel that blurs ``prod`` to the resolution of a template rendered from ``prev`` through the plane
+    (X_site, n_site) (core/matched_blur.py), or None. ``ys`` ((2 half + 1)^2, 2): the pose-estimate pixels of the
+    template's grid, whose real pixels are one apart; the map's Jacobian is taken by central differences at its
+    centre."""
+    n = 2 * half + 1
+    centre = ys.reshape(n, n, 2)[half - 1:half + 2, half - 1:half + 2].reshape(-1, 2)
+    P = prev_pixels_through_plane(prev, prod, X_site, n_site, centre).reshape(3, 3, 2)
+    J_prev_new = np.stack([(P[1, 2] - P[1, 0]) / 2.0, (P[2, 1] - P[0, 1]) / 2.0], axis=1)
+    cov = footprint_cov(J_prev_new)
+    return None if cov is None else gaussian_kernel(cov, max_sigma_px=half / 3.0)
 
 
 def confirmed_consistency(info: dict) -> tuple[float, float]:
