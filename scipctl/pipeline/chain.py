@@ -181,6 +181,8 @@ class ChainParams:
             raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
         if not isinstance(self.closure_vo, bool):
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
+        if not isinstance(self.ncc_matched_blur, bool):
+            raise ValueError(f"ChainParams.ncc_matched_blur: must be true or false, got {self.ncc_matched_blur!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:

@@ -158,3 +158,13 @@ def test_matched_blur_is_an_option_that_raises_the_ncc_of_a_coarser_template(dl,
     assert info_off["feature_status"] == info_on["feature_status"] == "confirmed"
     assert on.score > off.score
     assert np.linalg.norm(on.uv - mark) <= 2.0
+
+
+def test_matched_blur_flag_must_be_a_bool():
+    """ChainParams.check() names the field when ncc_matched_blur is not true/false (a 0/1 from a config file would
+    otherwise switch the option silently)."""
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="ncc_matched_blur"):
+        replace(ChainParams(), ncc_matched_blur=1).check()
+    assert replace(ChainParams(), ncc_matched_blur=True).check().ncc_matched_blur is True
