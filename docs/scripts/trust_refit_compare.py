@@ -1,0 +1,90 @@
+"""Compare two fits of scip's trust model: the packaged model against a refit on more evidence.
+
+    python docs/scripts/trust_refit_compare.py OLD_MODEL.json OLD_TABLE NEW_DIR BLIND_DIR [--diff]
+
+OLD_MODEL is the model before the refit (fitted on OLD_TABLE alone); the refit is ``fit_trust_model`` on OLD_TABLE
+plus every ``NEW_DIR/*.jsonl`` (what ``scipctl fit-trust OLD_TABLE NEW.jsonl.gz`` packages). Printed, at 4 px:
+
+* on the new tables: the old model (it never saw them) against the refit held out by family (each family's
+  targets answered by a refit on every other family, old and new rows);
+* on BLIND_DIR's tables (``scipctl trust-evidence`` of downlinks neither model saw): both models, overall, per
+  run, for the ``t3`` targets and per family; ``--diff``: the targets whose answer or verdict changed.
+
+BLIND_DIR's tables are grouped per table file (``synth --family`` downlinks of different families share the file
+name ``paper-<run>.mcap``). Used for docs/handoff.md, "The trust model refitted on 36 more downlinks (session 21)".
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import glob
+import os
+import sys
+
+from scipctl.commands.trust import read_rows
+from scipctl.io.trust_model import load_trust_model
+from scipctl.pipeline import trust_fit as tf
+
+R_PX = 4.0
+
+
+def line(name: str, choices: list, go_min: float) -> None:
+    s = tf._summary(choices, R_PX, go_min)
+    mr = "-" if s["miss_recall"] is None else f"{s['miss_recall']:.2f}"
+    print(f"{name:44s} n {s['n']:4d} within {s['within'] * 100:5.1f}% median {s['median_px']:.2f} px "
+          f"GO {s['go']:4d} ({s['go_rate'] * 100:5.1f}%) false GO {s['false_go']:2d} missed GO {s['missed_go']:3d} "
+          f"miss recall {mr} Brier {s['brier']:.4f} log loss {s['log_loss']:.3f}")
+
+
+def runs_of(rows: list) -> list:
+    return [(v[0].meta.get("run", "?"), k[1]) for k, v in sorted(tf.targets_of(rows).items())]
+
+
+def main(argv: list) -> None:
+    diff = "--diff" in argv
+    old_model_path, old_table, new_dir, blind_dir = [a for a in argv if a != "--diff"][:4]
+    old_model = load_trust_model(old_model_path)
+    old = [r for r in read_rows([old_table]) if r.error_px is not None]
+    new = [r for r in read_rows(sorted(glob.glob(os.path.join(new_dir, "*.jsonl")))) if r.error_px is not None]
+    blind = []
+    for t in sorted(glob.glob(os.path.join(blind_dir, "*.jsonl"))):
+        blind += [dataclasses.replace(r, group=os.path.basename(t)) for r in read_rows([t]) if r.error_px is not None]
+    both = old + new
+    refit = tf.fit_trust_model(both)
+    go_old, go_new = old_model.go_threshold(R_PX), refit.go_threshold(R_PX)
+    print(f"GO threshold at {R_PX:g} px: old {go_old}, refit {go_new}")
+
+    keyed_held = {}  # the new tables' targets, each family answered by a refit without it
+    for fam in tf.families_of(both):
+        test = [r for r in new if r.family == fam]
+        if test:
+            ks = sorted(tf.targets_of(test))
+            ch = tf.scip_choices(tf._raw_model([r for r in both if r.family != fam], tf.RADII_PX), test, R_PX)
+            keyed_held.update(zip(ks, ch))
+    keys = sorted(tf.targets_of(new))
+    held = [keyed_held[k] for k in keys]
+    old_on_new = tf.scip_choices(old_model, new, R_PX)
+    ro = runs_of(new)
+    sels = (("all", lambda c, r: True), ("marked", lambda c, r: c[4] != "extra"),
+            ("marked s2-arc", lambda c, r: c[4] != "extra" and r[0] == "s2-arc"))
+    for sel, keep in sels:
+        line(f"new tables, {sel}: old model", [c for c, r in zip(old_on_new, ro) if keep(c, r)], go_old)
+        line(f"new tables, {sel}: refit, family held out", [c for c, r in zip(held, ro) if keep(c, r)], go_new)
+
+    a, b, ro = tf.scip_choices(old_model, blind, R_PX), tf.scip_choices(refit, blind, R_PX), runs_of(blind)
+    for sel, keep in (("all", lambda r: True), ("s2-arc", lambda r: r[0] == "s2-arc"),
+                      ("s1-straight", lambda r: r[0] == "s1-straight"), ("t3", lambda r: r[1] == "t3")):
+        line(f"blind {sel}: old model", [c for c, r in zip(a, ro) if keep(r)], go_old)
+        line(f"blind {sel}: refit", [c for c, r in zip(b, ro) if keep(r)], go_new)
+    for fam in sorted({c[0] for c in a}):
+        line(f"blind {fam}: old model", [c for c in a if c[0] == fam], go_old)
+        line(f"blind {fam}: refit", [c for c in b if c[0] == fam], go_new)
+    if diff:
+        for (k, _), x, y in zip(sorted(tf.targets_of(blind).items()), a, b):
+            if abs(x[2] - y[2]) > 0.01 or (x[1] >= go_old) != (y[1] >= go_new) or (x[1] >= go_old and x[2] > R_PX) \
+                    or (y[1] >= go_new and y[2] > R_PX):
+                print(f"{k[0]:36s} {k[1]:4s} {x[4]:8s} old: {x[2]:7.2f} px p {x[1]:.3f} | refit: {y[2]:7.2f} px p {y[1]:.3f}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
