@@ -1,9 +1,10 @@
 """Compare two fits of scip's trust model: the packaged model against a refit on more evidence.
 
-    python docs/scripts/trust_refit_compare.py OLD_MODEL.json OLD_TABLE NEW_DIR BLIND_DIR [--diff]
+    python docs/scripts/trust_refit_compare.py OLD_MODEL.json OLD_TABLE NEW BLIND_DIR [--diff]
 
 OLD_MODEL is the model before the refit (fitted on OLD_TABLE alone); the refit is ``fit_trust_model`` on OLD_TABLE
-plus every ``NEW_DIR/*.jsonl`` (what ``scipctl fit-trust OLD_TABLE NEW.jsonl.gz`` packages). Printed, at 4 px:
+plus NEW (an evidence table, or a folder of them: every ``NEW/*.jsonl`` in name order), what ``scipctl fit-trust
+OLD_TABLE NEW`` writes. Printed, at 4 px:
 
 * on the new tables: the old model (it never saw them) against the refit held out by family (each family's
   targets answered by a refit on every other family, old and new rows);
@@ -45,7 +46,8 @@ def main(argv: list) -> None:
     old_model_path, old_table, new_dir, blind_dir = [a for a in argv if a != "--diff"][:4]
     old_model = load_trust_model(old_model_path)
     old = [r for r in read_rows([old_table]) if r.error_px is not None]
-    new = [r for r in read_rows(sorted(glob.glob(os.path.join(new_dir, "*.jsonl")))) if r.error_px is not None]
+    new_tables = sorted(glob.glob(os.path.join(new_dir, "*.jsonl"))) if os.path.isdir(new_dir) else [new_dir]
+    new = [r for r in read_rows(new_tables) if r.error_px is not None]
     blind = []
     for t in sorted(glob.glob(os.path.join(blind_dir, "*.jsonl"))):
         blind += [dataclasses.replace(r, group=os.path.basename(t)) for r in read_rows([t]) if r.error_px is not None]
