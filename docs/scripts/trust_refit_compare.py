@@ -12,7 +12,8 @@ OLD_TABLE NEW`` writes. Printed, at 4 px:
   run, for the ``t3`` targets and per family; ``--diff``: the targets whose answer or verdict changed.
 
 BLIND_DIR's tables are grouped per table file (``synth --family`` downlinks of different families share the file
-name ``paper-<run>.mcap``). Used for docs/handoff.md, "The trust model refitted on 36 more downlinks (session 21)".
+name ``paper-<run>.mcap``). Used for docs/handoff.md, "The trust model refitted on 36 more downlinks (session 21; measured, not
+adopted)".
 """
 
 from __future__ import annotations
@@ -56,15 +57,12 @@ def main(argv: list) -> None:
     go_old, go_new = old_model.go_threshold(R_PX), refit.go_threshold(R_PX)
     print(f"GO threshold at {R_PX:g} px: old {go_old}, refit {go_new}")
 
-    keyed_held = {}  # the new tables' targets, each family answered by a refit without it
-    for fam in tf.families_of(both):
+    held_by_target = {}  # the new tables' targets, each family answered by a refit without it
+    for fam in tf.families_of(new):
         test = [r for r in new if r.family == fam]
-        if test:
-            ks = sorted(tf.targets_of(test))
-            ch = tf.scip_choices(tf._raw_model([r for r in both if r.family != fam], tf.RADII_PX), test, R_PX)
-            keyed_held.update(zip(ks, ch))
-    keys = sorted(tf.targets_of(new))
-    held = [keyed_held[k] for k in keys]
+        m = tf._raw_model([r for r in both if r.family != fam], tf.RADII_PX)
+        held_by_target.update(zip(sorted(tf.targets_of(test)), tf.scip_choices(m, test, R_PX)))
+    held = [held_by_target[k] for k in sorted(tf.targets_of(new))]  # in scip_choices' order, as old_on_new
     old_on_new = tf.scip_choices(old_model, new, R_PX)
     ro = runs_of(new)
     sels = (("all", lambda c, r: True), ("marked", lambda c, r: c[4] != "extra"),
