@@ -1,10 +1,14 @@
 """Render simulated downlinks for the trust model of ``scip`` (docs/handoff.md, "Trust: scip").
 
-    python docs/scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N]
+    python docs/scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N] [--occluded M]
 
 One run of the ``paper`` scenario, of one scene family, written as ``OUT_DIR/<family>-<seed>-<run>.mcap``
 with ``N`` extra targets (random true surface points near the rock, seen by the near hazcam pair and the near
-navcam pair, exact marks: ``scipctl.sim.extra_targets``) besides the run's three. Only the images the handoff
+navcam pair, exact marks: ``scipctl.sim.extra_targets``) besides the run's three, and up to ``M`` occluded
+targets (true surface points the near navcam pair sees and something hides from the near left hazcam, >= 5 cm
+in front along its ray; ids ``o01``...: ``choose_occluded_targets``). An occluded target has navcam marks and
+no mark in the left hazcam; the ``.sim.json`` lists it under ``occluded_targets``, and ``scipctl trust-evidence``
+labels every hazcam answer for it wrong. Only the images the handoff
 uses (the ``near`` and ``far`` stops) are rendered, as ``scipctl synth`` renders them (same exposure, noise
 and seeds); the pancam and mid-stop images are left black, to halve the rendering time.
 
@@ -113,6 +117,7 @@ def main(argv=None):
     ap.add_argument("run")
     ap.add_argument("out", type=Path)
     ap.add_argument("--extra", type=int, default=12)
+    ap.add_argument("--occluded", type=int, default=0)
     a = ap.parse_args(argv)
 
     from scipctl import __version__
@@ -120,7 +125,7 @@ def main(argv=None):
     from scipctl.io.downlink import write_downlink
     from scipctl.model import TargetTruth
     from scipctl.sim.build import build_run
-    from scipctl.sim.extra_targets import choose_extra_targets, extra_marks
+    from scipctl.sim.extra_targets import choose_extra_targets, choose_occluded_targets, extra_marks
     from scipctl.sim.scenarios import _rng
 
     scene_family = None
@@ -138,16 +143,22 @@ def main(argv=None):
     haz = pid[("near", "hazcam", "left")]
     req = [pid[("near", "hazcam", "right")], pid[("near", "navcam", "left")], pid[("near", "navcam", "right")]]
     extra = choose_extra_targets(sim.scene, sim.products, haz, req, a.extra, _rng(a.seed, SCENARIO, a.run, "extra-targets"))
-    sim.downlink.targets.extend(extra_marks(sim.scene, sim.products, extra))
-    sim.downlink.truth_targets.extend(TargetTruth(t.id, np.asarray(t.xyz_site_m, float)) for t in extra)
+    hidden = (choose_occluded_targets(sim.scene, sim.products, haz, req[1:], a.occluded,
+                                      _rng(a.seed, SCENARIO, a.run, "occluded-targets")) if a.occluded > 0 else [])
+    extra_all = extra + [t for t, _, _ in hidden]
+    sim.downlink.targets.extend(extra_marks(sim.scene, sim.products, extra_all))
+    sim.downlink.truth_targets.extend(TargetTruth(t.id, np.asarray(t.xyz_site_m, float)) for t in extra_all)
     render_some(sim, errors, a.seed, a.run, {"near", "far"})
     a.out.mkdir(parents=True, exist_ok=True)
     name = f"{a.family}-{a.seed}-{a.run}"
     path = write_downlink(sim.downlink, a.out / f"{name}.mcap", "mcap")
     rec = dict(sim.record, family=a.family, extra_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist()} for t in extra],
+               occluded_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist(), "hidden_in": haz,
+                                  "occluder_depth_m": dep, "hidden_uv": uv.tolist()} for t, dep, uv in hidden],
                rendered_stops=["near", "far"],
                written_by={"tool": "scipctl", "version": __version__,
-                           "regenerate": f"python docs/scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"})
+                           "regenerate": f"python docs/scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"
+                                         + (f" --occluded {a.occluded}" if a.occluded else "")})
     if scene_family is not None:
         rec["scene_family"] = scene_family.to_dict()
     atomic_write_text(a.out / f"{name}.sim.json", json.dumps(rec, indent=1, sort_keys=True, default=str) + "\n")

@@ -45,7 +45,13 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
         fam = family or family_of_record(rec)
         meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
         meta["downlink_sha256"] = source.downlink.source_sha256
-        got = evidence_rows(source.downlink, Path(src).name, str(fam), meta)
+        occ = rec.get("occluded_targets", [])
+        if not isinstance(occ, list) or not all(isinstance(o, dict) and isinstance(o.get("id"), str) for o in occ):
+            raise InputError(str(src), "sim record occluded_targets", "not a list of {id: ...} records")
+        try:
+            got = evidence_rows(source.downlink, Path(src).name, str(fam), meta, occluded_ids=[o["id"] for o in occ])
+        except ValueError as e:
+            raise InputError(str(src), "sim record occluded_targets", str(e)) from None
         note(f"{Path(src).name}: {len(got)} candidate rows, family {fam}")
         rows += got
     atomic_write_text(out, "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))

@@ -5,6 +5,10 @@
 mean) and picks each radius's GO threshold from leave-one-family-out predictions. :func:`evaluate` reports,
 per family held out, what ``scip`` would have answered with a model fitted on the other families (and, for the
 same folds, a gradient-boosting and an isotonic-calibrated alternative, so that the kept model earns its place).
+
+Rows of occluded targets (hidden from the hazcam, :attr:`~.trust_data.EvidenceRow.occluded`) are wrong at every
+radius: they are fitted on and count as false GO when answered GO, and the evaluation reports them apart
+(``held_out_occluded``), so that the figures of the other targets stay comparable with tables that have none.
 """
 
 from __future__ import annotations
@@ -38,8 +42,13 @@ def round_sig(x: float) -> float:
 def _prep(rows: list[EvidenceRow], spec: dict):
     ev = [Evidence.from_dict(r.evidence) for r in rows]
     X = feature_matrix(ev, spec)
-    err = np.array([math.inf if r.error_px is None else r.error_px for r in rows], float)
+    err = np.array([math.inf if (r.error_px is None or r.occluded) else r.error_px for r in rows], float)
     return X, err
+
+
+def fit_rows(rows: list[EvidenceRow]) -> list[EvidenceRow]:
+    """The rows a fit or an evaluation uses: those with a true error, and those of occluded targets."""
+    return [r for r in rows if r.error_px is not None or r.occluded]
 
 
 def usable_features(X: np.ndarray, names: list) -> list:
@@ -102,13 +111,14 @@ def targets_of(rows: list[EvidenceRow]) -> dict:
 
 
 def scip_choices(model: TrustModel, rows: list[EvidenceRow], success_px: float) -> list[tuple]:
-    """Per target: (family, p of scip's answer, its error px, [per-candidate (p, error)], target kind)."""
+    """Per target: (family, p of scip's answer, its error px, [per-candidate (p, error)], target kind, occluded).
+    An occluded target's errors are None (no answer is right)."""
     out = []
     for (_, _), rs in sorted(targets_of(rows).items()):
         p = model.probability([Evidence.from_dict(r.evidence) for r in rs], success_px)
         i = int(np.argmax(p))
-        out.append((rs[0].family, float(p[i]), rs[i].error_px, list(zip(p.tolist(), [r.error_px for r in rs])),
-                    rs[0].kind))
+        errs = [None if r.occluded else r.error_px for r in rs]
+        out.append((rs[0].family, float(p[i]), errs[i], list(zip(p.tolist(), errs)), rs[0].kind, rs[0].occluded))
     return out
 
 
@@ -128,7 +138,7 @@ def _choose_go(pairs: list, success_px: float) -> float:
 def fit_trust_model(rows: list[EvidenceRow], radii=RADII_PX, provenance: Optional[dict] = None) -> TrustModel:
     """The trust model fitted on all ``rows``, GO thresholds from leave-one-family-out answers (all families
     pooled; with one family, from the in-sample answers)."""
-    rows = [r for r in rows if r.error_px is not None]
+    rows = fit_rows(rows)
     if not rows:
         raise ValueError("no evidence row with a true error to fit on")
     model = _raw_model(rows, radii)
@@ -143,7 +153,8 @@ def fit_trust_model(rows: list[EvidenceRow], radii=RADII_PX, provenance: Optiona
     for fit in model.fits:
         fit.go_min_p = _choose_go(oof[fit.success_px], fit.success_px)
     n_targets = len(targets_of(rows))
-    model.provenance = dict(provenance or {}, training_families=fams, n_rows=len(rows), n_targets=n_targets,
+    extra = {"n_occluded_targets": len({(r.group, r.target) for r in rows if r.occluded})} if any(r.occluded for r in rows) else {}
+    model.provenance = dict(provenance or {}, training_families=fams, n_rows=len(rows), n_targets=n_targets, **extra,
                             per_family={f: sum(1 for k, v in targets_of(rows).items() if v[0].family == f) for f in fams},
                             C=C_REG, go_precision=GO_PRECISION)
     return model
@@ -183,7 +194,7 @@ def _method_rates(rows: list[EvidenceRow], success_px: float) -> dict:
     for rs in tg.values():
         for r in rs:
             for s in r.sources:
-                if r.error_px is not None and r.error_px <= success_px:
+                if r.is_right(success_px):
                     hits[s] += 1
     names = {s for r in rows for s in r.sources}
     return {s: hits[s] / len(tg) for s in sorted(names)}
@@ -217,8 +228,8 @@ def _alt_candidate_metrics(train: list, test: list, success_px: float) -> dict:
     m = _raw_model(train, (success_px,))
     ev_tr = [Evidence.from_dict(r.evidence) for r in train]
     ev_te = [Evidence.from_dict(r.evidence) for r in test]
-    y_tr = np.array([r.error_px <= success_px for r in train])
-    y_te = np.array([r.error_px <= success_px for r in test])
+    y_tr = np.array([r.is_right(success_px) for r in train])
+    y_te = np.array([r.is_right(success_px) for r in test])
     p_lr = m.probability(ev_te, success_px)
     out = {"logistic": {"brier": _brier(p_lr, y_te), "log_loss": _logloss(p_lr, y_te)}}
     X_tr = feature_matrix(ev_tr, m.features)
@@ -239,7 +250,7 @@ def _alt_candidate_metrics(train: list, test: list, success_px: float) -> dict:
 def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[TrustModel] = None) -> dict:
     """Leave-one-family-out and fit-family (in-sample, ``model`` or one fitted on all rows) figures of ``scip``
     at ``success_px``: per family held out, its targets answered by a model fitted on the others."""
-    rows = [r for r in rows if r.error_px is not None]
+    rows = fit_rows(rows)
     fams = families_of(rows)
     full = model or fit_trust_model(rows)
     go_full = full.go_threshold(success_px)
@@ -251,8 +262,12 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
         if not train:
             continue
         m = _raw_model(train, RADII_PX)
-        ch = scip_choices(m, test, success_px)
-        pooled += ch
+        ch_all = scip_choices(m, test, success_px)
+        pooled += ch_all
+        ch = [c for c in ch_all if not c[5]]
+        test = [r for r in test if not r.occluded]
+        if not ch:  # a family of occluded targets only
+            continue
         rates_test = _method_rates(test, success_px)
         rates_train = _method_rates(train, success_px)
         best_train = max(rates_train, key=rates_train.get)
@@ -261,13 +276,26 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
         s.update({"best_method_on_train": best_train, "its_within": rates_test.get(best_train, 0.0),
                   "best_method_here": best_test, "best_within_here": rates_test[best_test],
                   "any_candidate_within": float(np.mean([any(e is not None and e <= success_px for _, e in c[3]) for c in ch])),
-                  "candidate_models": _alt_candidate_metrics(train, test, success_px)})
+                  "candidate_models": _alt_candidate_metrics(train, test, success_px),
+                  "occluded": occluded_summary([c for c in ch_all if c[5]], go_full)})
         report["held_out"][fam] = s
-    report["held_out_pooled"] = _summary(pooled, success_px, go_full)
+    seen = [c for c in pooled if not c[5]]
+    report["held_out_pooled"] = _summary(seen, success_px, go_full)
     # the scenarios' own marked targets (flat, point, edge, sand, contrast) apart from the random extra ones
-    report["held_out_pooled_marked"] = _summary([c for c in pooled if c[4] != "extra"], success_px, go_full)
+    report["held_out_pooled_marked"] = _summary([c for c in seen if c[4] not in ("extra", "occluded")], success_px, go_full)
+    report["held_out_occluded"] = occluded_summary([c for c in pooled if c[5]], go_full)
     for fam in fams:
-        report["fit"][fam] = _summary(scip_choices(full, [r for r in rows if r.family == fam], success_px),
-                                      success_px, go_full)
-    report["fit_pooled"] = _summary(scip_choices(full, rows, success_px), success_px, go_full)
+        ch = scip_choices(full, [r for r in rows if r.family == fam], success_px)
+        if any(not c[5] for c in ch):
+            report["fit"][fam] = _summary([c for c in ch if not c[5]], success_px, go_full)
+    ch = scip_choices(full, rows, success_px)
+    report["fit_pooled"] = _summary([c for c in ch if not c[5]], success_px, go_full)
+    report["fit_occluded"] = occluded_summary([c for c in ch if c[5]], go_full)
     return report
+
+
+def occluded_summary(choices: list, go_min: float) -> dict:
+    """What ``scip`` answered for occluded targets (every answer wrong): n, GO (all false), mean and max p."""
+    p = [c[1] for c in choices]
+    return {"n": len(choices), "go": sum(pi >= go_min for pi in p), "mean_p": float(np.mean(p)) if p else None,
+            "max_p": max(p) if p else None, "brier": _brier(p, [0.0] * len(p))}

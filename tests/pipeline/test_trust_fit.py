@@ -88,3 +88,49 @@ def test_round_trip_through_json(model):
     ev = [Evidence.from_dict(r.evidence) for r in small_table(4)]
     for r in RADII_PX:
         np.testing.assert_array_equal(back.probability(ev, r), model.probability(ev, r))
+
+
+def _with_occluded(rows, every: int = 6):
+    """``rows`` with every ``every``-th target of each family occluded (its rows flagged, no error)."""
+    import dataclasses
+
+    out = []
+    for r in rows:
+        hidden = int(r.target[1:]) % every == 0
+        out.append(dataclasses.replace(r, error_px=None, occluded=True) if hidden else r)
+    return out
+
+
+def test_occluded_rows_are_wrong_at_every_radius(rows):
+    """An occluded target's rows are fitted as failures: the same model as when they carry an error larger than
+    every radius."""
+    import dataclasses
+
+    occ = _with_occluded(rows)
+    far = [dataclasses.replace(r, error_px=1e9, occluded=False) if r.occluded else r for r in occ]
+    a, b = fit_trust_model(occ), fit_trust_model(far)
+    assert [f.to_dict() for f in a.fits] == [f.to_dict() for f in b.fits]
+    assert a.provenance["n_occluded_targets"] == 15 and "n_occluded_targets" not in b.provenance
+    assert all(not r.is_right(1e12) for r in occ if r.occluded)
+
+
+def test_evaluation_reports_occluded_targets_apart(rows):
+    occ = _with_occluded(rows)
+    rep = evaluate(occ, 4.0)
+    o = rep["held_out_occluded"]
+    assert o["n"] == 15 and rep["held_out_pooled"]["n"] == 75
+    assert 0 <= o["go"] <= o["n"] and 0.0 <= o["mean_p"] <= o["max_p"] <= 1.0
+    assert sum(s["occluded"]["n"] for s in rep["held_out"].values()) == 15
+    assert o["go"] == sum(s["occluded"]["go"] for s in rep["held_out"].values())
+
+
+def test_evidence_row_keeps_old_tables_bytes():
+    from scipctl.pipeline.trust_data import EvidenceRow
+
+    r = small_table(1)[0]
+    d = r.to_dict()
+    assert "occluded" not in d and EvidenceRow.from_dict(d) == r
+    import dataclasses
+
+    h = dataclasses.replace(r, error_px=None, occluded=True)
+    assert h.to_dict()["occluded"] is True and EvidenceRow.from_dict(h.to_dict()) == h

@@ -1,0 +1,76 @@
+"""Extra and occluded targets of the trust-model data (scipctl/sim/extra_targets.py), checked by independent ray
+casts from the true models: an extra target is seen by every required image, an occluded one is seen by the
+navcams and hidden from the hazcam by a surface at least ``min_depth_m`` in front of it."""
+
+import numpy as np
+import pytest
+
+from scipctl.sim.extra_targets import OCCLUDED_KIND, choose_extra_targets, choose_occluded_targets, extra_marks
+from scipctl.sim.marks import project_visible
+
+MIN_DEPTH_M = 0.05
+
+
+def _ids(sim):
+    pid = {(p.stop, p.camera, p.eye): p.product_id for p in sim.products}
+    return (pid[("near", "hazcam", "left")], [pid[("near", "hazcam", "right")]],
+            [pid[("near", "navcam", "left")], pid[("near", "navcam", "right")]])
+
+
+@pytest.fixture(scope="module")
+def occluded(run_full_exact):
+    haz, _, nav = _ids(run_full_exact)
+    got = choose_occluded_targets(run_full_exact.scene, run_full_exact.products, haz, nav, 6,
+                                  np.random.default_rng(7), min_depth_m=MIN_DEPTH_M)
+    assert got, "the paper scene has no point the navcams see behind something the hazcam sees"
+    return got
+
+
+def test_occluded_targets_are_hidden_from_the_hazcam_and_seen_by_the_navcams(run_full_exact, occluded):
+    sim = run_full_exact
+    haz, _, nav = _ids(sim)
+    by = {p.product_id: p for p in sim.products}
+    X = np.array([t.xyz_site_m for t, _, _ in occluded])
+    assert all(t.kind == OCCLUDED_KIND for t, _, _ in occluded)
+    assert [t.id for t, _, _ in occluded] == [f"o{i + 1:02d}" for i in range(len(occluded))]
+    h = by[haz]
+    uv, vis = project_visible(sim.scene, h.model_true_site, h.width, h.height, X)
+    assert not vis.any()
+    # the point projects to the pixel whose ray was followed (the ray's own point: float rounding only)
+    assert np.abs(uv - np.array([u for _, _, u in occluded])).max() < 1e-6
+    # an independent cast from that pixel's ray origin towards the point stops short of it by the reported depth
+    o, _ = h.model_true_site.unproject(uv)
+    dist = np.linalg.norm(X - o, axis=1)
+    hits = sim.scene.cast(o, (X - o) / dist[:, None])
+    gap = dist - hits.t_m
+    depth = np.array([d for _, d, _ in occluded])
+    assert (gap >= MIN_DEPTH_M - 1e-6).all() and (depth >= MIN_DEPTH_M).all()
+    assert np.abs(gap - depth).max() < 1e-6  # the same surfaces, cast once or layer by layer (1 mm steps skip none)
+    for pid in nav:
+        p = by[pid]
+        _, vis = project_visible(sim.scene, p.model_true_site, p.width, p.height, X)
+        assert vis.all(), pid
+    marks = extra_marks(sim.scene, sim.products, [t for t, _, _ in occluded])
+    for tm in marks:
+        got = {m.product_id for m in tm.marks}
+        assert haz not in got and set(nav) <= got
+
+
+def test_occluded_targets_are_a_function_of_the_seed(run_full_exact, occluded):
+    haz, _, nav = _ids(run_full_exact)
+    again = choose_occluded_targets(run_full_exact.scene, run_full_exact.products, haz, nav, 6,
+                                    np.random.default_rng(7), min_depth_m=MIN_DEPTH_M)
+    assert [(t.id, t.xyz_site_m.tolist(), d) for t, d, _ in again] == [(t.id, t.xyz_site_m.tolist(), d) for t, d, _ in occluded]
+
+
+def test_extra_targets_are_seen_by_every_required_image(run_full_exact):
+    sim = run_full_exact
+    haz, haz_r, nav = _ids(sim)
+    got = choose_extra_targets(sim.scene, sim.products, haz, haz_r + nav, 6, np.random.default_rng(3))
+    assert len(got) == 6
+    by = {p.product_id: p for p in sim.products}
+    X = np.array([t.xyz_site_m for t in got])
+    for pid in [haz] + haz_r + nav:
+        p = by[pid]
+        _, vis = project_visible(sim.scene, p.model_true_site, p.width, p.height, X)
+        assert vis.all(), pid
