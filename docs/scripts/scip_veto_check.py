@@ -42,7 +42,7 @@ def main(argv):
     go_min = load_packaged_trust_model().go_threshold(R_PX)
     n = go0 = go1 = fgo0 = fgo1 = lost = 0
     for fam in F.families_of(rows):
-        m = F._raw_model([r for r in rows if r.family != fam], (R_PX,))
+        m = F.fit_raw_model([r for r in rows if r.family != fam], (R_PX,))
         for _, rs in sorted(F.targets_of([r for r in rows if r.family == fam]).items()):
             ev = [Evidence.from_dict(r.evidence) for r in rs]
             p = m.probability(ev, R_PX)

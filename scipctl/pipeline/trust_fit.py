@@ -86,7 +86,7 @@ def fit_logistic(Z: np.ndarray, y: np.ndarray):
     return lr.coef_[0], float(lr.intercept_[0])
 
 
-def _raw_model(rows: list[EvidenceRow], radii=RADII_PX, features: Optional[dict] = None) -> TrustModel:
+def fit_raw_model(rows: list[EvidenceRow], radii=RADII_PX, features: Optional[dict] = None) -> TrustModel:
     spec = dict(FEATURES if features is None else features)
     X, err = _prep(rows, spec)
     names = usable_features(X, list(spec))
@@ -141,13 +141,13 @@ def fit_trust_model(rows: list[EvidenceRow], radii=RADII_PX, provenance: Optiona
     rows = fit_rows(rows)
     if not rows:
         raise ValueError("no evidence row with a true error to fit on")
-    model = _raw_model(rows, radii)
+    model = fit_raw_model(rows, radii)
     fams = families_of(rows)
     oof = defaultdict(list)
     for fam in fams:
         train = [r for r in rows if r.family != fam] if len(fams) > 1 else rows
         test = [r for r in rows if r.family == fam]
-        m = _raw_model(train, radii)
+        m = fit_raw_model(train, radii)
         for r in radii:
             oof[r] += [(c[1], c[2]) for c in scip_choices(m, test, r)]
     for fit in model.fits:
@@ -200,7 +200,7 @@ def _method_rates(rows: list[EvidenceRow], success_px: float) -> dict:
     return {s: hits[s] / len(tg) for s in sorted(names)}
 
 
-def _summary(choices: list, success_px: float, go_min: float) -> dict:
+def choice_summary(choices: list, success_px: float, go_min: float) -> dict:
     p = [c[1] for c in choices]
     y = [c[2] is not None and c[2] <= success_px for c in choices]
     go = [pi >= go_min for pi in p]
@@ -225,7 +225,7 @@ def _alt_candidate_metrics(train: list, test: list, success_px: float) -> dict:
     from sklearn.ensemble import HistGradientBoostingClassifier
     from sklearn.isotonic import IsotonicRegression
 
-    m = _raw_model(train, (success_px,))
+    m = fit_raw_model(train, (success_px,))
     ev_tr = [Evidence.from_dict(r.evidence) for r in train]
     ev_te = [Evidence.from_dict(r.evidence) for r in test]
     y_tr = np.array([r.is_right(success_px) for r in train])
@@ -261,7 +261,7 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
         test = [r for r in rows if r.family == fam]
         if not train:
             continue
-        m = _raw_model(train, RADII_PX)
+        m = fit_raw_model(train, RADII_PX)
         ch_all = scip_choices(m, test, success_px)
         pooled += ch_all
         ch = [c for c in ch_all if not c[5]]
@@ -272,7 +272,7 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
         rates_train = _method_rates(train, success_px)
         best_train = max(rates_train, key=rates_train.get)
         best_test = max(rates_test, key=rates_test.get)
-        s = _summary(ch, success_px, go_full)
+        s = choice_summary(ch, success_px, go_full)
         s.update({"best_method_on_train": best_train, "its_within": rates_test.get(best_train, 0.0),
                   "best_method_here": best_test, "best_within_here": rates_test[best_test],
                   "any_candidate_within": float(np.mean([any(e is not None and e <= success_px for _, e in c[3]) for c in ch])),
@@ -280,16 +280,16 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
                   "occluded": occluded_summary([c for c in ch_all if c[5]], go_full)})
         report["held_out"][fam] = s
     seen = [c for c in pooled if not c[5]]
-    report["held_out_pooled"] = _summary(seen, success_px, go_full)
+    report["held_out_pooled"] = choice_summary(seen, success_px, go_full)
     # the scenarios' own marked targets (flat, point, edge, sand, contrast) apart from the random extra ones
-    report["held_out_pooled_marked"] = _summary([c for c in seen if c[4] not in ("extra", "occluded")], success_px, go_full)
+    report["held_out_pooled_marked"] = choice_summary([c for c in seen if c[4] not in ("extra", "occluded")], success_px, go_full)
     report["held_out_occluded"] = occluded_summary([c for c in pooled if c[5]], go_full)
     for fam in fams:
         ch = scip_choices(full, [r for r in rows if r.family == fam], success_px)
         if any(not c[5] for c in ch):
-            report["fit"][fam] = _summary([c for c in ch if not c[5]], success_px, go_full)
+            report["fit"][fam] = choice_summary([c for c in ch if not c[5]], success_px, go_full)
     ch = scip_choices(full, rows, success_px)
-    report["fit_pooled"] = _summary([c for c in ch if not c[5]], success_px, go_full)
+    report["fit_pooled"] = choice_summary([c for c in ch if not c[5]], success_px, go_full)
     report["fit_occluded"] = occluded_summary([c for c in ch if c[5]], go_full)
     return report
 
