@@ -24,6 +24,12 @@ EXTRA_KIND = "extra"
 OCCLUDED_KIND = "occluded"
 STEP_M = 1e-3  # a ray cast again starts this far past the last hit (past the surface it met)
 MAX_LAYERS = 4  # surfaces passed along one hazcam ray before giving up
+# an occluded target is hidden over a disk of this radius (hazcam px) around its pixel: no answer within the
+# issue's success radius (4 px) can show the target's own surface (a point just behind a silhouette is not hidden
+# for an answer one pixel over); checked on the centre and on rings of 2 and 4 px, 8 rays each
+HIDDEN_DISK_PX = 4.0
+_RING_OFFSETS_PX = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in (0.5 * HIDDEN_DISK_PX, HIDDEN_DISK_PX)
+                                            for a in np.arange(8) * np.pi / 4])
 
 
 def choose_extra_targets(scene: Scene, products: list, ref_id: str, required_ids: list, n: int,
@@ -71,8 +77,10 @@ def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_i
     Rays of ``hazcam_id``'s true model through uniform pixels of its inner ``1 - 2 inner_frac`` part are followed
     past their first hit (the occluder) to the first surface at least ``min_depth_m`` behind it (site frame,
     metres; casting again :data:`STEP_M` past each hit, at most :data:`MAX_LAYERS` times). Such a point projects
-    to the ray's pixel and is hidden there; it is kept when it lies within ``max_radius_m`` of the rock's centre
-    and every image of ``seen_ids`` sees it (in the inner part, not occluded: :func:`project_visible`).
+    to the ray's pixel and is hidden there; it is kept when it lies within ``max_radius_m`` of the rock's centre,
+    stays hidden over the disk of :data:`HIDDEN_DISK_PX` around its pixel (every ray of the disk's rings first
+    hits a surface at least ``min_depth_m`` nearer than the point) and every image of ``seen_ids`` sees it (in
+    the inner part, not occluded: :func:`project_visible`).
 
     Returns ``[(Target (kind "occluded", ids o01, o02...), occluder depth m, hazcam pixel (2,))]``.
     """
@@ -101,6 +109,14 @@ def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_i
         todo[idx[deep | ~np.isfinite(t_hit)]] = False
         t_prev[idx] = t_hit
     ok = np.isfinite(depth) & (np.hypot(X[:, 0], X[:, 1]) < max_radius_m)
+    idx = np.flatnonzero(ok)
+    if len(idx):  # hidden over the whole disk: each ring ray meets a surface min_depth_m nearer than the point
+        m = len(_RING_OFFSETS_PX)
+        uv_ring = (uv[idx, None, :] + _RING_OFFSETS_PX[None]).reshape(-1, 2)
+        o_r, d_r = hz.model_true_site.unproject(uv_ring)
+        t_r = scene.cast(o_r, d_r).t_m.reshape(len(idx), m)
+        dist = np.linalg.norm(X[idx, None, :] - o_r.reshape(len(idx), m, 3), axis=2)
+        ok[idx] = np.all(t_r <= dist - min_depth_m, axis=1)
     Xq = np.where(ok[:, None], X, 0.0)
     for pid in seen_ids:
         p = by[pid]
