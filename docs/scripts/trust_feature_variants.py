@@ -12,7 +12,10 @@ data (session 22; measured, not adopted)".
 
 The variants add derived evidence (properties set on ``Evidence`` here, not in the package):
 ``geo_best_sigma`` (the smaller of the near / far views' sigma), the best view's navcam residual
-(``geo_best_nav_res_px``, in the package), and each view's sigma capped at 10.
+(``geo_best_nav_res_px``, in the package), each view's sigma capped at 10, and one interaction term,
+``app_geo_conflict`` = log1p(smaller sigma) / (1 + the smaller of the two views' tracking offsets, px): large when
+the expected windows track to the answer and its geometry disagrees (NaN without geometry; no tracking counts as
+no agreement).
 """
 
 from __future__ import annotations
@@ -45,6 +48,17 @@ Evidence.geo_far_sigma_cap = property(lambda e: _cap(e.geo_far_sigma))
 Evidence.geo_best_sigma_cap = property(lambda e: _nanmin(e.geo_near_sigma_cap, e.geo_far_sigma_cap))
 
 
+def _conflict(e) -> float:
+    s = e.geo_best_sigma
+    if not math.isfinite(s):
+        return math.nan
+    off = _nanmin(e.app_near_offset_px, e.app_far_offset_px)
+    return math.log1p(s) * (1.0 / (1.0 + off) if math.isfinite(off) else 0.0)
+
+
+Evidence.app_geo_conflict = property(_conflict)
+
+
 def variants() -> dict:
     base = dict(FEATURES)
     capped = {k: ((v[0] + "_cap", v[1]) if k.startswith("geo_") and k.endswith("log_sigma") else v) for k, v in base.items()}
@@ -52,7 +66,8 @@ def variants() -> dict:
             "+ log smaller sigma": dict(base, geo_best_log_sigma=("geo_best_sigma", "log1p")),
             "+ log best navcam residual": dict(base, geo_best_log_nav_res=("geo_best_nav_res_px", "log1p")),
             "sigma capped at 10": capped,
-            "capped + smaller one": dict(capped, geo_best_log_sigma=("geo_best_sigma_cap", "log1p"))}
+            "capped + smaller one": dict(capped, geo_best_log_sigma=("geo_best_sigma_cap", "log1p")),
+            "+ appearance x geometry": dict(base, app_geo_conflict=("app_geo_conflict", "x"))}
 
 
 def report(name: str, pooled: list, broken: dict) -> None:
