@@ -6,7 +6,7 @@ One run of the ``paper`` scenario, of one scene family, written as ``OUT_DIR/<fa
 with ``N`` extra targets (random true surface points near the rock, seen by the near hazcam pair and the near
 navcam pair, exact marks: ``scipctl.sim.extra_targets``) besides the run's three, and up to ``M`` occluded
 targets (true surface points the near navcam pair sees and something hides from the near left hazcam, >= 5 cm
-in front along its ray; ids ``o01``...: ``choose_occluded_targets``). An occluded target has navcam marks and
+in front, over the whole 4 px disk around the point's pixel; ids ``o01``...: ``choose_occluded_targets``). An occluded target has navcam marks and
 no mark in the left hazcam; the ``.sim.json`` lists it under ``occluded_targets``, and ``scipctl trust-evidence``
 labels every hazcam answer for it wrong. Only the images the handoff
 uses (the ``near`` and ``far`` stops) are rendered, as ``scipctl synth`` renders them (same exposure, noise
