@@ -55,16 +55,15 @@ def main(argv=None) -> None:
     ap.add_argument("blind_dir")
     ap.add_argument("--new", nargs="+", required=True, help="evidence tables (or folders of them) the refit adds")
     ap.add_argument("--diff", action="store_true")
-    a = ap.parse_args(argv)
-    diff = a.diff
-    for p in [a.old_model, a.old_table, a.blind_dir] + a.new:
+    args = ap.parse_args(argv)
+    for p in [args.old_model, args.old_table, args.blind_dir] + args.new:
         if not os.path.exists(p):
             ap.error(f"no such file or folder: {p}")
-    old_model = load_trust_model(a.old_model)
-    old = tf.fit_rows(read_rows([a.old_table]))
-    new = tf.fit_rows(read_rows([t for p in a.new for t in tables_in(p)]))
+    old_model = load_trust_model(args.old_model)
+    old = tf.fit_rows(read_rows([args.old_table]))
+    new = tf.fit_rows(read_rows([t for p in args.new for t in tables_in(p)]))
     blind = []
-    for t in sorted(glob.glob(os.path.join(a.blind_dir, "*.jsonl"))):
+    for t in sorted(glob.glob(os.path.join(args.blind_dir, "*.jsonl"))):
         blind += [dataclasses.replace(r, group=os.path.basename(t)) for r in tf.fit_rows(read_rows([t]))]
     both = old + new
     refit = tf.fit_trust_model(both)
@@ -98,7 +97,7 @@ def main(argv=None) -> None:
     for fam in sorted({c[0] for c in a}):
         line(f"blind {fam}: old model", [c for c in a if c[0] == fam], go_old)
         line(f"blind {fam}: refit", [c for c in b if c[0] == fam], go_new)
-    if diff:
+    if args.diff:
         for (k, _), x, y in zip(sorted(tf.targets_of(blind).items()), a, b):
             if abs(x[2] - y[2]) > 0.01 or (x[1] >= go_old) != (y[1] >= go_new) or (x[1] >= go_old and x[2] > R_PX) \
                     or (y[1] >= go_new and y[2] > R_PX):

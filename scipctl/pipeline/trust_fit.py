@@ -284,11 +284,11 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
     # the scenarios' own marked targets (flat, point, edge, sand, contrast) apart from the random extra ones
     report["held_out_pooled_marked"] = choice_summary([c for c in seen if c[4] not in ("extra", "occluded")], success_px, go_full)
     report["held_out_occluded"] = occluded_summary([c for c in pooled if c[5]], go_full)
+    ch = scip_choices(full, rows, success_px)  # in-sample: every target once, split by family below
     for fam in fams:
-        ch = scip_choices(full, [r for r in rows if r.family == fam], success_px)
-        if any(not c[5] for c in ch):
-            report["fit"][fam] = choice_summary([c for c in ch if not c[5]], success_px, go_full)
-    ch = scip_choices(full, rows, success_px)
+        seen_f = [c for c in ch if c[0] == fam and not c[5]]
+        if seen_f:
+            report["fit"][fam] = choice_summary(seen_f, success_px, go_full)
     report["fit_pooled"] = choice_summary([c for c in ch if not c[5]], success_px, go_full)
     report["fit_occluded"] = occluded_summary([c for c in ch if c[5]], go_full)
     return report

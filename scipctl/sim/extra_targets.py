@@ -32,6 +32,18 @@ _RING_OFFSETS_PX = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r
                                             for a in np.arange(8) * np.pi / 4])
 
 
+def _inner_pixels(rng: np.random.Generator, width: int, height: int, inner_frac: float, k: int) -> np.ndarray:
+    """``k`` uniform pixels ``(k, 2)`` of an image's inner ``1 - 2 inner_frac`` part (u drawn first, then v)."""
+    return np.stack([rng.uniform(inner_frac * width, (1 - inner_frac) * width, k),
+                     rng.uniform(inner_frac * height, (1 - inner_frac) * height, k)], 1)
+
+
+def _inner(uv: np.ndarray, width: int, height: int, inner_frac: float) -> np.ndarray:
+    """``(K,)`` bool: pixels ``uv`` ``(K, 2)`` strictly inside the image's inner ``1 - 2 inner_frac`` part."""
+    f = inner_frac
+    return ((uv[:, 0] > f * width) & (uv[:, 0] < (1 - f) * width) & (uv[:, 1] > f * height) & (uv[:, 1] < (1 - f) * height))
+
+
 def choose_extra_targets(scene: Scene, products: list, ref_id: str, required_ids: list, n: int,
                          rng: np.random.Generator, max_radius_m: float = 1.5, inner_frac: float = 0.06,
                          id_prefix: str = "x") -> list[Target]:
@@ -43,30 +55,18 @@ def choose_extra_targets(scene: Scene, products: list, ref_id: str, required_ids
     """
     by = {p.product_id: p for p in products}
     ref = by[ref_id]
-    m_ref = ref.model_true_site
-    W, H = ref.width, ref.height
-    k = max(20 * n, 200)
-    uv = np.stack([rng.uniform(inner_frac * W, (1 - inner_frac) * W, k),
-                   rng.uniform(inner_frac * H, (1 - inner_frac) * H, k)], 1)
-    o, d = m_ref.unproject(uv)
+    uv = _inner_pixels(rng, ref.width, ref.height, inner_frac, max(20 * n, 200))
+    o, d = ref.model_true_site.unproject(uv)
     hits = scene.cast(o, d)
     ok = hits.hit & (np.hypot(hits.points[:, 0], hits.points[:, 1]) < max_radius_m)
     X = np.where(ok[:, None], hits.points, 0.0)
     for pid in [ref_id] + list(required_ids):
         p = by[pid]
         uvk, vis = project_visible(scene, p.model_true_site, p.width, p.height, X)
-        f = inner_frac
-        inner = ((uvk[:, 0] > f * p.width) & (uvk[:, 0] < (1 - f) * p.width)
-                 & (uvk[:, 1] > f * p.height) & (uvk[:, 1] < (1 - f) * p.height))
-        ok &= vis & inner
+        ok &= vis & _inner(uvk, p.width, p.height, inner_frac)
     idx = np.flatnonzero(ok)[:n]
     return [Target(f"{id_prefix}{i + 1:02d}", EXTRA_KIND, "random visible surface point (trust-model data)",
                    np.asarray(X[j], float)) for i, j in enumerate(idx)]
-
-
-def _inner(uv: np.ndarray, width: int, height: int, inner_frac: float) -> np.ndarray:
-    f = inner_frac
-    return ((uv[:, 0] > f * width) & (uv[:, 0] < (1 - f) * width) & (uv[:, 1] > f * height) & (uv[:, 1] < (1 - f) * height))
 
 
 def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_ids: list, n: int,
@@ -87,8 +87,7 @@ def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_i
     by = {p.product_id: p for p in products}
     hz = by[hazcam_id]
     k = max(100 * n, 3000)
-    uv = np.stack([rng.uniform(inner_frac * hz.width, (1 - inner_frac) * hz.width, k),
-                   rng.uniform(inner_frac * hz.height, (1 - inner_frac) * hz.height, k)], 1)
+    uv = _inner_pixels(rng, hz.width, hz.height, inner_frac, k)
     o, d = hz.model_true_site.unproject(uv)
     first = scene.cast(o, d)
     t_first = np.where(first.hit, first.t_m, np.inf)
