@@ -118,6 +118,7 @@ def main(argv=None):
     ap.add_argument("out", type=Path)
     ap.add_argument("--extra", type=int, default=12)
     ap.add_argument("--occluded", type=int, default=0)
+    ap.add_argument("--shallow", type=int, default=0)
     a = ap.parse_args(argv)
 
     from scipctl import __version__
@@ -126,6 +127,7 @@ def main(argv=None):
     from scipctl.model import TargetTruth
     from scipctl.sim.build import build_run
     from scipctl.sim.extra_targets import choose_extra_targets, choose_occluded_targets, extra_marks
+    from scipctl.sim.occluders import add_shallow_occluders
     from scipctl.sim.scenarios import _rng
 
     scene_family = None
@@ -142,9 +144,17 @@ def main(argv=None):
     pid = {(p.stop, p.camera, p.eye): p.product_id for p in sim.products}
     haz = pid[("near", "hazcam", "left")]
     req = [pid[("near", "hazcam", "right")], pid[("near", "navcam", "left")], pid[("near", "navcam", "right")]]
+    # pebbles first: the targets drawn below are drawn in the scene that is rendered
+    protect = np.array([t.xyz_site_m for t in sim.downlink.truth_targets], float).reshape(-1, 3)
+    shallow = []
+    if a.shallow > 0:
+        scene, shallow = add_shallow_occluders(sim.scene, sim.products, haz, req[1:], protect, a.shallow,
+                                               _rng(a.seed, SCENARIO, a.run, "shallow-occluders"))
+        sim = replace(sim, scene=scene)
     extra = choose_extra_targets(sim.scene, sim.products, haz, req, a.extra, _rng(a.seed, SCENARIO, a.run, "extra-targets"))
     hidden = (choose_occluded_targets(sim.scene, sim.products, haz, req[1:], a.occluded,
                                       _rng(a.seed, SCENARIO, a.run, "occluded-targets")) if a.occluded > 0 else [])
+    hidden = [(s.target, s.depth_m, s.hazcam_uv) for s in shallow] + hidden
     extra_all = extra + [t for t, _, _ in hidden]
     sim.downlink.targets.extend(extra_marks(sim.scene, sim.products, extra_all))
     sim.downlink.truth_targets.extend(TargetTruth(t.id, np.asarray(t.xyz_site_m, float)) for t in extra_all)
@@ -155,10 +165,13 @@ def main(argv=None):
     rec = dict(sim.record, family=a.family, extra_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist()} for t in extra],
                occluded_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist(), "hidden_in": haz,
                                   "occluder_depth_m": dep, "hidden_uv": uv.tolist()} for t, dep, uv in hidden],
+               shallow_occluders=[{"name": s.rock.name, "hides": s.target.id, "centre_xy_m": s.rock.centre_xy_m.tolist(),
+                                   "size_m": s.rock.size_m.tolist()} for s in shallow],
                rendered_stops=["near", "far"],
                written_by={"tool": "scipctl", "version": __version__,
                            "regenerate": f"python docs/scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"
-                                         + (f" --occluded {a.occluded}" if a.occluded else "")})
+                                         + (f" --occluded {a.occluded}" if a.occluded else "")
+                                         + (f" --shallow {a.shallow}" if a.shallow else "")})
     if scene_family is not None:
         rec["scene_family"] = scene_family.to_dict()
     atomic_write_text(a.out / f"{name}.sim.json", json.dumps(rec, indent=1, sort_keys=True, default=str) + "\n")
