@@ -75,8 +75,8 @@ def test_fit_trust_bad_table_is_exit_2(tmp_path):
 
 
 def test_packaged_model_is_reproduced_by_its_command(tmp_path, monkeypatch):
-    """Issue #14 item 6: `scipctl fit-trust tests/data/trust/evidence-20dl-11fam.jsonl.gz -o scipctl/data/trust_model.json`
-    (the command in the packaged model's provenance) makes the packaged file again: run from the repository root
+    """Issue #14 item 6: the command in the packaged model's provenance (`scipctl fit-trust` on the four tables of
+    tests/data/trust/, `-o scipctl/data/trust_model.json`) makes the packaged file again: run from the repository root
     with the same arguments, only the output path differs, and it is not recorded in the fit."""
     packaged = ROOT / "scipctl/data/trust_model.json"
     want = json.loads(packaged.read_text())
