@@ -98,10 +98,12 @@ def main(argv=None) -> None:
         line(f"blind {fam}: old model", [c for c in a if c[0] == fam], go_old)
         line(f"blind {fam}: refit", [c for c in b if c[0] == fam], go_new)
     if args.diff:
+        inf = float("inf")  # an occluded target's answer has no error: every answer is wrong
         for (k, _), x, y in zip(sorted(tf.targets_of(blind).items()), a, b):
-            if abs(x[2] - y[2]) > 0.01 or (x[1] >= go_old) != (y[1] >= go_new) or (x[1] >= go_old and x[2] > R_PX) \
-                    or (y[1] >= go_new and y[2] > R_PX):
-                print(f"{k[0]:36s} {k[1]:4s} {x[4]:8s} old: {x[2]:7.2f} px p {x[1]:.3f} | refit: {y[2]:7.2f} px p {y[1]:.3f}")
+            ex, ey = (inf if x[2] is None else x[2]), (inf if y[2] is None else y[2])
+            if (ex != ey and not abs(ex - ey) <= 0.01) or (x[1] >= go_old) != (y[1] >= go_new) \
+                    or (x[1] >= go_old and ex > R_PX) or (y[1] >= go_new and ey > R_PX):
+                print(f"{k[0]:36s} {k[1]:4s} {x[4]:8s} old: {ex:7.2f} px p {x[1]:.3f} | refit: {ey:7.2f} px p {y[1]:.3f}")
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from typing import Optional
+from typing import NamedTuple, Optional
 
 import numpy as np
 
@@ -110,15 +110,26 @@ def targets_of(rows: list[EvidenceRow]) -> dict:
     return out
 
 
-def scip_choices(model: TrustModel, rows: list[EvidenceRow], success_px: float) -> list[tuple]:
-    """Per target: (family, p of scip's answer, its error px, [per-candidate (p, error)], target kind, occluded).
-    An occluded target's errors are None (no answer is right)."""
+class ScipChoice(NamedTuple):
+    """scip's answer for one target of an evidence table (a tuple: scripts read it by index too)."""
+
+    family: str
+    p: float  # p_success of scip's answer
+    error_px: Optional[float]  # its error; None for an occluded target (no answer is right)
+    candidates: list  # [(p, error px or None)] per candidate, in row order
+    kind: str  # the target's kind ("flat", "extra", "occluded", ...)
+    occluded: bool
+
+
+def scip_choices(model: TrustModel, rows: list[EvidenceRow], success_px: float) -> list[ScipChoice]:
+    """Per target, in sorted (group, target) order: :class:`ScipChoice`."""
     out = []
     for (_, _), rs in sorted(targets_of(rows).items()):
         p = model.probability([Evidence.from_dict(r.evidence) for r in rs], success_px)
         i = int(np.argmax(p))
         errs = [None if r.occluded else r.error_px for r in rs]
-        out.append((rs[0].family, float(p[i]), errs[i], list(zip(p.tolist(), errs)), rs[0].kind, rs[0].occluded))
+        out.append(ScipChoice(rs[0].family, float(p[i]), errs[i], list(zip(p.tolist(), errs)), rs[0].kind,
+                              rs[0].occluded))
     return out
 
 
@@ -149,7 +160,7 @@ def fit_trust_model(rows: list[EvidenceRow], radii=RADII_PX, provenance: Optiona
         test = [r for r in rows if r.family == fam]
         m = fit_raw_model(train, radii)
         for r in radii:
-            oof[r] += [(c[1], c[2]) for c in scip_choices(m, test, r)]
+            oof[r] += [(c.p, c.error_px) for c in scip_choices(m, test, r)]
     for fit in model.fits:
         fit.go_min_p = _choose_go(oof[fit.success_px], fit.success_px)
     n_targets = len(targets_of(rows))
@@ -201,10 +212,10 @@ def _method_rates(rows: list[EvidenceRow], success_px: float) -> dict:
 
 
 def choice_summary(choices: list, success_px: float, go_min: float) -> dict:
-    p = [c[1] for c in choices]
-    y = [c[2] is not None and c[2] <= success_px for c in choices]
+    p = [c.p for c in choices]
+    y = [c.error_px is not None and c.error_px <= success_px for c in choices]
     go = [pi >= go_min for pi in p]
-    errs = np.array([c[2] for c in choices], float)
+    errs = np.array([c.error_px for c in choices], float)
     n_go = sum(go)
     return {
         "n": len(choices), "within": float(np.mean(y)) if y else None,
@@ -264,7 +275,7 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
         m = fit_raw_model(train, RADII_PX)
         ch_all = scip_choices(m, test, success_px)
         pooled += ch_all
-        ch = [c for c in ch_all if not c[5]]
+        ch = [c for c in ch_all if not c.occluded]
         test = [r for r in test if not r.occluded]
         if not ch:  # a family of occluded targets only
             continue
@@ -275,27 +286,27 @@ def evaluate(rows: list[EvidenceRow], success_px: float = 4.0, model: Optional[T
         s = choice_summary(ch, success_px, go_full)
         s.update({"best_method_on_train": best_train, "its_within": rates_test.get(best_train, 0.0),
                   "best_method_here": best_test, "best_within_here": rates_test[best_test],
-                  "any_candidate_within": float(np.mean([any(e is not None and e <= success_px for _, e in c[3]) for c in ch])),
+                  "any_candidate_within": float(np.mean([any(e is not None and e <= success_px for _, e in c.candidates) for c in ch])),
                   "candidate_models": _alt_candidate_metrics(train, test, success_px),
-                  "occluded": occluded_summary([c for c in ch_all if c[5]], go_full)})
+                  "occluded": occluded_summary([c for c in ch_all if c.occluded], go_full)})
         report["held_out"][fam] = s
-    seen = [c for c in pooled if not c[5]]
+    seen = [c for c in pooled if not c.occluded]
     report["held_out_pooled"] = choice_summary(seen, success_px, go_full)
     # the scenarios' own marked targets (flat, point, edge, sand, contrast) apart from the random extra ones
-    report["held_out_pooled_marked"] = choice_summary([c for c in seen if c[4] not in ("extra", "occluded")], success_px, go_full)
-    report["held_out_occluded"] = occluded_summary([c for c in pooled if c[5]], go_full)
+    report["held_out_pooled_marked"] = choice_summary([c for c in seen if c.kind not in ("extra", "occluded")], success_px, go_full)
+    report["held_out_occluded"] = occluded_summary([c for c in pooled if c.occluded], go_full)
     ch = scip_choices(full, rows, success_px)  # in-sample: every target once, split by family below
     for fam in fams:
-        seen_f = [c for c in ch if c[0] == fam and not c[5]]
+        seen_f = [c for c in ch if c.family == fam and not c.occluded]
         if seen_f:
             report["fit"][fam] = choice_summary(seen_f, success_px, go_full)
-    report["fit_pooled"] = choice_summary([c for c in ch if not c[5]], success_px, go_full)
-    report["fit_occluded"] = occluded_summary([c for c in ch if c[5]], go_full)
+    report["fit_pooled"] = choice_summary([c for c in ch if not c.occluded], success_px, go_full)
+    report["fit_occluded"] = occluded_summary([c for c in ch if c.occluded], go_full)
     return report
 
 
 def occluded_summary(choices: list, go_min: float) -> dict:
     """What ``scip`` answered for occluded targets (every answer wrong): n, GO (all false), mean and max p."""
-    p = [c[1] for c in choices]
+    p = [c.p for c in choices]
     return {"n": len(choices), "go": sum(pi >= go_min for pi in p), "mean_p": float(np.mean(p)) if p else None,
             "max_p": max(p) if p else None, "brier": _brier(p, [0.0] * len(p))}
