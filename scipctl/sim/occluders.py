@@ -17,7 +17,8 @@ horizontal direction, and keeps it only if, exactly (ray casts against the pebbl
 * the point is hidden from the hazcam over the whole disk of
   :data:`~scipctl.sim.extra_targets.HIDDEN_DISK_PX` around its pixel, by a surface at least ``min_depth_m`` in
   front of it;
-* every image of ``seen_ids`` still sees the point (in the inner part, not occluded);
+* every image of ``seen_ids`` still sees the point (in the inner part, not occluded), and still sees the points
+  that earlier pebbles hide;
 * every point of ``protect`` (the run's own targets) is seen by every product exactly as before;
 * the pebble stands on the ground, not on a rock.
 
@@ -113,6 +114,7 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
     lattice = LatticeNoise(rng, 16)
     out: list[ShallowOccluder] = []
     before = _visibility(scene, products, protect) if len(protect) else []
+    seen_rays = [(np.zeros((0, 3)), np.zeros((0, 3))) for _ in seen]  # per seen image: (ray origins, hidden points)
     for uv_c in uv:
         if len(out) >= n:
             break
@@ -155,7 +157,13 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
         # the run's targets are seen as before
         if any(np.any(_blocked(V, F, o_p[vis], protect[vis])) for o_p, vis in before if vis.any()):
             continue
+        # and the navcams still see the points hidden by earlier pebbles
+        if out and any(np.any(_blocked(V, F, o_s, X_s)) for o_s, X_s in seen_rays):
+            continue
         scene = _copy(scene, rock)
+        for k, (u, p) in enumerate(zip(uv_seen, seen)):
+            o_k = p.model_true_site.unproject(u)[0]
+            seen_rays[k] = (np.concatenate([seen_rays[k][0], o_k]), np.concatenate([seen_rays[k][1], X[None]]))
         depth = float(np.linalg.norm(X - o[0]) - t_r[0])
         tid = f"{id_prefix}{len(out) + 1:02d}"
         out.append(ShallowOccluder(Target(tid, OCCLUDED_KIND, "surface point a pebble hides from the hazcam "

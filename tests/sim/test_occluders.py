@@ -106,3 +106,26 @@ def test_the_same_pebbles_twice(placed):
         assert np.array_equal(a.target.xyz_site_m, b.target.xyz_site_m)
         assert np.array_equal(a.rock.vertices, b.rock.vertices)
         assert a.depth_m == b.depth_m
+
+
+def test_later_pebbles_keep_earlier_hidden_points_in_the_navcams_view():
+    """A later pebble must not hide an earlier pebble's point from the navcams. The draw of
+    ``trust_render.py filtered-specks 3132 s2-arc --shallow 6`` met that case: before the check, its fifth pebble hid
+    ``p01`` from both near navcams (so ``p01`` had no navcam mark and no evidence row in the session-23 table)."""
+    from scipctl.sim.families import family_of_run
+    from scipctl.sim.scenarios import _rng, default_errors
+
+    fam = family_of_run("filtered-specks", "paper", "s2-arc", 3132)
+    sim = build_run("paper", "s2-arc", 3132, errors=default_errors("paper").scaled(fam.error_scale), render=False,
+                    family=fam)
+    haz, nav = _ids(sim)
+    protect = np.array([t.xyz_site_m for t in sim.downlink.truth_targets])
+    scene, got = add_shallow_occluders(sim.scene, sim.products, haz, nav, protect, 6,
+                                       _rng(3132, "paper", "s2-arc", "shallow-occluders"))
+    assert len(got) == 6
+    X = np.array([s.target.xyz_site_m for s in got])
+    by = {p.product_id: p for p in sim.products}
+    for pid in nav:
+        p = by[pid]
+        _, vis = project_visible(scene, p.model_true_site, p.width, p.height, X)
+        assert vis.all(), (pid, [s.target.id for s, v in zip(got, vis) if not v])
