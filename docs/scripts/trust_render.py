@@ -1,6 +1,6 @@
 """Render simulated downlinks for the trust model of ``scip`` (docs/handoff.md, "Trust: scip").
 
-    python docs/scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N] [--occluded M]
+    python docs/scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N] [--occluded M] [--shallow K]
 
 One run of the ``paper`` scenario, of one scene family, written as ``OUT_DIR/<family>-<seed>-<run>.mcap``
 with ``N`` extra targets (random true surface points near the rock, seen by the near hazcam pair and the near
@@ -8,7 +8,10 @@ navcam pair, exact marks: ``scipctl.sim.extra_targets``) besides the run's three
 targets (true surface points the near navcam pair sees and something hides from the near left hazcam, >= 5 cm
 in front, over the whole 4 px disk around the point's pixel; ids ``o01``...: ``choose_occluded_targets``). An occluded target has navcam marks and
 no mark in the left hazcam; the ``.sim.json`` lists it under ``occluded_targets``, and ``scipctl trust-evidence``
-labels every hazcam answer for it wrong. Only the images the handoff
+labels every hazcam answer for it wrong. ``--shallow K`` first stands up to ``K`` pebbles in the scene, each
+a few centimetres in front of a surface point on the near left hazcam's line of sight, hiding it over the same disk
+while the navcams still see it (ids ``p01``...: ``scipctl.sim.occluders``); they are listed under
+``shallow_occluders`` and their points under ``occluded_targets`` too. Only the images the handoff
 uses (the ``near`` and ``far`` stops) are rendered, as ``scipctl synth`` renders them (same exposure, noise
 and seeds); the pancam and mid-stop images are left black, to halve the rendering time.
 
@@ -165,13 +168,14 @@ def main(argv=None):
     rec = dict(sim.record, family=a.family, extra_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist()} for t in extra],
                occluded_targets=[{"id": t.id, "xyz_site_m": t.xyz_site_m.tolist(), "hidden_in": haz,
                                   "occluder_depth_m": dep, "hidden_uv": uv.tolist()} for t, dep, uv in hidden],
-               shallow_occluders=[{"name": s.rock.name, "hides": s.target.id, "centre_xy_m": s.rock.centre_xy_m.tolist(),
-                                   "size_m": s.rock.size_m.tolist()} for s in shallow],
                rendered_stops=["near", "far"],
                written_by={"tool": "scipctl", "version": __version__,
                            "regenerate": f"python docs/scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"
                                          + (f" --occluded {a.occluded}" if a.occluded else "")
                                          + (f" --shallow {a.shallow}" if a.shallow else "")})
+    if a.shallow > 0:  # only then: the records of the other commands keep their bytes
+        rec["shallow_occluders"] = [{"name": s.rock.name, "hides": s.target.id, "centre_xy_m": s.rock.centre_xy_m.tolist(),
+                                     "size_m": s.rock.size_m.tolist()} for s in shallow]
     if scene_family is not None:
         rec["scene_family"] = scene_family.to_dict()
     atomic_write_text(a.out / f"{name}.sim.json", json.dumps(rec, indent=1, sort_keys=True, default=str) + "\n")
