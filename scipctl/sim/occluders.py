@@ -35,7 +35,7 @@ from .extra_targets import _RING_OFFSETS_PX, _inner, _inner_pixels, OCCLUDED_KIN
 from .marks import project_visible
 from .noise import LatticeNoise
 from .rocks import ROCK_SHAPES, Rock, make_rock
-from .scene import GEOM_ROCKS, Scene
+from .scene import GEOM_ROCKS, Scene, o3d_rays, o3d_triangle_mesh
 from .targets import Target
 
 # a pebble: visible length, width/length and height ranges (m), the gap between its far edge and the point (m)
@@ -57,17 +57,12 @@ class ShallowOccluder:
 
 
 def _first_hit_t(V: np.ndarray, F: np.ndarray, o: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """``(N,)`` distance along unit rays ``o + t d`` ``(N, 3)`` to the mesh ``(V, F)`` (inf: missed)."""
+    """``(N,)`` distance along unit rays ``o + t d`` ``(N, 3)`` to the mesh ``(V, F)`` alone (inf: missed)."""
     from ..core.open3d_import import open3d
 
-    o3d = open3d()
-    m = o3d.t.geometry.TriangleMesh()
-    m.vertex.positions = o3d.core.Tensor(np.ascontiguousarray(V, np.float32))
-    m.triangle.indices = o3d.core.Tensor(np.ascontiguousarray(F, np.uint32))
-    rc = o3d.t.geometry.RaycastingScene()
-    rc.add_triangles(m)
-    rays = np.concatenate([o, d], axis=1).astype(np.float32)
-    return rc.cast_rays(o3d.core.Tensor(rays))["t_hit"].numpy().astype(np.float64)
+    rc = open3d().t.geometry.RaycastingScene()
+    rc.add_triangles(o3d_triangle_mesh(V, F))
+    return rc.cast_rays(o3d_rays(o, d))["t_hit"].numpy().astype(np.float64)
 
 
 def _blocked(V, F, origins: np.ndarray, X: np.ndarray) -> np.ndarray:
@@ -125,13 +120,13 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
         X = hit.points[0]
         if np.hypot(X[0], X[1]) >= max_radius_m:
             continue
-        uv_seen = []
+        o_seen = []  # per seen image: its ray origin (1, 3) for the point
         for p in seen:
             u, vis = project_visible(scene, p.model_true_site, p.width, p.height, X[None])
             if not (vis[0] and _inner(u, p.width, p.height, inner_frac)[0]):
                 break
-            uv_seen.append(u)
-        if len(uv_seen) < len(seen):
+            o_seen.append(p.model_true_site.unproject(u)[0])
+        if len(o_seen) < len(seen):
             continue
         # the pebble: on the ground in front of the point, along the ray's horizontal direction
         L = rng.uniform(*PEBBLE_LENGTH_M)
@@ -152,7 +147,7 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
         if not np.all(t_r <= dist - min_depth_m):
             continue
         # the navcams see over it
-        if any(_blocked(V, F, p.model_true_site.unproject(u)[0], X[None])[0] for u, p in zip(uv_seen, seen)):
+        if any(_blocked(V, F, o_k, X[None])[0] for o_k in o_seen):
             continue
         # the run's targets are seen as before
         if any(np.any(_blocked(V, F, o_p[vis], protect[vis])) for o_p, vis in before if vis.any()):
@@ -161,8 +156,7 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
         if out and any(np.any(_blocked(V, F, o_s, X_s)) for o_s, X_s in seen_rays):
             continue
         scene = _copy(scene, rock)
-        for k, (u, p) in enumerate(zip(uv_seen, seen)):
-            o_k = p.model_true_site.unproject(u)[0]
+        for k, o_k in enumerate(o_seen):
             seen_rays[k] = (np.concatenate([seen_rays[k][0], o_k]), np.concatenate([seen_rays[k][1], X[None]]))
         depth = float(np.linalg.norm(X - o[0]) - t_r[0])
         tid = f"{id_prefix}{len(out) + 1:02d}"

@@ -62,6 +62,30 @@ class Hits:
     primitive_id: np.ndarray  # (N,) int64
 
 
+def o3d_triangle_mesh(V: np.ndarray, F: np.ndarray):
+    """An Open3D tensor ``TriangleMesh`` of vertices ``V`` ``(N, 3)`` (float32) and triangles ``F`` ``(M, 3)``."""
+    from ..core.open3d_import import open3d
+
+    o3d = open3d()
+
+    m = o3d.t.geometry.TriangleMesh()
+    m.vertex.positions = o3d.core.Tensor(np.ascontiguousarray(V, np.float32))
+    m.triangle.indices = o3d.core.Tensor(np.ascontiguousarray(F, np.uint32))
+    return m
+
+
+def o3d_rays(origins: np.ndarray, dirs: np.ndarray):
+    """Open3D rays ``(N, 6)`` float32 from ``origins`` and ``dirs`` ``(N, 3)``."""
+    from ..core.open3d_import import open3d
+
+    o3d = open3d()
+
+    r = np.empty((len(origins), 6), np.float32)
+    r[:, :3] = origins
+    r[:, 3:] = dirs
+    return o3d.core.Tensor(r)
+
+
 @dataclass
 class Scene:
     seed: int
@@ -115,14 +139,7 @@ class Scene:
         return len(self.terrain_tris) + len(self.rock_mesh()[1]) + len(self.pebble_tris)
 
     def _mesh(self, V, F):
-        from ..core.open3d_import import open3d
-
-        o3d = open3d()
-
-        m = o3d.t.geometry.TriangleMesh()
-        m.vertex.positions = o3d.core.Tensor(np.ascontiguousarray(V, np.float32))
-        m.triangle.indices = o3d.core.Tensor(np.ascontiguousarray(F, np.uint32))
-        return m
+        return o3d_triangle_mesh(V, F)
 
     def raycaster(self):
         """The Open3D ``RaycastingScene`` (built once): terrain, rocks, pebbles."""
@@ -145,14 +162,7 @@ class Scene:
 
     @staticmethod
     def _rays(origins, dirs):
-        from ..core.open3d_import import open3d
-
-        o3d = open3d()
-
-        r = np.empty((len(origins), 6), np.float32)
-        r[:, :3] = origins
-        r[:, 3:] = dirs
-        return o3d.core.Tensor(r)
+        return o3d_rays(origins, dirs)
 
     def _cast_raw(self, rc, origins, dirs):
         return rc.cast_rays(self._rays(origins, dirs))
