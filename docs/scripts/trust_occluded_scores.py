@@ -34,15 +34,19 @@ def main(argv=None) -> None:
             ap.error(f"no such model file: {m}")
 
     from scipctl.commands.trust import read_rows
+    from scipctl.errors import InputError
     from scipctl.io.trust_model import load_trust_model
     from scipctl.pipeline import trust_fit as tf
 
-    rows = []
-    for t in tables:
-        rows += [dataclasses.replace(r, group=os.path.basename(t)) for r in tf.fit_rows(read_rows([t]))]
+    try:  # a bad model or table: one line and exit 2 (usage error), not a traceback
+        rows = []
+        for t in tables:
+            rows += [dataclasses.replace(r, group=os.path.basename(t)) for r in tf.fit_rows(read_rows([t]))]
+        models = [(path, load_trust_model(path)) for path in a.models]
+    except InputError as e:
+        ap.error(str(e))
     keys = sorted(tf.targets_of(rows))
-    for path in a.models:
-        model = load_trust_model(path)
+    for path, model in models:
         go_min = model.go_threshold(R_PX)
         choices = tf.scip_choices(model, rows, R_PX)  # in the order of ``keys``
         s = tf.choice_summary([c for c in choices if not c[5]], R_PX, go_min)

@@ -26,6 +26,7 @@ import glob
 import os
 
 from scipctl.commands.trust import read_rows
+from scipctl.errors import InputError
 from scipctl.io.trust_model import load_trust_model
 from scipctl.pipeline import trust_fit as tf
 
@@ -59,12 +60,15 @@ def main(argv=None) -> None:
     for p in [args.old_model, args.old_table, args.blind_dir] + args.new:
         if not os.path.exists(p):
             ap.error(f"no such file or folder: {p}")
-    old_model = load_trust_model(args.old_model)
-    old = tf.fit_rows(read_rows([args.old_table]))
-    new = tf.fit_rows(read_rows([t for p in args.new for t in tables_in(p)]))
-    blind = []
-    for t in sorted(glob.glob(os.path.join(args.blind_dir, "*.jsonl"))):
-        blind += [dataclasses.replace(r, group=os.path.basename(t)) for r in tf.fit_rows(read_rows([t]))]
+    try:  # a bad model or table: one line and exit 2 (usage error), not a traceback
+        old_model = load_trust_model(args.old_model)
+        old = tf.fit_rows(read_rows([args.old_table]))
+        new = tf.fit_rows(read_rows([t for p in args.new for t in tables_in(p)]))
+        blind = []
+        for t in sorted(glob.glob(os.path.join(args.blind_dir, "*.jsonl"))):
+            blind += [dataclasses.replace(r, group=os.path.basename(t)) for r in tf.fit_rows(read_rows([t]))]
+    except InputError as e:
+        ap.error(str(e))
     both = old + new
     refit = tf.fit_trust_model(both)
     go_old, go_new = old_model.go_threshold(R_PX), refit.go_threshold(R_PX)
