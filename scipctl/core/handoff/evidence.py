@@ -12,8 +12,10 @@ window built from one image, so agreement between trackers alone is weak evidenc
 * **geometry**, per view: hazcam point stereo at ``c`` (a 3-D point, hazcam rover frame) against the target's 3-D
   point from navcam point stereo moved by the registered navcam -> hazcam transform (whole-cloud ICP; the seed
   when it failed), in units of the expected sigma (both stereo range sigmas, 0.25 px of disparity, and a floor),
-  and the same point projected back into the navcam: its distance from the navcam target, in hazcam px; the
-  registration's own checks (ICP fitness and RMS, and the registration-check keys of :data:`REGISTRATION_CHECK_KEYS`
+  and the same point projected back into the navcam: its distance from the navcam target, in hazcam px;
+  occlusion: the hazcam's own dense stereo over the disk of ``occlusion_disk_px`` around ``c`` against the
+  predicted target's range (the median of how much nearer the surface there is, in units of the same sigma: a
+  stone standing in front of the target puts the answer on the stone); the registration's own checks (ICP fitness and RMS, and the registration-check keys of :data:`REGISTRATION_CHECK_KEYS`
   when the mesh-registration diagnostics carry them);
 * **consistency**: forward-backward (the hazcam window at ``c`` warped into the navcam view and tracked back
   there: the return error, in hazcam px), and agreement between candidates (how many method groups --
@@ -100,6 +102,9 @@ class Evidence:
     geo_near_nav_res_px: float = NAN
     geo_far_nav_res_px: float = NAN
     geo_haz_point: float = NAN  # 1: hazcam point stereo at c, 0.5: dense stereo only, 0: no hazcam range at c
+    # occlusion: median over the disk around c of (predicted target range - hazcam dense range) / sigma, per view
+    occ_near_front_sigma: float = NAN
+    occ_far_front_sigma: float = NAN
     # the registrations (of the near / far navcam cloud onto the hazcam cloud)
     reg_near_fitness: float = NAN
     reg_near_rmse_m: float = NAN
@@ -290,6 +295,33 @@ def geometry(view: TargetView, X_c: Optional[np.ndarray]) -> dict:
     return out
 
 
+def disk_offsets(radius_px: float) -> np.ndarray:
+    """Integer pixel offsets ``(K, 2)`` within ``radius_px`` of the origin (row-major order)."""
+    r = int(math.floor(radius_px))
+    dv, du = np.mgrid[-r:r + 1, -r:r + 1]
+    m = du**2 + dv**2 <= radius_px**2
+    return np.stack([du[m], dv[m]], -1).astype(float)
+
+
+def occlusion(view: TargetView, c: np.ndarray, disk_px: float) -> dict:
+    """Occlusion evidence of the hazcam pixel ``c`` (2,) against ``view`` (suffix -> value): ``front_sigma``, the
+    median over the hazcam-left pixels within ``disk_px`` of ``c`` of (range of the predicted target - range of
+    the hazcam's dense stereo there), both from the hazcam-left centre, in units of ``view.sigma_m``. Positive:
+    the surface the hazcam sees at ``c`` is nearer than the target (something stands in front of it, or ``c`` is
+    on a nearer surface); empty when fewer than half of the disk's pixels have a dense range."""
+    if view.X_pred_haz is None or not (view.sigma_m > 0):
+        return {}
+    C = view.case.haz.left_model.C
+    offsets = disk_offsets(disk_px)
+    X = view.case.haz.xyz_at(np.asarray(c, float).reshape(1, 2) + offsets)
+    ok = np.all(np.isfinite(X), axis=1)
+    if 2 * int(ok.sum()) < len(offsets):
+        return {}
+    r_target_m = float(np.linalg.norm(view.X_pred_haz - C))
+    front_m = r_target_m - np.linalg.norm(X[ok] - C, axis=1)
+    return {"front_sigma": float(np.median(front_m)) / view.sigma_m}
+
+
 @dataclass
 class Candidate:
     """One candidate answer: hazcam-left pixel ``uv`` (2,), the methods (``"method/navcam"``) that gave it."""
@@ -360,6 +392,8 @@ def candidate_evidence(views: dict[str, TargetView], cands: list[Candidate], i: 
                                                       v.case.params.template_half_px)
         for k, val in geometry(v, X_c).items():
             kw[f"geo_{label}_{k}"] = val
+        for k, val in occlusion(v, uv, sp.occlusion_disk_px).items():
+            kw[f"occ_{label}_{k}"] = val
         for k, val in v.reg.items():
             kw[f"reg_{label}_{k}"] = val
     kw.update(consistency(cands, i, sp.agree_px))

@@ -29,6 +29,9 @@ class ScipParams:
     backtrack_radius_px: float = 30.0  # forward-backward: the hazcam window's search in the navcam (hazcam px)
     dedup_px: float = 0.25  # candidates closer than this are one candidate (evidence computed once)
     geometry_sigma_floor_m: float = 0.005  # 3-D agreement: sigma = hypot(stereo sigmas, this floor)
+    # occlusion evidence: the hazcam's dense stereo over the disk of this radius around a candidate, against the
+    # predicted target's range (the success radius: a surface in front over that disk hides the target there)
+    occlusion_disk_px: float = 4.0
     # geometry veto: NO-GO, whatever p_success, when the answer's hazcam point lands farther than this (hazcam px)
     # from the navcam target in every view (Evidence.geo_best_nav_res_px; unknown: no veto). None: no veto.
     # 40 px: 1.5x the largest of any candidate within 4 px in tests/data/trust/evidence-24dl.jsonl.gz (27.3 px;
@@ -46,7 +49,7 @@ class ScipParams:
             if isinstance(v, (int, float)) and not isinstance(v, bool) and not math.isfinite(v):
                 bad(f.name, "must be finite")
         for name in ("success_px", "agree_px", "appearance_radius_px", "backtrack_radius_px", "dedup_px",
-                     "geometry_sigma_floor_m"):
+                     "geometry_sigma_floor_m", "occlusion_disk_px"):
             if not getattr(self, name) > 0:
                 bad(name, "must be > 0")
         if self.geometry_veto_px is not None and not self.geometry_veto_px > 0:

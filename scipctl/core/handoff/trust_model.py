@@ -46,6 +46,7 @@ for _v in ("near", "far"):
         f"reg_{_v}_log_global_agree": (f"reg_{_v}_global_agree_px", "log1p"),
         f"reg_{_v}_log_seed_spread": (f"reg_{_v}_seed_spread_px", "log1p"),
         f"reg_{_v}_target_residual_cm": (f"reg_{_v}_target_residual_m", "x100"),
+        f"occ_{_v}_log_front": (f"occ_{_v}_front_sigma", "log1p"),
     })
 FEATURES.update({
     "geo_haz_point": ("geo_haz_point", "x"),
