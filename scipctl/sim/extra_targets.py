@@ -28,17 +28,17 @@ MAX_LAYERS = 4  # surfaces passed along one hazcam ray before giving up
 # issue's success radius (4 px) can show the target's own surface (a point just behind a silhouette is not hidden
 # for an answer one pixel over); checked on the centre and on rings of 2 and 4 px, 8 rays each
 HIDDEN_DISK_PX = 4.0
-_RING_OFFSETS_PX = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in (0.5 * HIDDEN_DISK_PX, HIDDEN_DISK_PX)
+RING_OFFSETS_PX = np.array([[0.0, 0.0]] + [[r * np.cos(a), r * np.sin(a)] for r in (0.5 * HIDDEN_DISK_PX, HIDDEN_DISK_PX)
                                             for a in np.arange(8) * np.pi / 4])
 
 
-def _inner_pixels(rng: np.random.Generator, width: int, height: int, inner_frac: float, k: int) -> np.ndarray:
+def inner_pixels(rng: np.random.Generator, width: int, height: int, inner_frac: float, k: int) -> np.ndarray:
     """``k`` uniform pixels ``(k, 2)`` of an image's inner ``1 - 2 inner_frac`` part (u drawn first, then v)."""
     return np.stack([rng.uniform(inner_frac * width, (1 - inner_frac) * width, k),
                      rng.uniform(inner_frac * height, (1 - inner_frac) * height, k)], 1)
 
 
-def _inner(uv: np.ndarray, width: int, height: int, inner_frac: float) -> np.ndarray:
+def in_inner_part(uv: np.ndarray, width: int, height: int, inner_frac: float) -> np.ndarray:
     """``(K,)`` bool: pixels ``uv`` ``(K, 2)`` strictly inside the image's inner ``1 - 2 inner_frac`` part."""
     f = inner_frac
     return ((uv[:, 0] > f * width) & (uv[:, 0] < (1 - f) * width) & (uv[:, 1] > f * height) & (uv[:, 1] < (1 - f) * height))
@@ -55,7 +55,7 @@ def choose_extra_targets(scene: Scene, products: list, ref_id: str, required_ids
     """
     by = {p.product_id: p for p in products}
     ref = by[ref_id]
-    uv = _inner_pixels(rng, ref.width, ref.height, inner_frac, max(20 * n, 200))
+    uv = inner_pixels(rng, ref.width, ref.height, inner_frac, max(20 * n, 200))
     o, d = ref.model_true_site.unproject(uv)
     hits = scene.cast(o, d)
     ok = hits.hit & (np.hypot(hits.points[:, 0], hits.points[:, 1]) < max_radius_m)
@@ -63,7 +63,7 @@ def choose_extra_targets(scene: Scene, products: list, ref_id: str, required_ids
     for pid in [ref_id] + list(required_ids):
         p = by[pid]
         uvk, vis = project_visible(scene, p.model_true_site, p.width, p.height, X)
-        ok &= vis & _inner(uvk, p.width, p.height, inner_frac)
+        ok &= vis & in_inner_part(uvk, p.width, p.height, inner_frac)
     idx = np.flatnonzero(ok)[:n]
     return [Target(f"{id_prefix}{i + 1:02d}", EXTRA_KIND, "random visible surface point (trust-model data)",
                    np.asarray(X[j], float)) for i, j in enumerate(idx)]
@@ -87,7 +87,7 @@ def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_i
     by = {p.product_id: p for p in products}
     hz = by[hazcam_id]
     k = max(100 * n, 3000)
-    uv = _inner_pixels(rng, hz.width, hz.height, inner_frac, k)
+    uv = inner_pixels(rng, hz.width, hz.height, inner_frac, k)
     o, d = hz.model_true_site.unproject(uv)
     first = scene.cast(o, d)
     t_first = np.where(first.hit, first.t_m, np.inf)
@@ -110,8 +110,8 @@ def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_i
     ok = np.isfinite(depth) & (np.hypot(X[:, 0], X[:, 1]) < max_radius_m)
     idx = np.flatnonzero(ok)
     if len(idx):  # hidden over the whole disk: each ring ray meets a surface min_depth_m nearer than the point
-        m = len(_RING_OFFSETS_PX)
-        uv_ring = (uv[idx, None, :] + _RING_OFFSETS_PX[None]).reshape(-1, 2)
+        m = len(RING_OFFSETS_PX)
+        uv_ring = (uv[idx, None, :] + RING_OFFSETS_PX[None]).reshape(-1, 2)
         o_r, d_r = hz.model_true_site.unproject(uv_ring)
         t_r = scene.cast(o_r, d_r).t_m.reshape(len(idx), m)
         dist = np.linalg.norm(X[idx, None, :] - o_r.reshape(len(idx), m, 3), axis=2)
@@ -120,7 +120,7 @@ def choose_occluded_targets(scene: Scene, products: list, hazcam_id: str, seen_i
     for pid in seen_ids:
         p = by[pid]
         uvk, vis = project_visible(scene, p.model_true_site, p.width, p.height, Xq)
-        ok &= vis & _inner(uvk, p.width, p.height, inner_frac)
+        ok &= vis & in_inner_part(uvk, p.width, p.height, inner_frac)
     idx = np.flatnonzero(ok)[:n]
     return [(Target(f"{id_prefix}{i + 1:02d}", OCCLUDED_KIND, "surface point the navcams see and the hazcam does not "
                     "(trust-model data)", np.asarray(X[j], float)), float(depth[j]), uv[j].copy())

@@ -31,7 +31,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .extra_targets import _RING_OFFSETS_PX, _inner, _inner_pixels, OCCLUDED_KIND
+from .extra_targets import RING_OFFSETS_PX, in_inner_part, inner_pixels, OCCLUDED_KIND
 from .marks import project_visible
 from .noise import LatticeNoise
 from .rocks import ROCK_SHAPES, Rock, make_rock
@@ -105,7 +105,7 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
     by = {p.product_id: p for p in products}
     hz = by[hazcam_id]
     seen = [by[i] for i in seen_ids]
-    uv = _inner_pixels(rng, hz.width, hz.height, inner_frac, tries)
+    uv = inner_pixels(rng, hz.width, hz.height, inner_frac, tries)
     lattice = LatticeNoise(rng, 16)
     out: list[ShallowOccluder] = []
     before = _visibility(scene, products, protect) if len(protect) else []
@@ -123,7 +123,7 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
         o_seen = []  # per seen image: its ray origin (1, 3) for the point
         for p in seen:
             u, vis = project_visible(scene, p.model_true_site, p.width, p.height, X[None])
-            if not (vis[0] and _inner(u, p.width, p.height, inner_frac)[0]):
+            if not (vis[0] and in_inner_part(u, p.width, p.height, inner_frac)[0]):
                 break
             o_seen.append(p.model_true_site.unproject(u)[0])
         if len(o_seen) < len(seen):
@@ -140,7 +140,7 @@ def add_shallow_occluders(scene: Scene, products: list, hazcam_id: str, seen_ids
                          rng.uniform(0.7, 1.3), shape=ROCK_SHAPES["faceted"])
         V, F = rock.vertices, rock.triangles
         # hidden over the disk: each ring ray meets the pebble (or the scene) min_depth_m before the point
-        uv_ring = uv_c[None] + _RING_OFFSETS_PX
+        uv_ring = uv_c[None] + RING_OFFSETS_PX
         o_r, d_r = hz.model_true_site.unproject(uv_ring)
         t_r = np.minimum(_first_hit_t(V, F, o_r, d_r), scene.cast(o_r, d_r).t_m)
         dist = np.linalg.norm(X[None] - o_r, axis=1)
