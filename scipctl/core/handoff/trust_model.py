@@ -46,7 +46,6 @@ for _v in ("near", "far"):
         f"reg_{_v}_log_global_agree": (f"reg_{_v}_global_agree_px", "log1p"),
         f"reg_{_v}_log_seed_spread": (f"reg_{_v}_seed_spread_px", "log1p"),
         f"reg_{_v}_target_residual_cm": (f"reg_{_v}_target_residual_m", "x100"),
-        f"occ_{_v}_log_front": (f"occ_{_v}_front_sigma", "log1p"),
     })
 FEATURES.update({
     "geo_haz_point": ("geo_haz_point", "x"),
@@ -55,6 +54,9 @@ FEATURES.update({
     "log_other_navcam": ("other_navcam_px", "log1p"),
     "from_far": ("navcam", "is_far"),
 })
+# session 24: the occlusion evidence (a surface in front of the predicted target over the 4 px disk), last so that
+# the features before it keep their order
+FEATURES.update({f"occ_{_v}_log_front": (f"occ_{_v}_front_sigma", "log1p") for _v in ("near", "far")})
 del _v
 
 TRANSFORMS = ("x", "log1p", "log", "x100", "known", "is_far")
