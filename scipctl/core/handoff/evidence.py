@@ -15,8 +15,9 @@ window built from one image, so agreement between trackers alone is weak evidenc
   and the same point projected back into the navcam: its distance from the navcam target, in hazcam px;
   occlusion: the hazcam's own dense stereo over the disk of ``occlusion_disk_px`` around ``c`` against the
   predicted target's range (the median of how much nearer the surface there is, in units of the same sigma: a
-  stone standing in front of the target puts the answer on the stone); the registration's own checks (ICP fitness and RMS, and the registration-check keys of :data:`REGISTRATION_CHECK_KEYS`
-  when the mesh-registration diagnostics carry them);
+  stone standing in front of the target puts the answer on the stone); the registration's own checks (ICP fitness
+  and RMS, and the registration-check keys of :data:`REGISTRATION_CHECK_KEYS` when the mesh-registration
+  diagnostics carry them);
 * **consistency**: forward-backward (the hazcam window at ``c`` warped into the navcam view and tracked back
   there: the return error, in hazcam px), and agreement between candidates (how many method groups --
   kinematic / geometric / registration, near / far -- answered within ``agree_px`` of ``c``; how many *other*

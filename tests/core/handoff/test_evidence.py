@@ -66,7 +66,8 @@ def test_occlusion_on_the_synthetic_scene(handoff_scene):
     for t in handoff_scene.targets:
         views = target_views(cases, t.nav_uv, hp, hp.scip)
         uv = np.asarray(t.haz_uv, float)
-        cands = [Candidate(uv, [("refined-geometric", "near")]), Candidate(uv + [0.0, 20.0], [("pure-kinematic", "far")])]
+        cands = [Candidate(uv, [("refined-geometric", "near")]),
+                 Candidate(uv + [0.0, 20.0], [("pure-kinematic", "far")])]
         good, nearer = (candidate_evidence(views, cands, i, hp.scip) for i in range(2))
         for v in ("near", "far"):
             assert abs(getattr(good, f"occ_{v}_front_sigma")) < 2.0, (t.id, v)
