@@ -49,12 +49,12 @@ def main(argv=None) -> None:
     for path, model in models:
         go_min = model.go_threshold(R_PX)
         choices = tf.scip_choices(model, rows, R_PX)  # in the order of ``keys``
-        s = tf.choice_summary([c for c in choices if not c[5]], R_PX, go_min)
+        s = tf.choice_summary([c for c in choices if not c.occluded], R_PX, go_min)
         print(f"{path}: GO at p >= {go_min}")
         print(f"  visible  n {s['n']:4d} within {s['within'] * 100:5.1f} % GO {s['go']:4d} ({s['go_rate'] * 100:5.1f} %) "
               f"false GO {s['false_go']} Brier {s['brier']:.4f}")
         for k, name in KINDS.items():
-            sel = [c for (_, tid), c in zip(keys, choices) if c[5] and tid.startswith(k)]
+            sel = [c for (_, tid), c in zip(keys, choices) if c.occluded and tid.startswith(k)]
             if sel:
                 o = tf.occluded_summary(sel, go_min)
                 print(f"  {name:8s} n {o['n']:4d} GO (all wrong) {o['go']:3d} mean p {o['mean_p']:.3f} max p {o['max_p']:.3f}")

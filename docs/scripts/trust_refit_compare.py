@@ -82,13 +82,13 @@ def main(argv=None) -> None:
     held = [held_by_target[k] for k in sorted(tf.targets_of(new))]  # in scip_choices' order, as old_on_new
     old_on_new = tf.scip_choices(old_model, new, R_PX)
     ro = runs_of(new)
-    sels = (("all", lambda c, r: not c[5]), ("marked", lambda c, r: c[4] not in ("extra", "occluded")),
-            ("marked s2-arc", lambda c, r: c[4] not in ("extra", "occluded") and r[0] == "s2-arc"))
+    sels = (("all", lambda c, r: not c.occluded), ("marked", lambda c, r: c.kind not in ("extra", "occluded")),
+            ("marked s2-arc", lambda c, r: c.kind not in ("extra", "occluded") and r[0] == "s2-arc"))
     for sel, keep in sels:
         line(f"new tables, {sel}: old model", [c for c, r in zip(old_on_new, ro) if keep(c, r)], go_old)
         line(f"new tables, {sel}: refit, family held out", [c for c, r in zip(held, ro) if keep(c, r)], go_new)
     for name, ch, go in (("old model", old_on_new, go_old), ("refit, family held out", held, go_new)):
-        o = tf.occluded_summary([c for c in ch if c[5]], go)
+        o = tf.occluded_summary([c for c in ch if c.occluded], go)
         if o["n"]:
             print(f"new tables, occluded: {name:31s} n {o['n']:4d} GO (all false) {o['go']:3d} "
                   f"mean p {o['mean_p']:.3f} max p {o['max_p']:.3f} Brier {o['brier']:.4f}")
@@ -98,16 +98,16 @@ def main(argv=None) -> None:
                       ("s1-straight", lambda r: r[0] == "s1-straight"), ("t3", lambda r: r[1] == "t3")):
         line(f"blind {sel}: old model", [c for c, r in zip(a, ro) if keep(r)], go_old)
         line(f"blind {sel}: refit", [c for c, r in zip(b, ro) if keep(r)], go_new)
-    for fam in sorted({c[0] for c in a}):
-        line(f"blind {fam}: old model", [c for c in a if c[0] == fam], go_old)
-        line(f"blind {fam}: refit", [c for c in b if c[0] == fam], go_new)
+    for fam in sorted({c.family for c in a}):
+        line(f"blind {fam}: old model", [c for c in a if c.family == fam], go_old)
+        line(f"blind {fam}: refit", [c for c in b if c.family == fam], go_new)
     if args.diff:
         inf = float("inf")  # an occluded target's answer has no error: every answer is wrong
         for (k, _), x, y in zip(sorted(tf.targets_of(blind).items()), a, b):
-            ex, ey = (inf if x[2] is None else x[2]), (inf if y[2] is None else y[2])
-            if (ex != ey and not abs(ex - ey) <= 0.01) or (x[1] >= go_old) != (y[1] >= go_new) \
-                    or (x[1] >= go_old and ex > R_PX) or (y[1] >= go_new and ey > R_PX):
-                print(f"{k[0]:36s} {k[1]:4s} {x[4]:8s} old: {ex:7.2f} px p {x[1]:.3f} | refit: {ey:7.2f} px p {y[1]:.3f}")
+            ex, ey = (inf if x.error_px is None else x.error_px), (inf if y.error_px is None else y.error_px)
+            if (ex != ey and not abs(ex - ey) <= 0.01) or (x.p >= go_old) != (y.p >= go_new) \
+                    or (x.p >= go_old and ex > R_PX) or (y.p >= go_new and ey > R_PX):
+                print(f"{k[0]:36s} {k[1]:4s} {x.kind:8s} old: {ex:7.2f} px p {x.p:.3f} | refit: {ey:7.2f} px p {y.p:.3f}")
 
 
 if __name__ == "__main__":

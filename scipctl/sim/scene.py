@@ -138,9 +138,6 @@ class Scene:
     def n_triangles(self) -> int:
         return len(self.terrain_tris) + len(self.rock_mesh()[1]) + len(self.pebble_tris)
 
-    def _mesh(self, V, F):
-        return o3d_triangle_mesh(V, F)
-
     def raycaster(self):
         """The Open3D ``RaycastingScene`` (built once): terrain, rocks, pebbles."""
         if self._rc is None:
@@ -150,22 +147,18 @@ class Scene:
 
             rc = o3d.t.geometry.RaycastingScene()
             ids = [
-                rc.add_triangles(self._mesh(self.terrain_vertices(), self.terrain_tris)),
-                rc.add_triangles(self._mesh(*self.rock_mesh()[:2])),
+                rc.add_triangles(o3d_triangle_mesh(self.terrain_vertices(), self.terrain_tris)),
+                rc.add_triangles(o3d_triangle_mesh(*self.rock_mesh()[:2])),
             ]
             if len(self.pebble_tris):
-                ids.append(rc.add_triangles(self._mesh(self.pebble_vertices, self.pebble_tris)))
+                ids.append(rc.add_triangles(o3d_triangle_mesh(self.pebble_vertices, self.pebble_tris)))
             if ids != list(range(len(ids))):
                 raise RuntimeError(f"unexpected Open3D geometry ids {ids}")
             self._rc = rc
         return self._rc
 
-    @staticmethod
-    def _rays(origins, dirs):
-        return o3d_rays(origins, dirs)
-
     def _cast_raw(self, rc, origins, dirs):
-        return rc.cast_rays(self._rays(origins, dirs))
+        return rc.cast_rays(o3d_rays(origins, dirs))
 
     def cast(self, origins, dirs) -> Hits:
         """First hits of rays ``origins`` ``(N, 3)`` + t ``dirs`` ``(N, 3)`` (unit) in the site frame."""
@@ -225,7 +218,7 @@ class Scene:
         """``(N,)`` bool: something is hit along ``origins + t dirs`` for ``0 < t < t_max`` ``(N,)``."""
         origins = np.asarray(origins, float)
         dirs = np.asarray(dirs, float)
-        rays = self._rays(origins, np.broadcast_to(dirs, origins.shape))
+        rays = o3d_rays(origins, np.broadcast_to(dirs, origins.shape))
         tmax = np.broadcast_to(np.asarray(t_max, float), (len(origins),))
         # test_occlusions takes one tfar; group by +inf vs finite via cast_rays when finite
         if np.all(np.isinf(tmax)):
