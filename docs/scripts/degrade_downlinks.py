@@ -2,14 +2,15 @@
 
     python docs/scripts/degrade_downlinks.py SRC_ROOT OUT_ROOT VARIANT
 
-Every ``SRC_ROOT/<dir>/<name>.mcap`` (as ``scipctl synth`` writes them, the ``.sim.json`` beside) is read,
+Every ``SRC_ROOT/<name>.mcap`` and ``SRC_ROOT/<dir>/<name>.mcap`` (as ``scipctl synth`` writes them, the ``.sim.json`` beside) is read,
 each image's pixels are changed by the variant's :class:`~scipctl.sim.image_effects.EffectSpec`, and the
-downlink is written to ``OUT_ROOT/<dir>/<name>.mcap`` with everything else as it was (poses, models, marks,
+downlink is written to the same place under ``OUT_ROOT`` with everything else as it was (poses, models, marks,
 truth). The ``.sim.json`` is copied with an ``image_effects`` entry (the variant, its settings, the source's
 SHA-256), so ``scipctl trust-evidence`` and ``scipctl campaign`` see the same family and targets.
 
 VARIANT: ``blur`` (Gaussian PSF sigma 0.8 px), ``jpeg`` (12 -> 8-bit square-root companding, JPEG quality 75),
-``gamma`` (left eye gamma 0.8, right eye 1.25), ``all`` (the three, in that order). Session 25, docs/handoff.md
+``gamma`` (left eye gamma 0.8, right eye 1.25), ``all`` (the three, in that order); ``aug`` (blur 0.6 px, gamma
+0.85 / 1.18, JPEG 60: a different setting, for training data). Session 25, docs/handoff.md
 "Image formation the renderer does not do".
 """
 
@@ -26,6 +27,9 @@ VARIANTS = {
     "jpeg": dict(jpeg_quality=75),
     "gamma": dict(gamma_left=0.8, gamma_right=1.25),
     "all": dict(blur_sigma_px=0.8, gamma_left=0.8, gamma_right=1.25, jpeg_quality=75),
+    # another setting of the same three, for training data (so that a test on the four above is not of the
+    # setting a model was fitted with)
+    "aug": dict(blur_sigma_px=0.6, gamma_left=0.85, gamma_right=1.18, jpeg_quality=60),
 }
 
 
@@ -54,8 +58,8 @@ def main() -> None:
     ap.add_argument("out_root", type=Path)
     ap.add_argument("variant", choices=sorted(VARIANTS))
     a = ap.parse_args()
-    for src in sorted(a.src_root.glob("*/*.mcap")):
-        dst = a.out_root / src.parent.name / src.name
+    for src in sorted(a.src_root.glob("*.mcap")) + sorted(a.src_root.glob("*/*.mcap")):
+        dst = a.out_root / src.relative_to(a.src_root)
         if not dst.exists():
             degrade(src, dst, a.variant)
             print(dst, flush=True)
