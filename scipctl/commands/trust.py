@@ -35,7 +35,7 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically)."""
     from ..io.atomic import atomic_write_text
     from ..io.workspace import open_source
-    from ..pipeline.trust_data import evidence_rows
+    from ..pipeline.trust_data import OccludedTargetError, evidence_rows
 
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
     rows = []
@@ -50,7 +50,7 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
             raise InputError(str(src), "sim record occluded_targets", "not a list of {id: ...} records")
         try:
             got = evidence_rows(source.downlink, Path(src).name, str(fam), meta, occluded_ids=[o["id"] for o in occ])
-        except ValueError as e:
+        except OccludedTargetError as e:
             raise InputError(str(src), "sim record occluded_targets", str(e)) from None
         note(f"{Path(src).name}: {len(got)} candidate rows, family {fam}")
         rows += got

@@ -55,12 +55,17 @@ class EvidenceRow:
                    bool(d.get("occluded", False)))
 
 
+class OccludedTargetError(ValueError):
+    """An id given as an occluded target is not one the downlink can have as such."""
+
+
 def evidence_rows(dl: Downlink, name: str, family: str, meta: Optional[dict] = None,
                   params: Optional[HandoffParams] = None, progress=None, occluded_ids=()) -> list[EvidenceRow]:
     """Every candidate of every target of ``dl`` marked in its hazcam, near and far navcams together, and of
     every target of ``occluded_ids`` (hidden from the hazcam: rows ``occluded``, ``error_px`` None).
 
-    Raises ``ValueError`` when an id of ``occluded_ids`` is not a target of ``dl`` or has a mark in the hazcam."""
+    Raises :class:`OccludedTargetError` when an id of ``occluded_ids`` is not a target of ``dl`` or has a mark in
+    the hazcam."""
     from .handoff import build_setup, marked_targets, run_targets
 
     setup = build_setup(dl, params)
@@ -69,9 +74,9 @@ def evidence_rows(dl: Downlink, name: str, family: str, meta: Optional[dict] = N
     known = {t[0]: t for t in every}
     for tid in sorted(occluded):
         if tid not in known:
-            raise ValueError(f"occluded target {tid!r} is not a target of the downlink")
+            raise OccludedTargetError(f"occluded target {tid!r} is not a target of the downlink")
         if known[tid][2] is not None:
-            raise ValueError(f"occluded target {tid!r} has a mark in the hazcam {setup.hazcam.product_id}")
+            raise OccludedTargetError(f"occluded target {tid!r} has a mark in the hazcam {setup.hazcam.product_id}")
     targets = [t for t in every if t[2] is not None or t[0] in occluded]
     outs: dict = {}
     run_targets(dl, setup, targets, methods=["scip"], navcams=[n for n in ("near", "far") if n in setup.cases],

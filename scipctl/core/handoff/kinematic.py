@@ -16,7 +16,7 @@ from ..registration import squared_distances
 from .case import HandoffCase
 from .params import HandoffParams
 from .result import MethodResult, NoAnswer, answer, f, track_diag
-from .steps import dense_point, local_ifov_rad, nav_point, project_haz, track
+from .steps import dense_point, local_ifov_rad, nav_point, project_haz, search_reaches_image, track
 from .windows import fill_nan, nav_plane_normal, plane_window
 
 
@@ -85,6 +85,11 @@ def refined_kinematic(case: HandoffCase, nav_uv, params: HandoffParams, *,
         else:
             start = near_hint.uv
             X_haz = np.asarray(near_hint.diagnostics["xyz_haz_rover_m"])
+        if not search_reaches_image(start, p.search_radius_px, case.haz.width, case.haz.height):
+            # no hazcam pixel within the search radius: nothing to track (and a fish-eye model's pixel angle,
+            # needed to scale the window, is 0 that far outside the image)
+            raise NoAnswer(f"the kinematic start ({start[0]:.0f}, {start[1]:.0f}) is more than the search radius "
+                           f"{p.search_radius_px:g} px outside the hazcam image", {"start_uv": np.asarray(start).tolist()})
         tpl = None
         if p.far_window_warp == "plane":
             n_nav = nav_plane_normal(case, p, nav_uv, ps.xyz)
@@ -100,6 +105,9 @@ def refined_kinematic(case: HandoffCase, nav_uv, params: HandoffParams, *,
             ifov_nav = local_ifov_rad(case.nav.left_model, nav_uv)
             ifov_haz = local_ifov_rad(case.haz.left_model, start)
             range_haz = float(np.linalg.norm(X_haz - case.haz.left_model.C))
+            if not (ifov_nav > 0 and ifov_haz > 0 and ps.range_m > 0 and range_haz > 0):
+                raise NoAnswer("no window scale: a pixel angle or a range at the target is not positive",
+                               {"start_uv": np.asarray(start).tolist()})
             scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
             src_half = int(np.ceil(k / scale))
             win = extract_window(case.nav.left_img, nav_uv, src_half)

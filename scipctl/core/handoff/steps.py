@@ -43,6 +43,14 @@ def track(case: HandoffCase, template, start_uv, radius_px, min_score, template_
                   min_score=min_score)
 
 
+def search_reaches_image(start_uv, radius_px: float, width: int, height: int) -> bool:
+    """Whether the square search region of half-width ``radius_px`` around ``start_uv`` (2,) (as
+    :func:`~scipctl.core.tracking.track` searches) meets the ``width`` x ``height`` image at all."""
+    u, v = (float(x) for x in np.asarray(start_uv, float).reshape(2))
+    r = float(radius_px)
+    return bool(-r <= u <= width - 1 + r and -r <= v <= height - 1 + r)
+
+
 def local_ifov_rad(model: CameraModel, uv) -> float:
     """Angle subtended by one pixel at ``uv`` (geometric mean of the u and v directions), rad.
 
