@@ -1,6 +1,7 @@
 """scipctl/core/handoff/kinematic.py: the near -> far hint is an argument (no state kept between methods)."""
 
 import numpy as np
+import pytest
 
 from scipctl.core.handoff import HandoffParams, Method, run_method
 from scipctl.core.handoff.kinematic import pure_kinematic, refined_kinematic
@@ -44,8 +45,6 @@ def test_far_refined_kinematic_with_a_start_far_outside_the_image_has_no_answer(
     # Session 25: on a degraded m2020 downlink the far branch started from a near hint at (-10311, 2366), where the
     # CAHVORE pixel angle is 0, and the window scale raised ValueError, which stopped the whole downlink. A search
     # region that does not meet the image has nothing to track: NoAnswer, and run_method reports a failed result.
-    import pytest
-
     from scipctl.core.handoff.result import MethodResult, NoAnswer
 
     t = handoff_scene.targets[0]
