@@ -10,7 +10,7 @@ SHA-256), so ``scipctl trust-evidence`` and ``scipctl campaign`` see the same fa
 
 VARIANT: ``blur`` (Gaussian PSF sigma 0.8 px), ``jpeg`` (12 -> 8-bit square-root companding, JPEG quality 75),
 ``gamma`` (left eye gamma 0.8, right eye 1.25), ``all`` (the three, in that order); ``aug`` (blur 0.6 px, gamma
-0.85 / 1.18, JPEG 60: a different setting, for training data). Session 25, docs/handoff.md
+0.85 / 1.18, JPEG 60: a different setting, for training data); ``jpeg100`` (JPEG quality 100: a control). Session 25, docs/handoff.md
 "Image formation the renderer does not do".
 """
 
@@ -30,6 +30,9 @@ VARIANTS = {
     # another setting of the same three, for training data (so that a test on the four above is not of the
     # setting a model was fitted with)
     "aug": dict(blur_sigma_px=0.6, gamma_left=0.85, gamma_right=1.18, jpeg_quality=60),
+    # a control: the least change of the same kind (pixels move by a code or two), to see how much an answer
+    # moves for nothing
+    "jpeg100": dict(jpeg_quality=100),
 }
 
 
