@@ -17,7 +17,6 @@ VARIANT: ``blur`` (Gaussian PSF sigma 0.8 px), ``jpeg`` (12 -> 8-bit square-root
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 from dataclasses import replace
 from pathlib import Path
@@ -44,6 +43,7 @@ def degrade(src: Path, dst: Path, variant: str) -> None:
 
     spec = EffectSpec(**VARIANTS[variant])
     dl = read_downlink(src)
+    source_sha256 = dl.source_sha256  # of the file as read
     dl.images = [replace(im, png=encode_png(spec.apply(im.pixels, im.eye)), _pixels=None) for im in dl.images]
     dst.parent.mkdir(parents=True, exist_ok=True)
     write_downlink(dl, dst)
@@ -51,7 +51,7 @@ def degrade(src: Path, dst: Path, variant: str) -> None:
     if sim.exists():
         rec = json.loads(sim.read_text())
         rec["image_effects"] = {"variant": variant, "spec": spec.to_dict(),
-                                "source": str(src), "source_sha256": hashlib.sha256(src.read_bytes()).hexdigest()}
+                                "source": str(src), "source_sha256": source_sha256}
         atomic_write_text(dst.with_name(sim.name), json.dumps(rec, indent=1))
 
 

@@ -26,6 +26,8 @@ from typing import Optional
 
 import numpy as np
 
+from .render import bit_replicate_12
+
 TWELVE_BIT_MAX = 4095
 
 
@@ -48,8 +50,7 @@ def _from_unit(x: np.ndarray, dtype) -> np.ndarray:
     x = np.clip(x, 0.0, 1.0)
     if dtype == np.uint8:
         return np.rint(x * 255.0).astype(np.uint8)
-    v = np.rint(x * TWELVE_BIT_MAX).astype(np.uint16)
-    return (v << 4) | (v >> 8)
+    return bit_replicate_12(np.rint(x * TWELVE_BIT_MAX).astype(np.uint16))
 
 
 def optical_blur(pixels: np.ndarray, sigma_px: float) -> np.ndarray:
@@ -96,8 +97,7 @@ def companded_jpeg(pixels: np.ndarray, quality: int) -> np.ndarray:
     dec = cv2.imdecode(buf, cv2.IMREAD_GRAYSCALE)
     if px.dtype == np.uint8:
         return dec
-    v = sqrt_expand_lut()[dec]
-    return (v << 4) | (v >> 8)
+    return bit_replicate_12(sqrt_expand_lut()[dec])
 
 
 def tone_curve(pixels: np.ndarray, gamma: float) -> np.ndarray:

@@ -121,6 +121,12 @@ def auto_exposure(radiance: np.ndarray, sensor: Sensor) -> float:
     return sensor.target_fraction / max(p, 1e-6)
 
 
+def bit_replicate_12(v: np.ndarray) -> np.ndarray:
+    """12-bit values (uint16 array, 0..4095) -> 16-bit words with the top bits repeated below (``v << 4 | v >> 8``):
+    how a 12-bit image is stored in a 16-bit PNG."""
+    return (v << 4) | (v >> 8)
+
+
 def expose(radiance: np.ndarray, exposure: float, responsivity: float, sensor: Sensor,
            rng: np.random.Generator | None) -> np.ndarray:
     """Radiance ``(H, W)`` -> pixels: uint8 (8 bits) or uint16 (12 bits, bit-replicated to 16). ``rng`` None: no noise."""
@@ -133,5 +139,4 @@ def expose(radiance: np.ndarray, exposure: float, responsivity: float, sensor: S
     dn = np.clip(np.rint(e / fw * full), 0, full)
     if sensor.bits == 8:
         return dn.astype(np.uint8)
-    v = dn.astype(np.uint16)
-    return (v << 4) | (v >> 8)
+    return bit_replicate_12(dn.astype(np.uint16))

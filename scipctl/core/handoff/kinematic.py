@@ -105,10 +105,10 @@ def refined_kinematic(case: HandoffCase, nav_uv, params: HandoffParams, *,
             ifov_nav = local_ifov_rad(case.nav.left_model, nav_uv)
             ifov_haz = local_ifov_rad(case.haz.left_model, start)
             range_haz = float(np.linalg.norm(X_haz - case.haz.left_model.C))
-            if not (ifov_nav > 0 and ifov_haz > 0 and ps.range_m > 0 and range_haz > 0):
-                raise NoAnswer("no window scale: a pixel angle or a range at the target is not positive",
-                               {"start_uv": np.asarray(start).tolist()})
-            scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
+            try:
+                scale = window_scale_for_handoff(ifov_nav, ps.range_m, ifov_haz, range_haz)
+            except ValueError as e:  # a pixel angle or a range at the target is not positive
+                raise NoAnswer(f"no window scale: {e}", {"start_uv": np.asarray(start).tolist()}) from None
             src_half = int(np.ceil(k / scale))
             win = extract_window(case.nav.left_img, nav_uv, src_half)
             tpl = scale_window(win, scale)
