@@ -417,6 +417,47 @@ def footprint_blur_cov(A: np.ndarray) -> np.ndarray:
     return (V * np.clip(w, 0.0, None)) @ V.T
 
 
+def map_jacobian(q: np.ndarray) -> Optional[np.ndarray]:
+    """Median d(q)/d(pixel) ``(2, 2)`` of a pixel map ``q`` (h, w, 2) (NaN invalid) by neighbour differences:
+    column 0 is d(q)/du, column 1 d(q)/dv; None with fewer than 9 interior pixels where both are known."""
+    du = (q[:, 2:] - q[:, :-2])[1:-1] / 2
+    dv = (q[2:] - q[:-2])[:, 1:-1] / 2
+    ok = np.all(np.isfinite(du), axis=-1) & np.all(np.isfinite(dv), axis=-1)
+    if ok.sum() < 9:
+        return None
+    return np.stack([np.median(du[ok], axis=0), np.median(dv[ok], axis=0)], axis=1)
+
+
+def antialiased_sample(image: np.ndarray, q: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """``image`` (H, W) at source pixels ``q`` (..., 2) -> (...) float32 (NaN where ``q`` is not finite), each
+    destination pixel integrated over its footprint in the source.
+
+    ``A`` ``(2, 2)``: d(source px)/d(destination px). The part of ``image`` the samples need (with a 3-sigma
+    margin) is blurred by :func:`footprint_blur_cov` of ``A`` (nothing where the source is the coarser), then sampled
+    bilinearly: a source finer than the destination is averaged as the destination camera's own pixels average
+    the scene, instead of point-sampled (aliased).
+    """
+    q = np.asarray(q, float)
+    if q.shape[-1:] != (2,):
+        raise ValueError(f"q: expected (..., 2) source pixels, got shape {q.shape}")
+    ok = np.all(np.isfinite(q), axis=-1)
+    out = np.full(q.shape[:-1], np.nan, np.float32)
+    if not ok.any():
+        return out
+    cov = footprint_blur_cov(A)
+    pad = int(np.ceil(3 * np.sqrt(max(cov[0, 0], cov[1, 1])))) + 2
+    H, W = image.shape
+    u0 = int(max(np.floor(q[ok][:, 0].min()) - pad, 0))
+    v0 = int(max(np.floor(q[ok][:, 1].min()) - pad, 0))
+    u1 = int(min(np.ceil(q[ok][:, 0].max()) + pad + 1, W))
+    v1 = int(min(np.ceil(q[ok][:, 1].max()) + pad + 1, H))
+    if u1 - u0 < 2 or v1 - v0 < 2:
+        return out
+    crop = gaussian_blur_cov(image[v0:v1, u0:u1], cov)
+    out[ok] = bilinear_sample(crop, q[ok] - [u0, v0])
+    return out
+
+
 def gaussian_blur_cov(image: np.ndarray, cov: np.ndarray) -> np.ndarray:
     """``image`` (H, W) convolved with the Gaussian of covariance ``cov`` ``(2, 2)`` (px^2, (u, v) order).
 

@@ -116,6 +116,11 @@ class ChainParams:
     # the feature step's NCC compares the template with the new image blurred to the template's resolution (the
     # previous image's pixel footprint through the plane: core/matched_blur.py); False: the sharp image
     ncc_matched_blur: bool = False
+    # the previous view rendered into the new one (plane_warp.render_through_plane: the feature step's views and NCC
+    # templates, the NCC fallback's templates) is blurred to the new pixels' footprint in it where it is the finer
+    # view (the closure's 4.5 m pancam seen from the hazcam, the 10 m pancam from the 4.5 m navcam), as the handoff's
+    # windows are (core/expected.antialiased_sample); False: point samples (bilinear)
+    render_antialias: bool = False
     # point stereo at each tracked pixel: the designation's band and window per camera
     point_stereo: PointStereoParams = field(default_factory=PointStereoParams)
     other_template_half_px: int = 15
@@ -183,6 +188,8 @@ class ChainParams:
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
         if not isinstance(self.ncc_matched_blur, bool):
             raise ValueError(f"ChainParams.ncc_matched_blur: must be true or false, got {self.ncc_matched_blur!r}")
+        if not isinstance(self.render_antialias, bool):
+            raise ValueError(f"ChainParams.render_antialias: must be true or false, got {self.render_antialias!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:
@@ -445,14 +452,16 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     # fallback: a large window of the previous view, warped through the local plane, found over
                     # the whole search region by NCC; then the target window near it
                     big_half = params.context_half(c)
-                    tpl_big, tc_big = plane_warped_template(prev, prod, X_site, normal, pred, big_half)
+                    tpl_big, tc_big = plane_warped_template(prev, prod, X_site, normal, pred, big_half,
+                                                            antialias=params.render_antialias)
                     tr_big = None
                     if tpl_big is not None:
                         tr_big = track(tpl_big, prod.pixels_float(), pred, params.search_radius(c),
                                        template_center_uv=tc_big, min_score=0.3)
                     # the template shows the previous view of the plane around the target, built around the
                     # pose-estimate prediction (where the warp puts the target at the template's centre)
-                    tpl, tc = plane_warped_template(prev, prod, X_site, normal, pred, half)
+                    tpl, tc = plane_warped_template(prev, prod, X_site, normal, pred, half,
+                                                    antialias=params.render_antialias)
                     mode = "plane"
                     if tr_big is not None and tr_big.ok and np.all(np.isfinite(tr_big.uv)):
                         search_uv = tr_big.uv  # searched for near the prediction corrected for the pose error

@@ -70,7 +70,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
         with np.errstate(divide="ignore", invalid="ignore"):
             ys = yh[:, :2] / yh[:, 2:3]
-        tpl = render_through_plane(prev, prod, X_site, n_site, ys).reshape(2 * half + 1, 2 * half + 1)
+        tpl = render_through_plane(prev, prod, X_site, n_site, ys.reshape(2 * half + 1, 2 * half + 1, 2),
+                                   params.render_antialias)
         if np.isfinite(tpl).mean() < 0.9:
             return
         keep, kept = None, None
@@ -119,7 +120,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         S = np.array([[1 / step_px, 0, vhalf - c[0] / step_px], [0, 1 / step_px, vhalf - c[1] / step_px],
                       [0, 0, 1.0]])
         for k, n_view in enumerate(view_normals):
-            view, vc = plane_warped_view(prev, prod, X_site, n_view, pred_uv, vhalf, step_px=step_px)
+            view, vc = plane_warped_view(prev, prod, X_site, n_view, pred_uv, vhalf, step_px=step_px,
+                                         antialias=params.render_antialias)
             if np.isfinite(view).mean() < 0.2:
                 reasons.append(f"plane {k}: the previous view does not cover the prediction")
                 continue

@@ -59,18 +59,28 @@ def plane_points_site(prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
     return P_s
 
 
-def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
+def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv, antialias: bool = False) -> np.ndarray:
     """``prev``'s image seen at ``prod``'s pixels ``uv`` (..., 2) through the plane (X_site, n_site), site frame.
 
     Each pixel's ray (``prod``'s camera at its pose estimate) meets the plane
     through ``X_site`` (3,) with normal ``n_site`` (3,) (:func:`plane_points_site`); the point is projected
     into ``prev`` (its pose estimate) and ``prev``'s image is sampled there
-    (bilinear). Returns float32 (...) with NaN where ``prev`` did not see it.
+    (bilinear). With ``antialias`` and a grid ``uv`` (h, w, 2), h, w >= 3, whose cells are the rendered pixels,
+    ``prev`` is first blurred to the cells' footprint in it (the map's median Jacobian,
+    :func:`~scipctl.core.expected.antialiased_sample`): where ``prev`` is the finer view (the closure's 4.5 m
+    pancam seen from the hazcam) each rendered pixel averages what the new camera's pixel would, instead of
+    point-sampling it; where ``prev`` is the coarser nothing changes. Returns float32 (...) with NaN where ``prev``
+    did not see it.
     """
-    from ..core.expected import bilinear_sample
+    from ..core.expected import antialiased_sample, bilinear_sample, map_jacobian
 
     uv = np.asarray(uv, float)
     uv_prev = prev_pixels_through_plane(prev, prod, X_site, n_site, uv.reshape(-1, 2))
+    if antialias and uv.ndim == 3 and min(uv.shape[:2]) >= 3:
+        q = uv_prev.reshape(uv.shape)
+        A = map_jacobian(q)
+        if A is not None:
+            return antialiased_sample(prev.pixels_float(), q, A)
     return bilinear_sample(prev.pixels_float(), uv_prev).reshape(uv.shape[:-1])
 
 
@@ -83,7 +93,7 @@ def prev_pixels_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_
 
 
 def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,
-                      step_px: float = 1.0):
+                      step_px: float = 1.0, antialias: bool = False):
     """``prod``'s view of the window around ``centre_uv`` rendered from ``prev``'s image through a plane.
 
     See :func:`render_through_plane`. View pixel ``(i, j)`` is ``prod`` pixel
@@ -96,18 +106,19 @@ def plane_warped_view(prev: ImageProduct, prod: ImageProduct, X_site, n_site, ce
     c = np.round(np.asarray(centre_uv, float))
     g = np.arange(-half, half + 1) * float(step_px)
     us, vs = np.meshgrid(c[0] + g, c[1] + g)
-    vals = render_through_plane(prev, prod, X_site, n_site, np.stack([us, vs], -1))
+    vals = render_through_plane(prev, prod, X_site, n_site, np.stack([us, vs], -1), antialias)
     return vals, (np.asarray(centre_uv, float) - c) / float(step_px) + half
 
 
-def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int):
+def plane_warped_template(prev: ImageProduct, prod: ImageProduct, X_site, n_site, centre_uv, half: int,
+                          antialias: bool = False):
     """The window of ``prod`` around ``centre_uv`` as ``prev`` saw it, through the local plane (X_site, n_site).
 
     Each template pixel's ray (new camera, new pose estimate) meets the plane;
     the point is projected into the previous image and sampled. Returns
     ``(template (2h+1, 2h+1) float32 or None, template_center_uv (2,))``.
     """
-    vals, tc = plane_warped_view(prev, prod, X_site, n_site, centre_uv, half)
+    vals, tc = plane_warped_view(prev, prod, X_site, n_site, centre_uv, half, antialias=antialias)
     if np.isfinite(vals).mean() < 0.9:
         return None, None
     vals = np.where(np.isfinite(vals), vals, np.nanmean(vals)).astype(np.float32)

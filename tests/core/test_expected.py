@@ -4,10 +4,12 @@ from scipctl.core.camera import cahv_from_intrinsics
 import pytest
 
 from scipctl.core.expected import (
+    antialiased_sample,
     bilinear_sample,
     drape,
     footprint_blur_cov,
     gaussian_blur_cov,
+    map_jacobian,
     match_projection,
     nearest_projection,
     plane_points,
@@ -274,3 +276,72 @@ def test_nearest_projection_finds_points_off_the_search_lattice():
     res = nearest_projection(sparse, (0, 0), nav, nav.project(xyz[99, 101][None])[0])
     assert res is not None and np.array_equal(res.uv_integer, [101.0, 99.0]) and res.distance_px < 1e-9
     assert nearest_projection(np.full_like(xyz, np.nan), (0, 0), nav, [100.0, 100.0]) is None
+
+
+def test_map_jacobian_of_an_affine_map_is_exact_and_needs_nine_known_pixels():
+    """d(q)/d(pixel) of q = A (u, v) + b is A (column 0: d/du) whatever the holes; None when fewer than 9 interior
+    pixels have both differences."""
+    A = np.array([[1.7, -0.4], [0.3, 2.6]])
+    us, vs = np.meshgrid(np.arange(12.0), np.arange(9.0))
+    q = np.stack([us, vs], -1) @ A.T + [5.0, -3.0]
+    assert np.allclose(map_jacobian(q), A, atol=1e-12)
+    q[2:5, 3:7] = np.nan
+    assert np.allclose(map_jacobian(q), A, atol=1e-12)
+    q[:, 3:] = np.nan
+    assert map_jacobian(q) is None
+
+
+def test_antialiased_sample_is_a_gaussian_blur_then_bilinear_sample():
+    """Against scipy: for A = 2 I (a source twice as fine) the footprint blur is 0.25 px^2 per axis; the same blur by
+    scipy.ndimage.gaussian_filter (sigma 0.5, the same 3 px radius, borders 'nearest' as cv2's replicate) then
+    linear interpolation (map_coordinates, order 1). Bound 1e-3 on values in [0, 1]: gaussian_blur_cov keeps the
+    kernel invertible with a 1e-4 px^2 floor (sigma^2 0.2501 instead of 0.25: < 1e-4 relative on each weight) and
+    works in float32 (~1e-7)."""
+    from scipy.ndimage import gaussian_filter, map_coordinates
+
+    rng = np.random.default_rng(7)
+    img = rng.random((60, 70)).astype(np.float32)
+    q = np.stack(np.meshgrid(np.linspace(4.3, 62.9, 9), np.linspace(3.1, 55.7, 7)), -1)
+    A = 2.0 * np.eye(2)
+    got = antialiased_sample(img, q, A)
+    ref = map_coordinates(gaussian_filter(img.astype(float), 0.5, mode="nearest", truncate=6.0),
+                          [q[..., 1].ravel(), q[..., 0].ravel()], order=1).reshape(q.shape[:-1])
+    assert got.shape == q.shape[:-1] and got.dtype == np.float32
+    assert np.max(np.abs(got - ref)) < 1e-3
+
+
+def test_antialiased_sample_of_a_coarser_source_is_the_bilinear_sample_and_keeps_holes():
+    """No blur where the source is the coarser (footprint_blur_cov is 0): the bilinear samples bit for bit; a sample
+    at a non-finite pixel is NaN; a q that is not (..., 2) is refused."""
+    rng = np.random.default_rng(8)
+    img = rng.random((40, 50)).astype(np.float32)
+    q = rng.uniform([2, 2], [47, 37], (5, 6, 2))
+    q[1, 2] = np.nan
+    got = antialiased_sample(img, q, 0.6 * np.eye(2))
+    ok = np.all(np.isfinite(q), axis=-1)
+    assert np.isnan(got[1, 2]) and np.isfinite(got[ok]).all()
+    assert np.array_equal(got[ok], np.asarray(bilinear_sample(img, q[ok]), np.float32))
+    with pytest.raises(ValueError, match="q"):
+        antialiased_sample(img, q[..., :1], np.eye(2))
+
+
+def test_antialiased_sample_renders_a_coarser_camera_closer_than_point_samples():
+    """An exact scene: a destination camera whose pixel covers 2.5 x 2.5 source pixels sees their box average
+    (cv2.resize INTER_AREA of a white-noise source by 2.5 exactly: 5 x 5 source pixels per 2 x 2 destination
+    pixels). At the destination pixels' centres the anti-aliased samples are nearer that image than bilinear point
+    samples are. Measured RMS 0.040 against 0.129 (the source's own spread is 0.289, seed 9): bound half the point
+    samples' RMS (the measured ratio is 0.31)."""
+    import cv2
+
+    rng = np.random.default_rng(9)
+    src = rng.random((250, 250)).astype(np.float32)
+    dst = cv2.resize(src, (100, 100), interpolation=cv2.INTER_AREA)
+    j, i = np.meshgrid(np.arange(100.0), np.arange(100.0))
+    q = np.stack([(j + 0.5) * 2.5 - 0.5, (i + 0.5) * 2.5 - 0.5], -1)  # destination centres in source pixels
+    A = 2.5 * np.eye(2)
+    inner = (slice(3, -3), slice(3, -3))
+    aa = antialiased_sample(src, q, A)[inner]
+    point = np.asarray(bilinear_sample(src, q.reshape(-1, 2)), np.float32).reshape(100, 100)[inner]
+    rms_aa = float(np.sqrt(np.mean((aa - dst[inner]) ** 2)))
+    rms_point = float(np.sqrt(np.mean((point - dst[inner]) ** 2)))
+    assert rms_aa < 0.5 * rms_point

@@ -168,3 +168,12 @@ def test_matched_blur_flag_must_be_a_bool():
     with pytest.raises(ValueError, match="ncc_matched_blur"):
         replace(ChainParams(), ncc_matched_blur=1).check()
     assert replace(ChainParams(), ncc_matched_blur=True).check().ncc_matched_blur is True
+
+
+def test_render_antialias_flag_must_be_a_bool():
+    """ChainParams.check() names the field when render_antialias is not true/false."""
+    from dataclasses import replace
+
+    with pytest.raises(ValueError, match="render_antialias"):
+        replace(ChainParams(), render_antialias="yes").check()
+    assert replace(ChainParams(), render_antialias=True).check().render_antialias is True

@@ -15,7 +15,7 @@ from typing import Optional
 
 import numpy as np
 
-from ..expected import bilinear_sample, drape, footprint_blur_cov, gaussian_blur_cov, plane_points, project_map
+from ..expected import antialiased_sample, drape, map_jacobian, plane_points, project_map
 from ..transforms import RigidTransform
 from .case import HandoffCase
 from .params import HandoffParams
@@ -114,23 +114,8 @@ def plane_window(case: HandoffCase, X_haz, n_haz, half: int):
 
 def sample_nav(case: HandoffCase, q: np.ndarray, A: np.ndarray) -> np.ndarray:
     """The navcam-left image at navcam pixels ``q`` (h, w, 2) -> (h, w) float32 (NaN where ``q`` is not finite),
-    anti-aliased for ``A`` (2, 2) = d(navcam px)/d(hazcam px)."""
-    ok = np.all(np.isfinite(q), axis=-1)
-    out = np.full(q.shape[:-1], np.nan, np.float32)
-    if not ok.any():
-        return out
-    cov = footprint_blur_cov(A)
-    pad = int(np.ceil(3 * np.sqrt(max(cov[0, 0], cov[1, 1])))) + 2
-    H, W = case.nav.left_img.shape
-    u0 = int(max(np.floor(q[ok][:, 0].min()) - pad, 0))
-    v0 = int(max(np.floor(q[ok][:, 1].min()) - pad, 0))
-    u1 = int(min(np.ceil(q[ok][:, 0].max()) + pad + 1, W))
-    v1 = int(min(np.ceil(q[ok][:, 1].max()) + pad + 1, H))
-    if u1 - u0 < 2 or v1 - v0 < 2:
-        return out
-    crop = gaussian_blur_cov(case.nav.left_img[v0:v1, u0:u1], cov)
-    out[ok] = bilinear_sample(crop, q[ok] - [u0, v0])
-    return out
+    anti-aliased for ``A`` (2, 2) = d(navcam px)/d(hazcam px) (:func:`~scipctl.core.expected.antialiased_sample`)."""
+    return antialiased_sample(case.nav.left_img, q, A)
 
 
 def fill_nan(img: Optional[np.ndarray]) -> Optional[np.ndarray]:
@@ -154,13 +139,3 @@ def fill_nan(img: Optional[np.ndarray]) -> Optional[np.ndarray]:
         a[grow] = num[grow] / den[grow]
         valid = valid | grow
     return a
-
-
-def map_jacobian(q: np.ndarray) -> Optional[np.ndarray]:
-    """Median d(q)/d(pixel) ``(2, 2)`` of a pixel map ``q`` (h, w, 2) (NaN invalid) by neighbour differences."""
-    du = (q[:, 2:] - q[:, :-2])[1:-1] / 2
-    dv = (q[2:] - q[:-2])[:, 1:-1] / 2
-    ok = np.all(np.isfinite(du), axis=-1) & np.all(np.isfinite(dv), axis=-1)
-    if ok.sum() < 9:
-        return None
-    return np.stack([np.median(du[ok], axis=0), np.median(dv[ok], axis=0)], axis=1)
