@@ -48,9 +48,13 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
         emit_json(dict(rec.to_dict(), saved_to=str(path)))
     _print(rec, path)
     if rec.go is False:
+        from ..pipeline.designate import VETO_WARNING_PREFIX
+
         p = "n/a" if rec.p_ok is None else f"{rec.p_ok:.2f}"
-        raise CommandFailed(f"{rec.id}: designation NO-GO: P(within {rec.ok_tolerance_pct:g} % of the range of ideal "
-                            f"stereo) {p}; saved, but re-designate (another pixel or image) before planning on it",
+        why = next((w[len(VETO_WARNING_PREFIX):] for w in rec.warnings if w.startswith(VETO_WARNING_PREFIX)), None)
+        raise CommandFailed(f"{rec.id}: designation NO-GO: " + (f"{why} (P {p} not used)" if why else
+                            f"P(within {rec.ok_tolerance_pct:g} % of the range of ideal stereo) {p}")
+                            + "; saved, but re-designate (another pixel or image) before planning on it",
                             payload=None)  # the JSON record was already emitted above
 
 

@@ -14,6 +14,7 @@ import numpy as np
 from ..core.point_stereo import PointStereoParams
 from ..jsonutil import RecordReader, finite_or_none
 from ..model import Downlink, ImageProduct, InputError
+from .designation_trust import LOW_TEXTURE_WARNING, SATURATED_WARNING, VETO_WARNING_PREFIX, assess
 
 EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warned about
 
@@ -216,9 +217,9 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
     k = win // 2 + 1
     patch = L[max(0, int(uv[1]) - k):int(uv[1]) + k + 1, max(0, int(uv[0]) - k):int(uv[0]) + k + 1]
     if patch.size and float((patch >= 0.999).mean()) > 0.05:
-        warnings.append("saturated pixels in the window")
+        warnings.append(SATURATED_WARNING)
     if patch.size and float(patch.std()) < 0.01:
-        warnings.append("low texture")
+        warnings.append(LOW_TEXTURE_WARNING)
     if min(uv[0], uv[1], left.width - 1 - uv[0], left.height - 1 - uv[1]) < EDGE_MARGIN_PX:
         warnings.append("near the image edge")
     rec = Designation(
@@ -257,10 +258,10 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
                       incidence_deg=incidence)
     rec = replace(rec, warnings=tuple(warnings))
     if trust is not None:
-        from .designation_trust import assess
-
         a = assess(trust, rec)
         rec = replace(rec, p_ok=a.p_ok, ok_tolerance_pct=a.tolerance_pct, go=a.go)
+        if a.veto:
+            rec = replace(rec, warnings=rec.warnings + (VETO_WARNING_PREFIX + a.veto,))
     return rec
 
 

@@ -29,6 +29,10 @@ RADII_PCT = (0.5, 1.0, 2.0)
 DEFAULT_TOLERANCE_PCT = 1.0
 GO_PRECISION = 0.98  # the GO threshold: smallest p on GO_GRID whose held-out GO designations are right this often
 GO_GRID = tuple(round(0.90 + 0.01 * i, 2) for i in range(10))
+# the designation's warnings that are evidence (pipeline/designate.py writes them, DesignationEvidence reads them)
+SATURATED_WARNING = "saturated pixels in the window"
+LOW_TEXTURE_WARNING = "low texture"
+VETO_WARNING_PREFIX = "NO-GO whatever p_ok: "  # the warning that says why assess() vetoed a GO
 
 # feature name -> (DesignationEvidence field, transform of core.handoff.trust_model.transform)
 FEATURES = {
@@ -60,8 +64,8 @@ class DesignationEvidence:
         def f(x, scale=1.0):
             return math.nan if x is None else abs(float(x)) * scale
         w = tuple(rec.warnings or ())
-        return cls(f(rec.match_score), f(rec.match_ratio), float("saturated pixels in the window" in w),
-                   float("low texture" in w), float(rec.camera == "navcam"), f(rec.epipolar_offset_px),
+        return cls(f(rec.match_score), f(rec.match_ratio), float(SATURATED_WARNING in w),
+                   float(LOW_TEXTURE_WARNING in w), float(rec.camera == "navcam"), f(rec.epipolar_offset_px),
                    f(rec.ray_miss_m, 1000.0))
 
     def to_dict(self) -> dict:
@@ -81,10 +85,19 @@ class DesignationTrust:
     go: bool
     tolerance_pct: float
     go_min_p: Optional[float]
+    veto: Optional[str] = None  # why the designation is NO-GO whatever p_ok says (None: p_ok decides)
 
 
 def assess(model: Optional[TrustModel], rec, tolerance_pct: float = DEFAULT_TOLERANCE_PCT) -> DesignationTrust:
-    """The trust of designation ``rec`` under ``model`` (None: no model -> p_ok None, NO-GO)."""
+    """The trust of designation ``rec`` under ``model`` (None: no model -> p_ok None, NO-GO).
+
+    A window with no texture (the ``low texture`` warning: its standard deviation under 1 % of full scale) is NO-GO
+    whatever ``p_ok`` says (``veto``): its NCC peak is the noise of a flat patch and says nothing about where the
+    match is. The model cannot learn that from one such row in its table; on the blind populations `pop6`-`pop9`
+    (1501 designations) the 6 with the warning were all more than 1 % of the range off, 4 of them by more than
+    10 %, and one (880 %, a saturated far-navcam window) had p_ok 0.96 (docs/stereo-and-tracking.md, "How far to
+    trust a designation").
+    """
     if model is None or not rec.has_position:
         return DesignationTrust(None, False, tolerance_pct, None)
     p = model.probability([DesignationEvidence.of(rec)], tolerance_pct)
@@ -92,6 +105,8 @@ def assess(model: Optional[TrustModel], rec, tolerance_pct: float = DEFAULT_TOLE
     if p is None or go_min is None:
         return DesignationTrust(None, False, tolerance_pct, None)
     p_ok = float(round(float(p[0]), 4))
+    if LOW_TEXTURE_WARNING in tuple(rec.warnings or ()):
+        return DesignationTrust(p_ok, False, tolerance_pct, float(go_min), veto="the window has no texture to match")
     return DesignationTrust(p_ok, bool(p_ok >= go_min), tolerance_pct, float(go_min))
 
 

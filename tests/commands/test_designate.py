@@ -127,3 +127,27 @@ def test_camera_option_picks_latest_left_image(sol, dl):
     r = runner.invoke(app, ["designate", str(sol), "--camera", "pancam", "--pixel", f"{mk.u},{mk.v}", "--json"])
     assert r.exit_code == 0, r.stderr
     assert json.loads(r.stdout)["product_id"] == latest.product_id
+
+
+def test_a_vetoed_designation_exits_1_saying_why_and_is_saved(tmp_path):
+    """The low-texture veto through the command (the exact slab scene at 5 % contrast, as
+    tests/pipeline/test_designation_trust.py): exit 1, one line that names the reason instead of a GO-sized P, and
+    the record saved with the veto among its warnings."""
+    from scipctl.io.downlink import write_downlink
+    from tests.pipeline import scene as S
+    from tests.pipeline.broken_downlinks import _swap, encode_pixels, with_pixels
+
+    _, dl = S.cached("slab")
+    left = dl.product("pancam_left_1_0")
+    faint = {p.product_id: with_pixels(p, 120.0 + (p.pixels.astype(float) - p.pixels.mean()) * 0.05)
+             for p in (left, dl.stereo_pair(left))}
+    path = write_downlink(encode_pixels(_swap(dl, faint)), tmp_path / "faint.mcap", container="mcap")
+    mk = dl.target("t_flat").mark_in(left.product_id)
+    r = subprocess.run([sys.executable, "-m", "scipctl.cli", "designate", str(path), "--product", left.product_id,
+                        "--pixel", f"{mk.u},{mk.v}", "--id", "f1"], capture_output=True, text=True)
+    assert r.returncode == 1, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert "NO-GO" in last and "texture" in last and "Traceback" not in r.stderr
+    saved = json.loads((tmp_path / "faint.mcap.scipctl" / "targets.json").read_text())
+    rec = next(t for t in saved["targets"] if t["id"] == "f1")
+    assert rec["go"] is False and any(w.startswith("NO-GO whatever p_ok") for w in rec["warnings"])
