@@ -1,6 +1,7 @@
 """Render simulated downlinks for the trust model of ``scip`` (docs/handoff.md, "Trust: scip").
 
     python docs/scripts/trust_render.py FAMILY SEED RUN OUT_DIR [--extra N] [--occluded M] [--shallow K]
+                                        [--stale CAMERA:BASELINE_SCALE[:FOCAL_SCALE]]
 
 One run of the ``paper`` scenario, of one scene family, written as ``OUT_DIR/<family>-<seed>-<run>.mcap``
 with ``N`` extra targets (random true surface points near the rock, seen by the near hazcam pair and the near
@@ -11,7 +12,10 @@ no mark in the left hazcam; the ``.sim.json`` lists it under ``occluded_targets`
 labels every hazcam answer for it wrong. ``--shallow K`` first stands up to ``K`` pebbles in the scene, each
 a few centimetres in front of a surface point on the near left hazcam's line of sight, hiding it over the same disk
 while the navcams still see it (ids ``p01``...: ``scipctl.sim.occluders``); they are listed under
-``shallow_occluders`` and their points under ``occluded_targets`` too. Only the images the handoff
+``shallow_occluders`` and their points under ``occluded_targets`` too. ``--stale navcam:1.01`` renders with a stale
+calibration of that camera pair (``ErrorSettings.stale_camera``: the true right eye 1 % farther along the baseline
+than the downlinked model says, and the focal length of both eyes times FOCAL_SCALE, default 1), on top of the
+family's errors. Only the images the handoff
 uses (the ``near`` and ``far`` stops) are rendered, as ``scipctl synth`` renders them (same exposure, noise
 and seeds); the pancam and mid-stop images are left black, to halve the rendering time.
 
@@ -122,7 +126,20 @@ def main(argv=None):
     ap.add_argument("--extra", type=int, default=12)
     ap.add_argument("--occluded", type=int, default=0)
     ap.add_argument("--shallow", type=int, default=0)
+    ap.add_argument("--stale", default=None, metavar="CAMERA:BASELINE_SCALE[:FOCAL_SCALE]")
     a = ap.parse_args(argv)
+    stale = None
+    if a.stale:
+        parts = a.stale.split(":")
+        if len(parts) not in (2, 3) or parts[0] not in ("navcam", "hazcam", "pancam"):
+            ap.error(f"--stale: expected CAMERA:BASELINE_SCALE[:FOCAL_SCALE] with a mast or body camera, got {a.stale!r}")
+        try:
+            scales = [float(x) for x in parts[1:]] + [1.0] * (3 - len(parts))
+        except ValueError:
+            ap.error(f"--stale: the scales must be numbers, got {a.stale!r}")
+        if not all(0.5 < x < 2.0 for x in scales):
+            ap.error(f"--stale: the scales must lie in (0.5, 2), got {a.stale!r}")
+        stale = {"stale_camera": parts[0], "stale_baseline_scale": scales[0], "stale_focal_scale": scales[1]}
 
     from scipctl import __version__
     from scipctl.io.atomic import atomic_write_text
@@ -136,6 +153,7 @@ def main(argv=None):
     scene_family = None
     if a.family in TRUST_FAMILIES:
         errors, rover, texture = family_settings(a.family)
+        errors = replace(errors, **stale) if stale else errors
         sim = build_run(SCENARIO, a.run, a.seed, errors=errors, render=False, rover=rover, texture=texture)
     else:
         from scipctl.sim.families import family_of_run
@@ -143,6 +161,7 @@ def main(argv=None):
 
         scene_family = family_of_run(a.family, SCENARIO, a.run, a.seed)
         errors = default_errors(SCENARIO).scaled(scene_family.error_scale)  # what build_run uses for the family
+        errors = replace(errors, **stale) if stale else errors
         sim = build_run(SCENARIO, a.run, a.seed, errors=errors, render=False, family=scene_family)
     pid = {(p.stop, p.camera, p.eye): p.product_id for p in sim.products}
     haz = pid[("near", "hazcam", "left")]
@@ -172,7 +191,8 @@ def main(argv=None):
                written_by={"tool": "scipctl", "version": __version__,
                            "regenerate": f"python docs/scripts/trust_render.py {a.family} {a.seed} {a.run} OUT --extra {a.extra}"
                                          + (f" --occluded {a.occluded}" if a.occluded else "")
-                                         + (f" --shallow {a.shallow}" if a.shallow else "")})
+                                         + (f" --shallow {a.shallow}" if a.shallow else "")
+                                         + (f" --stale {a.stale}" if a.stale else "")})
     if a.shallow > 0:  # only then: the records of the other commands keep their bytes
         rec["shallow_occluders"] = [{"name": s.rock.name, "hides": s.target.id, "centre_xy_m": s.rock.centre_xy_m.tolist(),
                                      "size_m": s.rock.size_m.tolist()} for s in shallow]
