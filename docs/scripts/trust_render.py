@@ -117,6 +117,22 @@ def render_some(sim, errors, seed: int, run: str, stops: set, supersample: int =
         by_id[p.product_id].png = encode_png(px)
 
 
+def stale_settings(spec: str) -> dict:
+    """``--stale CAMERA:BASELINE_SCALE[:FOCAL_SCALE]`` -> the ErrorSettings fields it sets; ValueError naming the
+    option when the spec is malformed or a scale lies outside (0.5, 2)."""
+    parts = spec.split(":")
+    if len(parts) not in (2, 3) or parts[0] not in ("navcam", "hazcam", "pancam"):
+        raise ValueError(f"--stale: expected CAMERA:BASELINE_SCALE[:FOCAL_SCALE] with CAMERA navcam, hazcam or pancam, "
+                         f"got {spec!r}")
+    try:
+        scales = [float(x) for x in parts[1:]] + [1.0] * (3 - len(parts))
+    except ValueError:
+        raise ValueError(f"--stale: the scales must be numbers, got {spec!r}") from None
+    if not all(0.5 < x < 2.0 for x in scales):
+        raise ValueError(f"--stale: the scales must lie in (0.5, 2), got {spec!r}")
+    return {"stale_camera": parts[0], "stale_baseline_scale": scales[0], "stale_focal_scale": scales[1]}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("family", choices=family_names())
@@ -128,18 +144,10 @@ def main(argv=None):
     ap.add_argument("--shallow", type=int, default=0)
     ap.add_argument("--stale", default=None, metavar="CAMERA:BASELINE_SCALE[:FOCAL_SCALE]")
     a = ap.parse_args(argv)
-    stale = None
-    if a.stale:
-        parts = a.stale.split(":")
-        if len(parts) not in (2, 3) or parts[0] not in ("navcam", "hazcam", "pancam"):
-            ap.error(f"--stale: expected CAMERA:BASELINE_SCALE[:FOCAL_SCALE] with a mast or body camera, got {a.stale!r}")
-        try:
-            scales = [float(x) for x in parts[1:]] + [1.0] * (3 - len(parts))
-        except ValueError:
-            ap.error(f"--stale: the scales must be numbers, got {a.stale!r}")
-        if not all(0.5 < x < 2.0 for x in scales):
-            ap.error(f"--stale: the scales must lie in (0.5, 2), got {a.stale!r}")
-        stale = {"stale_camera": parts[0], "stale_baseline_scale": scales[0], "stale_focal_scale": scales[1]}
+    try:
+        stale = stale_settings(a.stale) if a.stale else None
+    except ValueError as e:
+        ap.error(str(e))
 
     from scipctl import __version__
     from scipctl.io.atomic import atomic_write_text
