@@ -100,12 +100,13 @@ def assess(model: Optional[TrustModel], rec, tolerance_pct: float = DEFAULT_TOLE
     """
     if model is None or not rec.has_position:
         return DesignationTrust(None, False, tolerance_pct, None)
-    p = model.probability([DesignationEvidence.of(rec)], tolerance_pct)
+    ev = DesignationEvidence.of(rec)
+    p = model.probability([ev], tolerance_pct)
     go_min = model.go_threshold(tolerance_pct)
     if p is None or go_min is None:
         return DesignationTrust(None, False, tolerance_pct, None)
     p_ok = float(round(float(p[0]), 4))
-    if LOW_TEXTURE_WARNING in tuple(rec.warnings or ()):
+    if ev.low_texture == 1.0:
         return DesignationTrust(p_ok, False, tolerance_pct, float(go_min), veto="the window has no texture to match")
     return DesignationTrust(p_ok, bool(p_ok >= go_min), tolerance_pct, float(go_min))
 
