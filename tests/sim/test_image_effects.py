@@ -112,17 +112,15 @@ def test_degrade_downlinks_script_changes_only_the_pixels(tmp_path):
     """docs/scripts/degrade_downlinks.py on a bundled sol: every image is EffectSpec.apply of the original, everything
     else read back equal, and the .sim.json copy records the variant and its source."""
     import hashlib
-    import importlib.util
     import json
     import shutil
     from pathlib import Path
 
     from scipctl.io.downlink import read_downlink
+    from tests import doc_scripts
 
     root = Path(__file__).resolve().parents[2]
-    spec = importlib.util.spec_from_file_location("degrade_downlinks", root / "docs/scripts/degrade_downlinks.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = doc_scripts.load("degrade_downlinks")
     src_dir = tmp_path / "src" / "sol"
     src_dir.mkdir(parents=True)
     for name in ("paper-s1-straight.mcap", "paper-s1-straight.sim.json"):

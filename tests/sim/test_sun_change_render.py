@@ -1,22 +1,17 @@
 """docs/scripts/sun_change_render.py: the sun moved for the designation stop only, everything else the control's,
 and the control the same bytes as ``scipctl synth``."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests import doc_scripts
 
 
 @pytest.fixture(scope="module")
 def sc():
-    spec = importlib.util.spec_from_file_location("sun_change_render", ROOT / "docs" / "scripts" / "sun_change_render.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return doc_scripts.load("sun_change_render")
 
 
 def _az_el_deg(s):

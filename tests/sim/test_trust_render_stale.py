@@ -3,23 +3,17 @@
 What a stale calibration does to the rendered geometry is tested in tests/sim/test_errors.py
 (test_stale_calibration_biases_stereo_range)."""
 
-import importlib.util
 import math
-from pathlib import Path
 
 import pytest
 
 from scipctl.sim.errors import ErrorSettings
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests import doc_scripts
 
 
 @pytest.fixture(scope="module")
 def tr():
-    spec = importlib.util.spec_from_file_location("trust_render", ROOT / "docs" / "scripts" / "trust_render.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return doc_scripts.load("trust_render")
 
 
 def test_a_spec_sets_the_stale_fields_and_they_apply_to_error_settings(tr):
