@@ -28,7 +28,7 @@ import numpy as np
 
 from ..core.point_stereo import PointStereoParams, on_left_ray
 from ..model import Downlink, ImageProduct, InputError
-from .feature_track import feature_track, vo_correction
+from .feature_track import feature_track, texture_view, vo_correction
 from .plane_warp import local_normals_site, near_dense_stereo, plane_warped_template
 from ..jsonutil import finite_or_none
 
@@ -121,6 +121,10 @@ class ChainParams:
     # view (the closure's 4.5 m pancam seen from the hazcam, the 10 m pancam from the 4.5 m navcam), as the handoff's
     # windows are (core/expected.antialiased_sample); False: point samples (bilinear)
     render_antialias: bool = False
+    # a feature step that confirms nothing is tried once more on both images' texture without their lighting
+    # (core/illumination.log_highpass: the log image less its Gaussian blur of this many new-image pixels; the
+    # previous image's blur covers the same ground); None: not tried
+    texture_retry_sigma_px: Optional[float] = None
     # point stereo at each tracked pixel: the designation's band and window per camera
     point_stereo: PointStereoParams = field(default_factory=PointStereoParams)
     other_template_half_px: int = 15
@@ -190,6 +194,9 @@ class ChainParams:
             raise ValueError(f"ChainParams.ncc_matched_blur: must be true or false, got {self.ncc_matched_blur!r}")
         if not isinstance(self.render_antialias, bool):
             raise ValueError(f"ChainParams.render_antialias: must be true or false, got {self.render_antialias!r}")
+        t = self.texture_retry_sigma_px
+        if t is not None and not (isinstance(t, (int, float)) and not isinstance(t, bool) and np.isfinite(t) and t > 0):
+            raise ValueError(f"ChainParams.texture_retry_sigma_px: must be a number > 0 or None, got {t!r}")
         if not isinstance(self.closure, bool):
             raise ValueError(f"ChainParams.closure: must be true or false, got {self.closure!r}")
         if self.answer not in CHAIN_ANSWERS:
@@ -444,6 +451,17 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     vo = vo_correction(dl, prev, prod, prev_range, feats, params, prev_stereo)
                 tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params,
                                           new_stereo, vo=vo)
+                sig = params.texture_retry_sigma_px
+                if sig is not None and finfo.get("feature_status") != "confirmed":
+                    # nothing confirmed: the two views may differ in their lighting (another sun); the same step on
+                    # their texture alone, each filtered over the same patch of ground
+                    tr2, finfo2 = feature_track(texture_view(prev, max(sig / max(scale, 1.0), 1.0)),
+                                                texture_view(prod, sig), X_site, planes, n_view, pred, scale, half,
+                                                feats, params, new_stereo)
+                    if finfo2.get("feature_status") == "confirmed":
+                        tr, finfo = tr2, dict(finfo2, texture_retry=finfo.get("feature_status"))
+                    else:
+                        finfo["texture_retry"] = finfo2.get("feature_status")
                 extra.update(finfo)
                 if tr is not None:
                     mode = "plane, feature-guided"

@@ -193,6 +193,16 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     return out, info
 
 
+def texture_view(im: ImageProduct, sigma_px: float) -> ImageProduct:
+    """A copy of ``im`` whose pixels are its texture without its lighting (:func:`scipctl.core.illumination.log_highpass`
+    of its own, float32; ``pixels_float()`` divides them by 255, which neither NCC nor SIFT's percentile stretch sees),
+    under its product id with ``#texture<sigma_px>`` appended so that a keypoint cache keeps the two apart."""
+    from ..core.illumination import log_highpass
+
+    return dataclasses.replace(im, product_id=f"{im.product_id}#texture{sigma_px:g}",
+                               _pixels=log_highpass(im.pixels_float(), sigma_px))
+
+
 def _matched_blur_kernel(prev: ImageProduct, prod: ImageProduct, X_site, n_site, ys, half: int):
     """The kernel that blurs ``prod`` to the resolution of a template rendered from ``prev`` through the plane
     (X_site, n_site) (core/matched_blur.py), or None. ``ys`` ((2 half + 1)^2, 2): the pose-estimate pixels of the

@@ -177,3 +177,30 @@ def test_render_antialias_flag_must_be_a_bool():
     with pytest.raises(ValueError, match="render_antialias"):
         replace(ChainParams(), render_antialias="yes").check()
     assert replace(ChainParams(), render_antialias=True).check().render_antialias is True
+
+
+def test_texture_retry_sigma_must_be_a_positive_number_or_none():
+    """ChainParams.check() names the field; None (the default) turns the retry off."""
+    from dataclasses import replace
+
+    assert ChainParams().texture_retry_sigma_px is None
+    for bad in (0.0, -3.0, float("nan"), "8", True):
+        with pytest.raises(ValueError, match="texture_retry_sigma_px"):
+            replace(ChainParams(), texture_retry_sigma_px=bad).check()
+    assert replace(ChainParams(), texture_retry_sigma_px=8.0).check().texture_retry_sigma_px == 8.0
+
+
+def test_texture_view_is_the_same_product_with_its_lighting_taken_out(dl):
+    """texture_view: the product's geometry unchanged, its pixels core/illumination.log_highpass of its own, under
+    another product id (a keypoint cache keyed by product id keeps the two apart); the original is untouched."""
+    from scipctl.core.illumination import log_highpass
+    from scipctl.pipeline.feature_track import texture_view
+
+    im = _navcams(dl)[0]
+    before = im.pixels.copy()
+    tv = texture_view(im, 6.0)
+    assert tv.product_id == im.product_id + "#texture6" and tv.camera_model is im.camera_model and tv.pose is im.pose
+    # pixels_float() of the view is the filtered image over 255: the NCC and SIFT's percentile stretch do not see
+    # the factor (exact: the same float32 array divided once)
+    assert np.array_equal(tv.pixels_float(), log_highpass(im.pixels_float(), 6.0) / np.float32(255.0))
+    assert np.array_equal(im.pixels, before)
