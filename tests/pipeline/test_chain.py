@@ -547,3 +547,53 @@ def test_the_relief_mask_is_an_option_that_changes_only_the_tracking_steps(dl, c
         assert s.extra["relief_masked"] == (params.relief_min_kept <= kept < 1.0)
         seen += 1
     assert seen >= 3
+
+
+def test_the_texture_retry_replaces_only_a_step_that_confirmed_nothing(monkeypatch):
+    """ChainParams.texture_retry_sigma_px: where the feature step confirms nothing, it runs once more on both images'
+    texture_view (the previous one filtered over the same ground: sigma / scale), and a confirmed retry is the
+    step's answer, recording what the first try gave; a confirmed first try is never retried. The wiring, with the
+    feature step replaced by a stub that confirms only on texture views (paper-s1-straight t2's first pancam track)."""
+    import scipctl.pipeline.chain as chain_mod
+    from scipctl.core.tracking import TrackResult
+
+    real = chain_mod.feature_track
+    calls = []
+
+    def stub(prev, prod, X_site, view_normals, n_site, pred_uv, scale, half, feats, params, new_stereo=None, vo=None):
+        calls.append((prev.product_id, prod.product_id, scale))
+        if "#texture" not in prod.product_id and len(calls) == 1:  # the first step's first try: nothing confirmed
+            return None, {"feature_status": "failed"}
+        tr, info = real(prev, prod, X_site, view_normals, n_site, pred_uv, scale, half, feats, params, new_stereo, vo)
+        return tr, info
+
+    monkeypatch.setattr(chain_mod, "feature_track", stub)
+    dl = read_downlink(SAMPLES[0])
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target("t2").mark_in(start.product_id)
+    params = ChainParams(answer="handoff", texture_retry_sigma_px=8.0)
+    steps = run_chain(dl, start, [mk.u, mk.v], target_id="t2", params=params)
+    (p0, n0, s0), (p1, n1, s1) = calls[0], calls[1]
+    assert "#texture" not in n0 and n1 == n0 + "#texture8" and p1 == f"{p0}#texture{8.0 / s0:g}" and s1 == s0
+    first = steps[1]
+    assert first.extra["feature_status"] == "confirmed" and first.extra["texture_retry"] == "failed"
+    # the texture views still find the target within the chain's success radius for a 4.5 m pancam track on this
+    # rig (8 mm across the line of sight, 6.2 px; measured 2.6 px, against 1.3 px for the raw first try)
+    assert first.ok and first.error_px < 6.0
+    # every later step confirmed on its first try here, so none was retried
+    assert not any("#texture" in c[1] for c in calls[2:])
+    assert all("texture_retry" not in s.extra for s in steps[2:])
+
+
+def test_the_texture_retry_changes_nothing_where_it_confirms_nothing():
+    """paper-s1-straight t1: its first pancam track finds no feature model (21 px, flagged) and neither does the
+    retry on texture, so the chain is the same step for step as without the option; the step records the retry's
+    outcome."""
+    dl = read_downlink(SAMPLES[0])
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target("t1").mark_in(start.product_id)
+    off = run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=HANDOFF)
+    on = run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(answer="handoff", texture_retry_sigma_px=8.0))
+    assert on[1].extra.get("texture_retry") == "failed" and not on[1].ok
+    assert [s.tracked_uv for s in on] == [s.tracked_uv for s in off]
+    assert [s.p_success for s in on] == [s.p_success for s in off]
