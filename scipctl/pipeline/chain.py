@@ -123,7 +123,7 @@ class ChainParams:
     render_antialias: bool = False
     # a feature step that confirms nothing is tried once more on both images' texture without their lighting
     # (core/illumination.log_highpass: the log image less its Gaussian blur of this many new-image pixels; the
-    # previous image's blur covers the same ground); None: not tried
+    # previous image's divided by the zoom where the new view is the finer, at least 1 px); None: not tried
     texture_retry_sigma_px: Optional[float] = None
     # point stereo at each tracked pixel: the designation's band and window per camera
     point_stereo: PointStereoParams = field(default_factory=PointStereoParams)
@@ -454,7 +454,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 sig = params.texture_retry_sigma_px
                 if sig is not None and finfo.get("feature_status") != "confirmed":
                     # nothing confirmed: the two views may differ in their lighting (another sun); the same step on
-                    # their texture alone, each filtered over the same patch of ground
+                    # their texture alone. Where the new view is the finer (scale > 1, a track towards the target) the
+                    # previous image's blur covers the same ground as the new one's; otherwise both blur by sig px
                     tr2, finfo2 = feature_track(texture_view(prev, max(sig / max(scale, 1.0), 1.0)),
                                                 texture_view(prod, sig), X_site, planes, n_view, pred, scale, half,
                                                 feats, params, new_stereo)
