@@ -63,30 +63,6 @@ def shift_name(az_deg: float, el_deg: float) -> str:
     return f"sun{az_deg:+g}_{el_deg:+g}".replace("+", "p").replace("-", "m")
 
 
-def render_stop(sim, scene, stop: str, errors, seed: int, run: str, supersample: int) -> dict:
-    """PNG bytes of every product of ``sim`` at ``stop`` rendered in ``scene``, exposed as ``build_run`` exposes
-    them (auto-exposure per stop and camera from the left image, the same sensor-noise streams)."""
-    from scipctl.io.images import encode_png
-    from scipctl.sim.build import DEFAULT_BITS
-    from scipctl.sim.render import Sensor, auto_exposure, expose, render_radiance
-    from scipctl.sim.scenarios import _rng
-
-    out, exposure_of = {}, {}
-    for p in sim.products:
-        if p.stop != stop:
-            continue
-        sensor = Sensor(bits=DEFAULT_BITS.get(p.camera, 8))
-        washed = errors.is_washed_out(run, p.stop, p.camera)
-        resp = errors.responsivity_of(p.camera, p.eye)
-        rad = render_radiance(scene, p.model_true_site, p.width, p.height, supersample)
-        key = (p.stop, p.camera)
-        if p.eye == "left" or key not in exposure_of:
-            exposure_of[key] = auto_exposure(rad, sensor) * (errors.washed_out_factor if washed else 1.0)
-        rng = _rng(seed, SCENARIO, run, "sensor", p.product_id) if errors.sensor_noise else None
-        out[p.product_id] = encode_png(expose(rad, exposure_of[key], resp, sensor, rng))
-    return out
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("family")
@@ -109,7 +85,7 @@ def main(argv=None) -> int:
     from scipctl.commands.synth import record_json, regenerate_command
     from scipctl.io.atomic import atomic_write_text
     from scipctl.io.downlink import write_downlink
-    from scipctl.sim.build import build_run
+    from scipctl.sim.build import build_run, render_stops
     from scipctl.sim.families import family_of_run
     from scipctl.sim.scenarios import default_errors
 
@@ -131,7 +107,7 @@ def main(argv=None) -> int:
     pngs = {im.product_id: im.png for im in sim.downlink.images}
     for az, el in shifts:
         sun = shifted_sun(sim.scene.sun_dir_site, az, el)
-        new = render_stop(sim, replace(sim.scene, sun_dir_site=sun), DESIGNATION_STOP, errors, a.seed, a.run, supersample)
+        new = render_stops(sim, errors, {DESIGNATION_STOP}, supersample, scene=replace(sim.scene, sun_dir_site=sun))
         for im in sim.downlink.images:
             im.png = new.get(im.product_id, pngs[im.product_id])
         folder = a.out / shift_name(az, el)

@@ -93,30 +93,6 @@ def family_settings(family: str):
     return errors, rover, texture
 
 
-def render_some(sim, errors, seed: int, run: str, stops: set, supersample: int = 2):
-    """Render the products of ``sim`` (built with ``render=False``) at ``stops``, as ``build_run`` does."""
-    from scipctl.io.images import encode_png
-    from scipctl.sim.build import DEFAULT_BITS
-    from scipctl.sim.render import Sensor, auto_exposure, expose, render_radiance
-    from scipctl.sim.scenarios import _rng
-
-    by_id = {im.product_id: im for im in sim.downlink.images}
-    exposure_of = {}
-    for p in sim.products:
-        if p.stop not in stops:
-            continue
-        sensor = Sensor(bits=DEFAULT_BITS.get(p.camera, 8))
-        washed = errors.is_washed_out(run, p.stop, p.camera)
-        resp = errors.responsivity_of(p.camera, p.eye)
-        rad = render_radiance(sim.scene, p.model_true_site, p.width, p.height, supersample)
-        key = (p.stop, p.camera)
-        if p.eye == "left" or key not in exposure_of:
-            exposure_of[key] = auto_exposure(rad, sensor) * (errors.washed_out_factor if washed else 1.0)
-        rng = _rng(seed, SCENARIO, run, "sensor", p.product_id) if errors.sensor_noise else None
-        px = expose(rad, exposure_of[key], resp, sensor, rng)
-        by_id[p.product_id].png = encode_png(px)
-
-
 def stale_settings(spec: str) -> dict:
     """``--stale CAMERA:BASELINE_SCALE[:FOCAL_SCALE]`` -> the ErrorSettings fields it sets; ValueError naming the
     option when the spec is malformed or a scale lies outside (0.5, 2)."""
@@ -153,7 +129,7 @@ def main(argv=None):
     from scipctl.io.atomic import atomic_write_text
     from scipctl.io.downlink import write_downlink
     from scipctl.model import TargetTruth
-    from scipctl.sim.build import build_run
+    from scipctl.sim.build import build_run, render_stops
     from scipctl.sim.extra_targets import choose_extra_targets, choose_occluded_targets, extra_marks
     from scipctl.sim.occluders import add_shallow_occluders
     from scipctl.sim.scenarios import _rng
@@ -188,7 +164,9 @@ def main(argv=None):
     extra_all = extra + [t for t, _, _ in hidden]
     sim.downlink.targets.extend(extra_marks(sim.scene, sim.products, extra_all))
     sim.downlink.truth_targets.extend(TargetTruth(t.id, np.asarray(t.xyz_site_m, float)) for t in extra_all)
-    render_some(sim, errors, a.seed, a.run, {"near", "far"})
+    pngs = render_stops(sim, errors, {"near", "far"})  # the handoff's stops only, rendered as build_run renders them
+    for im in sim.downlink.images:
+        im.png = pngs.get(im.product_id, im.png)
     a.out.mkdir(parents=True, exist_ok=True)
     name = f"{a.family}-{a.seed}-{a.run}"
     path = write_downlink(sim.downlink, a.out / f"{name}.mcap", "mcap")

@@ -176,3 +176,30 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     if fam is not None:
         record["family"] = fam.to_dict()
     return SimRun(plan, dl, record, scene, products, targets)
+
+
+def render_stops(sim: SimRun, errors: ErrorSettings, stops, supersample: int = 2,
+                 scene: Optional[Scene] = None) -> dict:
+    """PNG bytes of every product of ``sim`` (built with ``render=False``, or to be rendered again) at ``stops`` (stop
+    labels), rendered and exposed as :func:`build_run` does: auto-exposure per stop and camera from the left image,
+    the same sensor-noise streams, the default bits. ``scene``: render in this scene instead of ``sim.scene`` (e.g.
+    the same ground under another sun). Returns ``{product_id: png}``; ``sim`` is not changed."""
+    from ..io.images import encode_png
+    from .render import Sensor, auto_exposure, expose, render_radiance
+
+    scene = sim.scene if scene is None else scene
+    scenario, run, seed = sim.plan.scenario, sim.plan.run, sim.plan.seed
+    out, exposure_of = {}, {}
+    for p in sim.products:
+        if p.stop not in stops:
+            continue
+        sensor = Sensor(bits=DEFAULT_BITS.get(p.camera, 8))
+        washed = errors.is_washed_out(run, p.stop, p.camera)
+        resp = errors.responsivity_of(p.camera, p.eye)
+        rad = render_radiance(scene, p.model_true_site, p.width, p.height, supersample)
+        key = (p.stop, p.camera)
+        if p.eye == "left" or key not in exposure_of:
+            exposure_of[key] = auto_exposure(rad, sensor) * (errors.washed_out_factor if washed else 1.0)
+        rng = _rng(seed, scenario, run, "sensor", p.product_id) if errors.sensor_noise else None
+        out[p.product_id] = encode_png(expose(rad, exposure_of[key], resp, sensor, rng))
+    return out

@@ -42,3 +42,17 @@ def test_scene_is_shared_by_the_runs_of_a_scene():
         for s in plan.stops:
             for r in a.rocks[1:]:
                 assert np.linalg.norm(r.centre_xy_m - s.xy_m) > r.radius_m + 0.6
+
+
+def test_render_stops_renders_as_build_run_does():
+    """sim/build.render_stops on a run built without pixels gives, stop by stop, the bytes build_run renders (the
+    scripts that re-render some stops, docs/scripts/trust_render.py and sun_change_render.py, rely on it)."""
+    from scipctl.sim.build import build_run, render_stops
+    from scipctl.sim.scenarios import default_errors
+
+    full = build_run("paper", "s1-straight", 3, image_scale=0.125, supersample=1)
+    bare = build_run("paper", "s1-straight", 3, image_scale=0.125, supersample=1, render=False)
+    pngs = render_stops(bare, default_errors("paper"), {"near", "far"}, supersample=1)
+    want = {im.product_id: im.png for im in full.downlink.images if "-near-" in im.product_id or "-far-" in im.product_id}
+    assert sorted(pngs) == sorted(want) and all(pngs[k] == want[k] for k in want)
+    assert all(im.png != pngs.get(im.product_id) for im in bare.downlink.images)  # bare's own images untouched
