@@ -29,7 +29,7 @@ import numpy as np
 from ..core.point_stereo import PointStereoParams, on_left_ray
 from ..model import Downlink, ImageProduct, InputError
 from .feature_track import feature_track, texture_view, vo_correction
-from .plane_warp import local_normals_site, near_dense_stereo, plane_warped_template
+from .plane_warp import local_normals_site, near_dense_stereo, plane_warped_template, render_planes
 from ..jsonutil import finite_or_none
 
 def _per_camera(name: str, values: dict, fallback, minimum, integer: bool = False) -> None:
@@ -439,11 +439,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     (normal, ground), normal_from = local_normals_site(prev, X_prev, prev_range, prev_stereo), prev
                 # the surface plane at the target (or the rover's ground plane when dense stereo gave no normal)
                 # renders the template; the coarse step also tries the surrounding ground's plane
-                up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
-                n_view = normal if normal is not None else (ground if ground is not None else up)
-                planes = [n_view]
-                if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > 5.0:
-                    planes.append(ground)
+                planes, n_view = render_planes(prev, normal, ground)
                 # the new image's own stereo says which template pixels the plane misplaces (relief_mask)
                 new_stereo = None if params.relief_max_parallax_px is None else near_dense_stereo(dl, prod, rng_new)
                 vo = None

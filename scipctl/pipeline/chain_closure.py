@@ -92,7 +92,7 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     from ..core.point_stereo import on_left_ray
     from ..core.windows import window_scale_for_handoff
     from .feature_track import feature_track, vo_correction
-    from .plane_warp import local_normals_site, near_dense_stereo
+    from .plane_warp import local_normals_site, near_dense_stereo, render_planes
 
     prev = dl.product(R.product_id)
     # the reference's estimate on its tracked pixel's ray, as the chain keeps it (on_left_ray)
@@ -100,12 +100,7 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     X_site = prev.pose.T_site_rover.apply(X_prev)
     rng_prev = float(np.linalg.norm(X_prev - prev.camera_model.C))
     prev_stereo = near_dense_stereo(dl, prev, rng_prev)  # the plane's normals and the odometry's 3-D points
-    normal, ground = local_normals_site(prev, X_prev, rng_prev, prev_stereo)
-    up = prev.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
-    n_view = normal if normal is not None else (ground if ground is not None else up)
-    planes = [n_view]
-    if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > 5.0:
-        planes.append(ground)
+    planes, n_view = render_planes(prev, *local_normals_site(prev, X_prev, rng_prev, prev_stereo))
     X_new = prod.pose.T_site_rover.inverse().apply(X_site)
     pred = prod.camera_model.project(X_new[None])[0]
     if not np.all(np.isfinite(pred)):

@@ -45,6 +45,24 @@ def local_normals_site(prod: ImageProduct, X_rover: np.ndarray, range_m: float, 
     return tuple(out)
 
 
+# the surrounding ground's plane is tried too when it differs from the target's own by more than this (degrees)
+GROUND_PLANE_MIN_DEG = 5.0
+
+
+def render_planes(prod: ImageProduct, normal, ground) -> tuple[list, np.ndarray]:
+    """The planes the feature step renders ``prod`` through, from :func:`local_normals_site`'s ``(normal,
+    ground)`` (site frame, each ``(3,)`` or None): ``(planes, n_view)``. ``n_view``, the one the NCC template is
+    rendered through, is the target's own surface (else the surrounding ground, else the rover's ground plane at
+    ``prod``'s pose estimate, site ``-z`` of the rover); ``planes`` is ``[n_view]``, plus the ground's when it
+    differs from ``n_view`` by more than ``GROUND_PLANE_MIN_DEG``."""
+    up = prod.pose.T_site_rover.rotate([0.0, 0.0, -1.0])
+    n_view = normal if normal is not None else (ground if ground is not None else up)
+    planes = [n_view]
+    if ground is not None and np.degrees(np.arccos(np.clip(ground @ n_view, -1, 1))) > GROUND_PLANE_MIN_DEG:
+        planes.append(ground)
+    return planes, n_view
+
+
 def plane_points_site(prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
     """Where the rays of ``prod``'s pixels ``uv`` (N, 2) (its camera at its pose estimate) meet the plane through
     ``X_site`` (3,) with normal ``n_site`` (3,), site frame: ``(N, 3)``, NaN where a ray does not meet it in front
