@@ -1,7 +1,7 @@
 """The closure check's reference choice (pipeline/chain_closure.py); its run on real chains is in test_chain.py."""
 
 from scipctl.pipeline.chain import ChainParams, ChainStep
-from scipctl.pipeline.chain_closure import Closure, closure_reference
+from scipctl.pipeline.chain_closure import CLOSURE_REFERENCES, Closure, closure_reference
 
 import pytest
 
@@ -26,6 +26,17 @@ def test_the_reference_is_the_last_trusted_pancam_track():
     assert closure_reference(steps, 5) == 2
     steps[2] = _step("navcam", "handoff", (1, 1), ok=False)
     assert closure_reference(steps, 5) is None  # navcam tracks and the designation (~10 m) are never one
+
+
+def test_the_reference_order_can_be_asked_for():
+    steps = [_step("pancam", "designate", (1, 0)), _step("pancam", "track", (1, 1)), _step("navcam", "handoff", (1, 1)),
+             _step("navcam", "track", (1, 2)), _step("navcam", "track", (1, 3)),
+             _step("hazcam", "handoff", (1, 3), final=True)]
+    assert closure_reference(steps, 5, CLOSURE_REFERENCES) == closure_reference(steps, 5) == 1
+    assert closure_reference(steps, 5, (("navcam", "handoff"), ("pancam", "track"))) == 2
+    assert closure_reference(steps, 5, (("pancam", "designate"),)) == 0  # a measurement may ask for the designation
+    assert closure_reference(steps, 5, (("navcam", "track"),)) == 3  # the last one before the final stop
+    assert closure_reference(steps, 5, (("hazcam", "handoff"),)) is None
 
 
 def test_closure_params_and_record():

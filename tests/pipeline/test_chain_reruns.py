@@ -1,0 +1,86 @@
+"""The measurement scripts that run parts of recorded chains again (docs/scripts/closure_references.py,
+docs/scripts/first_track_rerun.py): on chains of the bundled paper-s1-straight, written as a campaign records
+them, each must give the recorded answers back before its variants mean anything."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from scipctl.io.downlink import read_downlink
+from scipctl.pipeline.chain import run_chain
+from scipctl.pipeline.chain_trust import chain_verdict
+from tests.doc_scripts import load
+
+ROOT = Path(__file__).resolve().parents[2]
+SOL = ROOT / "sample_sols/mcap/paper-s1-straight.mcap"
+
+
+@pytest.fixture(scope="module")
+def camp(tmp_path_factory):
+    """A campaign folder with the default chains of t1 (its 4.5 m pancam track fails: the closure starts from the
+    navcam handoff) and t2 (a confirmed pancam track), records as ``scipctl campaign`` writes them."""
+    dl = read_downlink(SOL)
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    lines = [{"kind": "header", "status": "ok", "family": "default", "job": {"path": str(SOL)}}]
+    feats = {}
+    for tid in ("t1", "t2"):
+        mk = dl.target(tid).mark_in(start.product_id)
+        steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, feature_cache=feats)
+        lines.append({"kind": "chain", "record": {"target": tid, "go": chain_verdict(steps).go,
+                                                  "steps": [s.to_dict() for s in steps]}})
+    out = tmp_path_factory.mktemp("camp")
+    (out / "records").mkdir()
+    (out / "records" / "paper-s1-straight.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    return out
+
+
+def test_closures_from_each_reference_give_the_recorded_one_back(camp, tmp_path, capsys):
+    cr = load("closure_references")
+    out = tmp_path / "rows.jsonl"
+    assert cr.main(["run", str(camp), str(out)]) == 0
+    assert json.loads(capsys.readouterr().err) == {"chains": 2, "reproduced": 2, "moved": 0}
+    rows = {r["target"]: r for r in map(json.loads, out.read_text().splitlines())}
+    # t1: no trusted pancam track, so the chain's closure came from the navcam handoff; t2 from the pancam track
+    assert rows["t1"]["pancam"]["step"] is None and rows["t1"]["used_step"] == rows["t1"]["navcam"]["step"]
+    assert rows["t2"]["used_step"] == rows["t2"]["pancam"]["step"] == 1
+    assert rows["t1"]["designation"]["step"] == rows["t2"]["designation"]["step"] == 0
+    s = cr.score(list(rows.values()))
+    today = s["rules"][0]
+    assert today["order"] == ["pancam", "navcam"]
+    # today's order is the chain's own answer, chain by chain
+    assert today["won"] == today["lost"] == 0 and today["within"] == s["own_within"]
+    for r in rows.values():
+        err, _ = cr.rule_error(r, ("pancam", "navcam"))
+        assert err == pytest.approx(r["final_px"], abs=1e-9)
+
+
+def test_the_first_track_again_gives_the_recorded_pixel_back(camp, tmp_path, capsys):
+    ft = load("first_track_rerun")
+    out = tmp_path / "rows.jsonl"
+    assert ft.main(["run", str(camp), str(out), 'h26={"half": 26}']) == 0
+    assert json.loads(capsys.readouterr().err) == {"tracks": 2, "reproduced": 2, "moved": 0}
+    rows = {r["target"]: r for r in map(json.loads, out.read_text().splitlines())}
+    assert rows["t1"]["default"]["status"] == rows["t1"]["recorded_status"] == "failed"
+    assert rows["t2"]["default"]["uv"] == rows["t2"]["recorded_uv"]
+    assert rows["t2"]["default"]["status"] == "confirmed" and set(rows["t2"]) >= {"default", "h26"}
+    s = ft.score(list(rows.values()))
+    assert s["tracks"] == 2 and s["variants"]["default"]["confirmed"] == 1
+    assert s["variants"]["h26"]["won_4mm"] + s["variants"]["h26"]["lost_4mm"] <= 2
+
+
+@pytest.mark.parametrize("script, args", [
+    ("closure_references", ["run", "{tmp}", "{tmp}/o.jsonl"]),
+    ("first_track_rerun", ["run", "{tmp}", "{tmp}/o.jsonl"]),
+    ("first_track_rerun", ["run", "{camp}", "{tmp}/o.jsonl", 'x={"half": 20, "other": 1}']),
+    ("first_track_rerun", ["run", "{camp}", "{tmp}/o.jsonl", 'x={"params": {"feature_median_px": 2}}']),
+    ("closure_references", ["score", "{tmp}/missing.jsonl"]),
+])
+def test_bad_input_is_refused_with_exit_2_and_nothing_written(script, args, camp, tmp_path, capsys):
+    argv = [a.replace("{tmp}", str(tmp_path)).replace("{camp}", str(camp)) for a in args]
+    with pytest.raises(SystemExit) as e:
+        load(script).main(argv)
+    assert e.value.code == 2
+    assert not (tmp_path / "o.jsonl").exists()
+    err = capsys.readouterr().err.strip().splitlines()[-1]  # argparse: the usage, then the one line that says why
+    assert err.startswith(f"{script}.py: error:")
