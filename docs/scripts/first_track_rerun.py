@@ -6,7 +6,7 @@ track's error, and its template (session 28; measured)").
     python docs/scripts/first_track_rerun.py score OUT.jsonl [--json]
 
 ``run``: for every chain of the campaign folder CAMP (``scipctl campaign ... --chain``) with a first pancam track
-and a mark there, the feature step of that track
+whose feature step ran, and a mark there, the feature step of that track
 (:func:`~scipctl.pipeline.feature_track.feature_track`) as ``run_chain`` makes it from the recorded designation
 (its pixel and stereo point, the plane from its dense stereo), once per variant. A variant is ``NAME=JSON`` with
 ``{"half": N}`` (the NCC template's half-size, new pixels) and/or ``{"params": {ChainParams field: value}}``;
@@ -77,8 +77,8 @@ def run_file(path: str) -> tuple[list, int, int]:
             continue
         steps = [ChainStep.from_dict(s) for s in rec["record"]["steps"]]
         S1 = next((s for s in steps if s.camera == "pancam" and s.kind == "track"), None)
-        if S1 is None or S1.mark_uv is None or steps[0].kind != "designate":
-            continue
+        if S1 is None or S1.mark_uv is None or steps[0].kind != "designate" or "feature_status" not in S1.extra:
+            continue  # no such track, no mark, or the chain did not run its feature step (e.g. behind the camera)
         dl = dl or read_downlink(header["job"]["path"])
         px_mm = S1.extra.get("px_mm")
         row = {"downlink": header["job"]["path"], "family": header.get("family"), "target": rec["record"]["target"],

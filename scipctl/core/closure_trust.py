@@ -27,8 +27,9 @@ from .logistic_model import PixelLogistic
 @dataclass
 class ClosureEvidence(EvidenceRecord):
     """What a closure knows about itself (NaN: unknown). ``from_pancam``: 1 when it started from the 4.5 m pancam
-    track, 0 from the navcam handoff; ``ref_p_success``: the reference step's own probability (step model);
-    ``handoff_px``: distance (hazcam px) from the closure pixel to the handoff path's answer (``closure_px``)."""
+    image (its track, or the navcam handoff's point projected into it), 0 from the navcam handoff's image;
+    ``ref_p_success``: the reference step's own probability (step model); ``handoff_px``: distance (hazcam px) from
+    the closure pixel to the handoff path's answer (``closure_px``)."""
 
     ncc_peak: float = math.nan
     local_inliers: float = math.nan

@@ -99,6 +99,11 @@ class ChainParams:
     # answer within 4 px 169 -> 179 of 260 chains (tuning) and 122 -> 131 of 186 (held out), for +17-19 % of the
     # chain's CPU on the bundled sols; the closure trust model is fitted on such closures (session 18)
     closure_vo: bool = True
+    # when the closure would start from the navcam handoff at the imaging stop (its pancam track there not trusted),
+    # it first starts from the pancam image of that stop at the navcam handoff's point projected into it
+    # (chain_closure.pancam_from_navcam), and keeps that closure when it is confirmed (docs/stereo-and-tracking.md,
+    # "The closure's reference")
+    closure_pancam_from_navcam: bool = False
     vo_threshold_px: float = 2.0
     vo_min_inliers: int = 20
     vo_ratio: float = 0.8
@@ -190,6 +195,9 @@ class ChainParams:
             raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
         if not isinstance(self.closure_vo, bool):
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
+        if not isinstance(self.closure_pancam_from_navcam, bool):
+            raise ValueError(f"ChainParams.closure_pancam_from_navcam: must be true or false, got "
+                             f"{self.closure_pancam_from_navcam!r}")
         if not isinstance(self.ncc_matched_blur, bool):
             raise ValueError(f"ChainParams.ncc_matched_blur: must be true or false, got {self.ncc_matched_blur!r}")
         if not isinstance(self.render_antialias, bool):

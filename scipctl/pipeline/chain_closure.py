@@ -58,6 +58,9 @@ class Closure:
     # position (hazcam px)
     feature_pooled: Optional[int] = None
     feature_refine_px: Optional[float] = None
+    # "navcam": the closure started from the pancam image of the reference's stop, at the navcam handoff's point
+    # projected into it (ChainParams.closure_pancam_from_navcam); None: from the reference step's own image
+    via: Optional[str] = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -120,6 +123,32 @@ def track_from_step(dl, R, prod, params, feats: Optional[dict] = None):
     return tr, info, float(scale), pred
 
 
+def pancam_from_navcam(dl, N):
+    """The navcam handoff step ``N`` re-expressed in the pancam image of its stop (the chain's last left pancam
+    there): a copy of ``N`` whose image is that pancam and whose pixel is ``N``'s point (its stereo point moved onto
+    its pixel's ray, site frame) projected into it; its ``xyz_site_m`` is that point. Both cameras are on the mast at
+    one stop, so no drive lies between them: the projection carries the navcam pixel's error and the two cameras'
+    relative calibration, not a pose error. None when the stop has no left pancam or the point does not project
+    into it."""
+    import dataclasses
+
+    from ..core.point_stereo import on_left_ray
+
+    pans = [im for im in dl.images_at(N.position, "pancam", "left")]
+    if not pans or N.tracked_uv is None or N.xyz_site_m is None:
+        return None
+    pan = max(pans, key=lambda im: im.time_s)  # the one run_chain tracks at that stop
+    nav = dl.product(N.product_id)
+    X_nav = on_left_ray(nav.camera_model, np.asarray(N.tracked_uv, float),
+                        nav.pose.T_site_rover.inverse().apply(np.asarray(N.xyz_site_m, float)))
+    X_site = nav.pose.T_site_rover.apply(X_nav)
+    uv = pan.camera_model.project(pan.pose.T_site_rover.inverse().apply(X_site)[None])[0]
+    if not (np.all(np.isfinite(uv)) and 0 <= uv[0] <= pan.width - 1 and 0 <= uv[1] <= pan.height - 1):
+        return None
+    return dataclasses.replace(N, camera="pancam", product_id=pan.product_id, tracked_uv=[float(x) for x in uv],
+                               xyz_site_m=[float(x) for x in X_site])
+
+
 def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Closure:
     """The :class:`Closure` of a chain whose final hazcam handoff is the step with ``extra["final"]``.
 
@@ -136,10 +165,19 @@ def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Clos
     if ref is None:
         return Closure("no reference")
     R, H = steps[ref], steps[final]
-    tr, info, scale, pred = track_from_step(dl, R, dl.product(H.product_id), params, feats)
+    via = None
+    if params.closure_pancam_from_navcam and R.camera == "navcam":
+        # the pancam image of the same stop resolves the target 3x finer; a confirmed closure from it is taken
+        R_pan = pancam_from_navcam(dl, R)
+        if R_pan is not None:
+            tr, info, scale, pred = track_from_step(dl, R_pan, dl.product(H.product_id), params, feats)
+            if pred is not None and info.get("feature_status") == "confirmed":
+                R, via = R_pan, "navcam"
+    if via is None:
+        tr, info, scale, pred = track_from_step(dl, R, dl.product(H.product_id), params, feats)
     if pred is None:
         return Closure("failed", R.product_id, ref)
-    out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale),
+    out = Closure(info.get("feature_status", "failed"), R.product_id, ref, scale=float(scale), via=via,
                   ncc_peak=info.get("ncc_score"), feature_local_inliers=int(info.get("feature_local_inliers", 0)),
                   feature_confirmed=int(info.get("feature_confirmed", 0)),
                   feature_shift_px=info.get("feature_shift_px"), feature_vo=info.get("feature_vo"),
@@ -166,6 +204,6 @@ def closure_evidence(steps: list, closure: dict):
     return ClosureEvidence(
         ncc_peak=num(closure.get("ncc_peak")), local_inliers=num(closure.get("feature_local_inliers")),
         confirmed=num(closure.get("feature_confirmed")), shift_px=num(closure.get("feature_shift_px")),
-        scale=num(closure.get("scale")), from_pancam=float(R is not None and R.camera == "pancam"),
+        scale=num(closure.get("scale")), from_pancam=float(R is not None and (R.camera == "pancam" or closure.get("via") == "navcam")),
         ref_p_success=num(None if R is None else R.p_success), handoff_px=num(closure.get("closure_px")),
         refine_px=num(closure.get("feature_refine_px")), pooled=num(closure.get("feature_pooled")))

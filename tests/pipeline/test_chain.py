@@ -598,3 +598,29 @@ def test_the_texture_retry_changes_nothing_where_it_confirms_nothing():
     assert on[1].extra.get("texture_retry") == "failed" and not on[1].ok
     assert [s.tracked_uv for s in on] == [s.tracked_uv for s in off]
     assert [s.p_success for s in on] == [s.p_success for s in off]
+
+
+def test_the_closure_can_start_from_the_pancam_at_the_navcam_point(dl, chains):
+    """ChainParams.closure_pancam_from_navcam: only a closure that would start from the navcam handoff changes, and
+    only when the closure from the pancam image of that stop is confirmed (else today's closure)."""
+    from scipctl.pipeline.chain_closure import closure_check, closure_evidence
+
+    via = []
+    for tid, steps in chains.items():
+        off = closure_check(dl, steps, ChainParams()).to_dict()
+        on = closure_check(dl, steps, ChainParams(closure_pancam_from_navcam=True)).to_dict()
+        ref = steps[off["reference_step"]]
+        assert on["reference_step"] == off["reference_step"]
+        if ref.camera == "pancam" or on["via"] is None:
+            assert on == off
+            continue
+        pan = dl.product(on["reference"])
+        assert on["via"] == "navcam" and on["status"] == "confirmed" and ref.camera == "navcam"
+        assert pan.camera == "pancam" and pan.position == ref.position
+        # the chain's success radius (4 px); measured 2.27 px (paper-s1-straight t1, OpenCV 5.0)
+        assert np.hypot(*np.subtract(on["uv"], steps[-1].mark_uv)) <= 4.0
+        assert closure_evidence(steps, on).from_pancam == 1.0 and closure_evidence(steps, off).from_pancam == 0.0
+        via.append(tid)
+    # paper-s1-straight t1's 4.5 m pancam track fails: its closure starts from the navcam handoff, and the pancam
+    # closure at its point is confirmed (paper-s1-arc t1's is not: today's closure stays)
+    assert via == (["t1"] if _stem(dl) == "paper-s1-straight" else [])

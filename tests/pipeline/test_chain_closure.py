@@ -1,5 +1,7 @@
 """The closure check's reference choice (pipeline/chain_closure.py); its run on real chains is in test_chain.py."""
 
+import numpy as np
+
 from scipctl.pipeline.chain import ChainParams, ChainStep
 from scipctl.pipeline.chain_closure import CLOSURE_REFERENCES, Closure, closure_reference
 
@@ -77,3 +79,63 @@ def test_visual_odometry_in_the_closure_by_default():
     off = run_chain(dl, start, [mk.u, mk.v], target_id="t2", feature_cache=feats,
                     params=ChainParams(closure_vo=False))[-1].extra["closure"]
     assert off["vo_inliers"] is None and off["feature_vo"] is None
+
+
+def _standin_stop(pan_width=1024):
+    """A navcam and a pancam on one mast at one stop (stand-ins: only what pancam_from_navcam reads), the same
+    rover pose estimate, and a target ~4.5 m ahead in the rover frame."""
+    from types import SimpleNamespace
+
+    from scipctl.core.transforms import RigidTransform, axis_angle_to_matrix
+    from tests.models import cahv, cahvor
+
+    T_site_rover = RigidTransform(axis_angle_to_matrix([0, 0, 1], 0.7), np.array([10.0, -4.0, 0.2]))
+    pose = SimpleNamespace(T_site_rover=T_site_rover)
+    nav = SimpleNamespace(product_id="nav-L", camera_model=cahvor(f_px=400.0, tilt_down_rad=0.3), pose=pose,
+                          width=1024, height=1024, time_s=5.0)
+    pan = SimpleNamespace(product_id="pan-L", camera_model=cahv(f_px=1200.0, tilt_down_rad=0.3, C=(0.42, 0.15, -1.5)),
+                          pose=pose, width=pan_width, height=1024, time_s=6.0)
+    X_rover = nav.camera_model.C + 4.5 * nav.camera_model.A + np.array([0.0, 0.05, 0.0])
+
+    class DL:
+        def images_at(self, position, camera=None, eye=None):
+            return [pan] if camera == "pancam" else [nav]
+
+        def product(self, pid):
+            return {"nav-L": nav, "pan-L": pan}[pid]
+
+    return DL(), nav, pan, X_rover
+
+
+def test_pancam_from_navcam_projects_the_navcam_point_into_the_pancam():
+    from scipctl.pipeline.chain_closure import pancam_from_navcam
+
+    dl, nav, pan, X_rover = _standin_stop()
+    T = nav.pose.T_site_rover
+    uv_nav = nav.camera_model.project(X_rover[None])[0]
+    N = _step("navcam", "handoff", (1, 1), uv=uv_nav, xyz=T.apply(X_rover))
+    N.product_id = "nav-L"
+    R = pancam_from_navcam(dl, N)
+    # exact pixel and point: the pancam's own projection of the target (no drive between the two images)
+    assert R.camera == "pancam" and R.product_id == "pan-L" and R.position == N.position
+    np.testing.assert_allclose(R.tracked_uv, pan.camera_model.project(X_rover[None])[0], atol=1e-9)
+    np.testing.assert_allclose(R.xyz_site_m, T.apply(X_rover), atol=1e-9)
+    # a stereo point off its pixel's ray (range error) is moved onto the ray first
+    N.xyz_site_m = list(T.apply(X_rover + np.array([0.0, 0.3, 0.1])))
+    R = pancam_from_navcam(dl, N)
+    o, d = nav.camera_model.unproject(np.asarray(uv_nav, float)[None])
+    X = T.inverse().apply(np.asarray(R.xyz_site_m))
+    assert np.linalg.norm(np.cross(X - o[0], d[0])) < 1e-9
+    np.testing.assert_allclose(R.tracked_uv, pan.camera_model.project(X[None])[0], atol=1e-9)
+    # nothing to start from: a point outside the pancam image, or no point
+    dl_narrow, *_ = _standin_stop(pan_width=100)
+    N.xyz_site_m = list(T.apply(X_rover))
+    assert pancam_from_navcam(dl_narrow, N) is None
+    N.xyz_site_m = None
+    assert pancam_from_navcam(dl, N) is None
+
+
+def test_the_pancam_from_navcam_option_is_checked():
+    with pytest.raises(ValueError, match="closure_pancam_from_navcam"):
+        ChainParams(closure_pancam_from_navcam=1).check()
+    assert ChainParams().closure_pancam_from_navcam is False
