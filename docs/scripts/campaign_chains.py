@@ -37,3 +37,85 @@ def campaign_chains(campaigns: list, dirs: dict):
             for rec in lines[1:]:
                 if rec.get("kind") == "chain":
                     yield fam, name, rec["record"]
+
+
+def recorded_chains(path) -> tuple[dict, list]:
+    """One campaign records file: ``(header, [(chain record, its ChainStep list), ...])``, the chains with steps of
+    a downlink that ran (none when its header's status is not ``ok``)."""
+    from scipctl.pipeline.chain import ChainStep
+
+    lines = [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
+    header, out = lines[0], []
+    if header.get("status") == "ok":
+        for rec in lines[1:]:
+            if rec.get("kind") == "chain" and rec["record"].get("steps"):
+                out.append((rec["record"], [ChainStep.from_dict(s) for s in rec["record"]["steps"]]))
+    return header, out
+
+
+def rerun_campaign(camp, run_file, workers: int = 1, initializer=None, initargs=()) -> tuple[list, int, int]:
+    """``run_file(path) -> (rows, reproduced, moved)`` over every records file of the campaign folder ``camp``
+    (``workers`` > 1: a process pool), summed: ``(rows, reproduced, moved)``. ValueError when ``camp`` has no
+    ``records/*.jsonl``."""
+    files = sorted(str(f) for f in Path(camp, "records").glob("*.jsonl"))
+    if not files:
+        raise ValueError(f"{camp}: no records/*.jsonl (not a campaign folder)")
+    if workers > 1:
+        from multiprocessing import Pool
+
+        with Pool(workers, initializer=initializer, initargs=initargs) as pool:
+            parts = pool.map(run_file, files)
+    else:
+        if initializer is not None:
+            initializer(*initargs)
+        parts = [run_file(f) for f in files]
+    rows, same, moved = [], 0, 0
+    for rw, sm, mv in parts:
+        rows += rw
+        same, moved = same + sm, moved + mv
+    return rows, same, moved
+
+
+def write_jsonl(path, rows: list) -> None:
+    """``rows`` as JSON lines at ``path``, written to a temporary name first, then renamed."""
+    import os
+
+    tmp = f"{path}.tmp"
+    with open(tmp, "w", encoding="utf-8") as fo:
+        fo.write("".join(json.dumps(x) + "\n" for x in rows))
+    os.replace(tmp, path)
+
+
+def read_jsonl(path) -> list:
+    """The JSON lines of ``path`` (OSError / ValueError as ``open`` and ``json`` raise them)."""
+    return [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
+
+
+def rerun_main(ap, args, run_file, what: str, initializer=None, initargs=()) -> int:
+    """The ``run`` command of a script that runs parts of recorded chains again: :func:`rerun_campaign` over
+    ``args.camp`` into ``args.out``, ``{what: rows, "reproduced": N, "moved": M}`` on stderr; exit code 1 when a
+    recorded answer moved, 2 (``ap.error``) when ``args.camp`` is no campaign folder."""
+    import sys
+
+    try:
+        rows, same, moved = rerun_campaign(args.camp, run_file, args.workers, initializer, initargs)
+    except ValueError as e:
+        ap.error(str(e))
+    write_jsonl(args.out, rows)
+    print(json.dumps({what: len(rows), "reproduced": same, "moved": moved}), file=sys.stderr)
+    return 1 if moved else 0
+
+
+def score_main(ap, args, score, show) -> int:
+    """The ``score`` command of such a script: ``score(rows)`` of the rows at ``args.rows``, as JSON with
+    ``args.json``, else ``show(it)``; an unreadable file is refused by ``ap.error`` (exit code 2)."""
+    try:
+        rows = read_jsonl(args.rows)
+    except (OSError, ValueError) as e:
+        ap.error(f"{args.rows}: {e}")
+    out = score(rows)
+    if args.json:
+        print(json.dumps(out))
+    else:
+        show(out)
+    return 0

@@ -21,13 +21,14 @@ A campaign folder without ``records/`` or an unreadable OUT is refused with one 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
+from campaign_chains import recorded_chains, rerun_main, score_main  # noqa: E402
 
 # reference name -> closure_reference order (one kind each)
 REFERENCES = {"pancam": (("pancam", "track"),), "navcam": (("navcam", "handoff"),),
@@ -41,27 +42,22 @@ SUCCESS_PX = 4.0
 def run_file(path: str) -> tuple[list, int, int]:
     """The rows of one campaign records file: ``(rows, reproduced, moved)``."""
     from scipctl.io.downlink import read_downlink
-    from scipctl.pipeline.chain import ChainParams, ChainStep
+    from scipctl.pipeline.chain import ChainParams
     from scipctl.pipeline.chain_closure import closure_reference, track_from_step
 
-    lines = [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
-    header, rows, same, moved = lines[0], [], 0, 0
-    if header.get("status") != "ok":
-        return rows, same, moved
+    header, chains = recorded_chains(path)
+    rows, same, moved = [], 0, 0
     dl, params, feats = None, ChainParams(), {}  # one keypoint cache per downlink, as the chain shares it
-    for rec in lines[1:]:
-        if rec.get("kind") != "chain" or not rec["record"].get("steps"):
-            continue
-        steps = [ChainStep.from_dict(s) for s in rec["record"]["steps"]]
+    for record, steps in chains:
         fi = next((i for i, s in enumerate(steps) if s.camera == "hazcam" and s.extra.get("final")), None)
         if fi is None or "closure" not in steps[fi].extra:
             continue
         H = steps[fi]
         answer = H.extra.get("answer")
         handoff_uv = (H.extra.get("handoff") or {}).get("uv") if answer == "closure" else H.tracked_uv
-        row = {"downlink": header["job"]["path"], "family": header.get("family"), "target": rec["record"]["target"],
+        row = {"downlink": header["job"]["path"], "family": header.get("family"), "target": record["target"],
                "final_px": H.error_px, "answer": answer, "mark": H.mark_uv, "handoff_uv": handoff_uv,
-               "chain_go": rec["record"].get("go"), "used_step": H.extra["closure"].get("reference_step")}
+               "chain_go": record.get("go"), "used_step": H.extra["closure"].get("reference_step")}
         dl = dl or read_downlink(header["job"]["path"])
         prod = dl.product(H.product_id)
         for name, order in REFERENCES.items():
@@ -163,35 +159,8 @@ def main(argv=None) -> int:
     s.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     if a.cmd == "run":
-        files = sorted(str(f) for f in Path(a.camp, "records").glob("*.jsonl"))
-        if not files:
-            ap.error(f"{a.camp}: no records/*.jsonl (not a campaign folder)")
-        rows, same, moved = [], 0, 0
-        if a.workers > 1:
-            from multiprocessing import Pool
-            with Pool(a.workers) as pool:
-                parts = pool.map(run_file, files)
-        else:
-            parts = [run_file(f) for f in files]
-        for rw, sm, mv in parts:
-            rows += rw
-            same, moved = same + sm, moved + mv
-        tmp = f"{a.out}.tmp"
-        with open(tmp, "w", encoding="utf-8") as fo:
-            fo.write("".join(json.dumps(x) + "\n" for x in rows))
-        os.replace(tmp, a.out)
-        print(json.dumps({"chains": len(rows), "reproduced": same, "moved": moved}), file=sys.stderr)
-        return 1 if moved else 0
-    try:
-        rows = [json.loads(line) for line in Path(a.rows).read_text(encoding="utf-8").splitlines() if line.strip()]
-    except (OSError, ValueError) as e:
-        ap.error(f"{a.rows}: {e}")
-    out = score(rows)
-    if a.json:
-        print(json.dumps(out))
-    else:
-        _print(out)
-    return 0
+        return rerun_main(ap, a, run_file, "chains")
+    return score_main(ap, a, score, _print)
 
 
 if __name__ == "__main__":

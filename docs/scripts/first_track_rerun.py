@@ -27,12 +27,14 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import sys
 from collections import Counter
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
+from campaign_chains import recorded_chains, rerun_main, score_main  # noqa: E402
 
 VARIANTS: dict = {}
 
@@ -65,23 +67,18 @@ def first_track(dl, steps, params, half: int, feats: dict):
 def run_file(path: str) -> tuple[list, int, int]:
     """The rows of one campaign records file: ``(rows, reproduced, moved)``."""
     from scipctl.io.downlink import read_downlink
-    from scipctl.pipeline.chain import ChainParams, ChainStep
+    from scipctl.pipeline.chain import ChainParams
 
-    lines = [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
-    header, rows, same, moved = lines[0], [], 0, 0
-    if header.get("status") != "ok":
-        return rows, same, moved
+    header, chains = recorded_chains(path)
+    rows, same, moved = [], 0, 0
     dl, feats = None, {}
-    for rec in lines[1:]:
-        if rec.get("kind") != "chain" or not rec["record"].get("steps"):
-            continue
-        steps = [ChainStep.from_dict(s) for s in rec["record"]["steps"]]
+    for record, steps in chains:
         S1 = next((s for s in steps if s.camera == "pancam" and s.kind == "track"), None)
         if S1 is None or S1.mark_uv is None or steps[0].kind != "designate" or "feature_status" not in S1.extra:
             continue  # no such track, no mark, or the chain did not run its feature step (e.g. behind the camera)
         dl = dl or read_downlink(header["job"]["path"])
         px_mm = S1.extra.get("px_mm")
-        row = {"downlink": header["job"]["path"], "family": header.get("family"), "target": rec["record"]["target"],
+        row = {"downlink": header["job"]["path"], "family": header.get("family"), "target": record["target"],
                "recorded_uv": S1.tracked_uv, "recorded_status": S1.extra.get("feature_status"), "px_mm": px_mm}
         for name, spec in VARIANTS.items():
             params = dataclasses.replace(ChainParams(), **spec.get("params", {})).check()
@@ -170,36 +167,8 @@ def main(argv=None) -> int:
                 dataclasses.replace(ChainParams(), **variants[name].get("params", {})).check()
             except (ValueError, TypeError) as e:
                 ap.error(f"variant {v!r}: {e}")
-        files = sorted(str(f) for f in Path(a.camp, "records").glob("*.jsonl"))
-        if not files:
-            ap.error(f"{a.camp}: no records/*.jsonl (not a campaign folder)")
-        if a.workers > 1:
-            from multiprocessing import Pool
-            with Pool(a.workers, initializer=_init, initargs=(variants,)) as pool:
-                parts = pool.map(run_file, files)
-        else:
-            _init(variants)
-            parts = [run_file(f) for f in files]
-        rows, same, moved = [], 0, 0
-        for rw, sm, mv in parts:
-            rows += rw
-            same, moved = same + sm, moved + mv
-        tmp = f"{a.out}.tmp"
-        with open(tmp, "w", encoding="utf-8") as fo:
-            fo.write("".join(json.dumps(x) + "\n" for x in rows))
-        os.replace(tmp, a.out)
-        print(json.dumps({"tracks": len(rows), "reproduced": same, "moved": moved}), file=sys.stderr)
-        return 1 if moved else 0
-    try:
-        rows = [json.loads(line) for line in Path(a.rows).read_text(encoding="utf-8").splitlines() if line.strip()]
-    except (OSError, ValueError) as e:
-        ap.error(f"{a.rows}: {e}")
-    out = score(rows)
-    if a.json:
-        print(json.dumps(out))
-    else:
-        _print(out)
-    return 0
+        return rerun_main(ap, a, run_file, "tracks", _init, (variants,))
+    return score_main(ap, a, score, _print)
 
 
 if __name__ == "__main__":
