@@ -91,6 +91,23 @@ def read_jsonl(path) -> list:
     return [json.loads(line) for line in Path(path).read_text(encoding="utf-8").splitlines() if line.strip()]
 
 
+def rerun_parser(prog: str, description: str):
+    """The command line of a script that runs parts of recorded chains again: ``run CAMP OUT [--workers N]`` and
+    ``score ROWS [--json]``. Returns ``(parser, the run subparser)``, for the script's own ``run`` arguments."""
+    import argparse
+
+    ap = argparse.ArgumentParser(prog=prog, description=description)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    run = sub.add_parser("run")
+    run.add_argument("camp")
+    run.add_argument("out")
+    run.add_argument("--workers", type=int, default=1)
+    score = sub.add_parser("score")
+    score.add_argument("rows")
+    score.add_argument("--json", action="store_true")
+    return ap, run
+
+
 def rerun_main(ap, args, run_file, what: str, initializer=None, initargs=()) -> int:
     """The ``run`` command of a script that runs parts of recorded chains again: :func:`rerun_campaign` over
     ``args.camp`` into ``args.out``, ``{what: rows, "reproduced": N, "moved": M}`` on stderr; exit code 1 when a

@@ -20,7 +20,6 @@ A campaign folder without ``records/`` or an unreadable OUT is refused with one 
 
 from __future__ import annotations
 
-import argparse
 import sys
 from collections import Counter
 from pathlib import Path
@@ -28,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
-from campaign_chains import recorded_chains, rerun_main, score_main  # noqa: E402
+from campaign_chains import recorded_chains, rerun_main, rerun_parser, score_main  # noqa: E402
 
 # reference name -> closure_reference order (one kind each)
 REFERENCES = {"pancam": (("pancam", "track"),), "navcam": (("navcam", "handoff"),),
@@ -148,15 +147,7 @@ def _print(s: dict) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run")
-    r.add_argument("camp")
-    r.add_argument("out")
-    r.add_argument("--workers", type=int, default=1)
-    s = sub.add_parser("score")
-    s.add_argument("rows")
-    s.add_argument("--json", action="store_true")
+    ap, _ = rerun_parser(Path(__file__).name, __doc__.splitlines()[0])
     a = ap.parse_args(argv)
     if a.cmd == "run":
         return rerun_main(ap, a, run_file, "chains")

@@ -24,7 +24,6 @@ is refused with one line and exit code 2.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import sys
@@ -34,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
-from campaign_chains import recorded_chains, rerun_main, score_main  # noqa: E402
+from campaign_chains import recorded_chains, rerun_main, rerun_parser, score_main  # noqa: E402
 
 VARIANTS: dict = {}
 
@@ -143,16 +142,8 @@ def _print(s: dict) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog=Path(__file__).name, description=__doc__.splitlines()[0])
-    sub = ap.add_subparsers(dest="cmd", required=True)
-    r = sub.add_parser("run")
-    r.add_argument("camp")
-    r.add_argument("out")
+    ap, r = rerun_parser(Path(__file__).name, __doc__.splitlines()[0])
     r.add_argument("variants", nargs="*", metavar="NAME=JSON")
-    r.add_argument("--workers", type=int, default=1)
-    s = sub.add_parser("score")
-    s.add_argument("rows")
-    s.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     if a.cmd == "run":
         from scipctl.pipeline.chain import ChainParams

@@ -134,7 +134,7 @@ def pancam_from_navcam(dl, N):
 
     from ..core.point_stereo import on_left_ray
 
-    pans = [im for im in dl.images_at(N.position, "pancam", "left")]
+    pans = dl.images_at(N.position, "pancam", "left")
     if not pans or N.tracked_uv is None or N.xyz_site_m is None:
         return None
     pan = max(pans, key=lambda im: im.time_s)  # the one run_chain tracks at that stop
@@ -201,9 +201,11 @@ def closure_evidence(steps: list, closure: dict):
 
     ref = closure.get("reference_step")
     R = steps[ref] if isinstance(ref, int) and 0 <= ref < len(steps) else None
+    # the image the closure started from: the reference's own, or the pancam at a navcam reference's point
+    from_pancam = R is not None and (R.camera == "pancam" or closure.get("via") == "navcam")
     return ClosureEvidence(
         ncc_peak=num(closure.get("ncc_peak")), local_inliers=num(closure.get("feature_local_inliers")),
         confirmed=num(closure.get("feature_confirmed")), shift_px=num(closure.get("feature_shift_px")),
-        scale=num(closure.get("scale")), from_pancam=float(R is not None and (R.camera == "pancam" or closure.get("via") == "navcam")),
+        scale=num(closure.get("scale")), from_pancam=float(from_pancam),
         ref_p_success=num(None if R is None else R.p_success), handoff_px=num(closure.get("closure_px")),
         refine_px=num(closure.get("feature_refine_px")), pooled=num(closure.get("feature_pooled")))
