@@ -204,6 +204,12 @@ def _trust(step) -> str:
     if (step.extra or {}).get("answer") == "closure":
         ref = (step.extra.get("closure") or {}).get("reference")
         parts.append(f"closure from {ref}")
+    d = (step.extra or {}).get("designation") if step.kind == "designate" else None
+    if d and d.get("p_ok") is not None:
+        # the designation's p is for its 3-D point, not a pixel radius (pipeline/designation_trust.py)
+        parts.append(f"p: 3-D point within {d.get('tolerance_pct', 1.0):g} % of the range")
+        if d.get("veto"):
+            parts.append(f"NO-GO whatever p: {d['veto']}")
     if step.reason:
         parts.append(str(step.reason))
     return " ".join(parts)

@@ -311,7 +311,7 @@ def stereo_at(dl: Downlink, left: ImageProduct, uv, params: ChainParams):
 def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[str] = None,
               handoff_method: str = "scip", template_mode: str = "plane", handoff_at: str = "every",
               params: Optional[ChainParams] = None, step_model=None, setups: Optional[dict] = None,
-              closure_model=None, feature_cache: Optional[dict] = None) -> list:
+              closure_model=None, feature_cache: Optional[dict] = None, designation_model=...) -> list:
     """Follow the target from ``start`` (a left pancam or navcam image) to the last hazcam image.
 
     ``template_mode``: ``"plane"`` (default) renders the previous stop's image
@@ -345,7 +345,11 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
     ``closure_model``: the :class:`~scipctl.core.closure_trust.ClosureTrustModel` of an adopted closure answer
     (``params.answer == "closure"``; None: the packaged one). ``feature_cache``: a dict shared by the chains of one
     downlink, where the feature step keeps each image's keypoints by (product id, downsampling): computed once,
-    the same keypoints (None: this chain's own).
+    the same keypoints (None: this chain's own). ``designation_model``: the designation trust model
+    (:mod:`scipctl.pipeline.designation_trust`) that scores the designation step as ``scipctl designate`` would
+    (``extra["designation"]``: its ``p_ok`` at the model's default tolerance, GO, threshold and veto; the step's
+    ``p_success``/``go`` are those, :func:`~scipctl.pipeline.chain_trust.score_steps`); left out: the packaged one;
+    None: not scored (``p_success`` None, GO, as before the designation had a model).
     """
     params = (params or ChainParams()).check()
     if template_mode not in ("plane", "scale"):
@@ -406,6 +410,11 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         reason = "no right eye" if ps is None else ps.reason
         raise InputError(start.product_id, "pixel", f"designation has no stereo: {reason}")
     steps.append(step(start, "designate", None, uv, ps))
+    # the designation's own evidence, as `scipctl designate` builds it from the same point stereo (scored below)
+    from .designate import designation_from_stereo
+
+    designation = designation_from_stereo(start, dl.stereo_pair(start), uv, ps, params.band(start.camera),
+                                          params.stereo_window(start.camera), target_id or "target")
     X_site = start.pose.T_site_rover.apply(on_left_ray(start.camera_model, uv, ps.xyz))
     prev, prev_uv, prev_range = start, uv, float(ps.range_m)
     cam = start.camera
@@ -572,6 +581,16 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         from ..io.step_trust_model import load_packaged_step_trust_model
 
         step_model = load_packaged_step_trust_model()
+    if designation_model is ...:
+        from ..io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
+
+        designation_model = load_packaged_trust_model(PACKAGED_DESIGNATION)
+    if designation_model is not None:
+        from .designation_trust import assess
+
+        a = assess(designation_model, designation)
+        steps[0].extra["designation"] = {"p_ok": a.p_ok, "go": a.go, "tolerance_pct": a.tolerance_pct,
+                                         "go_min_p": a.go_min_p, "veto": a.veto}
     score_steps(steps, step_model)
     score_hazcam_handoffs(steps)
     if params.answer == "closure" and handoffs and "closure" in handoffs[-1].extra:

@@ -11,8 +11,10 @@ chain's own GO (docs/stereo-and-tracking.md, "Trust along the chain").
   needs both GO (:func:`score_hazcam_handoffs`; ``scip``'s own are kept in ``extra``). When the chain answers
   with its closure (``ChainParams.answer``), the final step's are the closure model's
   (:mod:`scipctl.core.closure_trust`);
-- the designation: not scored here (``p_success`` None, ``go`` True: the chain starts from what the operator
-  designated; the designation's own trust is ``designate``'s);
+- the designation: the designation trust model's, as ``scipctl designate`` gives it (``extra["designation"]``,
+  set by :func:`~scipctl.pipeline.chain.run_chain`: ``p_success`` = P(the 3-D point within 1 % of the range of
+  ideal point stereo), GO at that model's threshold; NO-GO advises ``re-designate``). Without it (no model, or a
+  record made before it) ``p_success`` None and GO: the chain starts from what the operator designated;
 - the chain is GO when every step up to the final hazcam handoff is GO and there is a final hazcam answer, or when
   its answer is an adopted closure that is GO (the closure model's p is for the answer itself and weighs its
   reference step's own p) (:func:`chain_verdict`); each NO-GO step carries ``advice`` (:data:`ADVICE`).
@@ -71,14 +73,19 @@ def step_evidence(steps: list, i: int) -> StepEvidence:
 
 def score_steps(steps: list, model: Optional[StepTrustModel]) -> None:
     """Set ``p_success``/``go`` of every tracking step of ``steps`` in place (None/False without a model); the
-    designation is GO (unscored); the hazcam handoff keeps what ``scip`` gave it."""
+    designation's from its ``extra["designation"]`` (the designation trust model's ``p_ok`` and GO), or None and GO
+    when it has none; the hazcam handoff keeps what ``scip`` gave it."""
     idx = [i for i, s in enumerate(steps) if step_kind(s) is not None]
     for s in steps:
         if s.kind == "designate":
-            s.p_success, s.go = None, True
+            d = (s.extra or {}).get("designation") or {}
+            s.p_success, s.go = (None, True) if d.get("p_ok") is None else (float(d["p_ok"]), bool(d.get("go")))
     if model is None:
         for i in idx:
             steps[i].p_success, steps[i].go = None, False
+        for i, s in enumerate(steps):
+            if s.kind == "designate":
+                s.advice = None if s.go else advice_for(steps, i)
         return
     p = model.probability([step_evidence(steps, i) for i in idx])
     for i, pi in zip(idx, p):
@@ -141,6 +148,7 @@ def score_hazcam_handoffs(steps: list) -> None:
 def advice_for(steps: list, i: int) -> str:
     """What the operator should do when ``steps[i]`` is NO-GO (one of :data:`ADVICE`):
 
+    - the designation (its point stereo not trusted): ``re-designate``;
     - the hazcam handoff, or a navcam step at the hazcam's stop: the chain's pixel there cannot be trusted, but
       the near navcams see the target at arm's range: designate it there and hand off from them
       (``fall back to near navcams``);
@@ -151,6 +159,8 @@ def advice_for(steps: list, i: int) -> str:
       would inherit its error; take ``new image at this stop`` (or hand on from the last GO step's image).
     """
     s = steps[i]
+    if s.kind == "designate":
+        return REDESIGNATE  # its 3-D point is not trusted: the chain's predictions and planes start from it
     haz_positions = {p.position for p in steps if p.camera == "hazcam"}
     if s.camera == "hazcam" or (s.camera == "navcam" and s.position in haz_positions):
         return FALL_BACK

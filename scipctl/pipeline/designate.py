@@ -191,6 +191,41 @@ def surface_normal(xyz: np.ndarray, centre: np.ndarray, radius_m: float) -> tupl
     return n, len(pts)
 
 
+def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, band_px: float, window_px: int,
+                            target_id: str) -> Designation:
+    """The :class:`Designation` of the point stereo result ``ps`` (:func:`~scipctl.core.point_stereo.point_stereo`
+    at ``uv`` (2,) of ``left`` against ``right`` with band ``band_px`` and window ``window_px``): the match, the
+    warnings its left window earns (saturated, low texture, near the edge: the trust model's evidence) and, when the
+    match is good, the 3-D point in the rover and site frames. No surface normal and no trust (:func:`designate`
+    adds them); the chain's designation step (pipeline/chain.py) builds its own from its point stereo with this."""
+    uv = np.asarray(uv, float)
+    L = left.pixels_float()
+    warnings = []
+    k = window_px // 2 + 1
+    patch = L[max(0, int(uv[1]) - k):int(uv[1]) + k + 1, max(0, int(uv[0]) - k):int(uv[0]) + k + 1]
+    if patch.size and float((patch >= 0.999).mean()) > 0.05:
+        warnings.append(SATURATED_WARNING)
+    if patch.size and float(patch.std()) < 0.01:
+        warnings.append(LOW_TEXTURE_WARNING)
+    if min(uv[0], uv[1], left.width - 1 - uv[0], left.height - 1 - uv[1]) < EDGE_MARGIN_PX:
+        warnings.append("near the image edge")
+    rec = Designation(
+        id=target_id, product_id=left.product_id, right_product_id=right.product_id, camera=left.camera,
+        position=(left.site, left.drive), pixel_uv=tuple(uv.tolist()), band_px=float(band_px), ok=bool(ps.ok),
+        reason=ps.reason, match_score=_f(ps.score), match_ratio=_f(getattr(ps, "ratio", None)),
+        uv_right=None if ps.uv_right is None else tuple(float(x) for x in ps.uv_right),
+        epipolar_offset_px=_f(ps.epipolar_offset_px), warnings=tuple(warnings))
+    if not ps.ok:
+        return rec
+    X_rover = np.asarray(ps.xyz, float)
+    X_site = left.pose.T_site_rover.apply(X_rover)
+    return replace(rec, xyz_rover_m=tuple(X_rover.tolist()), xyz_site_m=tuple(X_site.tolist()),
+                   range_m=_f(ps.range_m), range_sigma_m=_f(ps.range_sigma_m),
+                   ray_miss_m=_f(getattr(ps, "miss_distance_m", None)),
+                   pose={"position_m": left.pose.position_m.tolist(),
+                         "orientation_wxyz": left.pose.orientation_wxyz.tolist(), "source": left.pose.source})
+
+
 def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
               params: Optional[PointStereoParams] = None, trust=None) -> Designation:
     """Point stereo at ``uv`` in ``left``; returns the :class:`Designation` (raises InputError).
@@ -213,29 +248,11 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
     L = left.pixels_float()
     R = right.pixels_float()
     ps = point_stereo(L, R, left.camera_model, right.camera_model, uv, band_px=band, window_px=win)
-    warnings = []
-    k = win // 2 + 1
-    patch = L[max(0, int(uv[1]) - k):int(uv[1]) + k + 1, max(0, int(uv[0]) - k):int(uv[0]) + k + 1]
-    if patch.size and float((patch >= 0.999).mean()) > 0.05:
-        warnings.append(SATURATED_WARNING)
-    if patch.size and float(patch.std()) < 0.01:
-        warnings.append(LOW_TEXTURE_WARNING)
-    if min(uv[0], uv[1], left.width - 1 - uv[0], left.height - 1 - uv[1]) < EDGE_MARGIN_PX:
-        warnings.append("near the image edge")
-    rec = Designation(
-        id=target_id, product_id=left.product_id, right_product_id=right.product_id, camera=left.camera,
-        position=(left.site, left.drive), pixel_uv=tuple(uv.tolist()), band_px=band, ok=bool(ps.ok),
-        reason=ps.reason, match_score=_f(ps.score), match_ratio=_f(getattr(ps, "ratio", None)),
-        uv_right=None if ps.uv_right is None else tuple(float(x) for x in ps.uv_right),
-        epipolar_offset_px=_f(ps.epipolar_offset_px))
+    rec = designation_from_stereo(left, right, uv, ps, band, win, target_id)
     if not ps.ok:
-        return replace(rec, warnings=tuple(warnings))
+        return rec
+    warnings = list(rec.warnings)
     X_rover = np.asarray(ps.xyz, float)
-    X_site = left.pose.T_site_rover.apply(X_rover)
-    rec = replace(rec, xyz_rover_m=tuple(X_rover.tolist()), xyz_site_m=tuple(X_site.tolist()), range_m=_f(ps.range_m),
-                  range_sigma_m=_f(ps.range_sigma_m), ray_miss_m=_f(getattr(ps, "miss_distance_m", None)),
-                  pose={"position_m": left.pose.position_m.tolist(),
-                        "orientation_wxyz": left.pose.orientation_wxyz.tolist(), "source": left.pose.source})
     if with_normal:
         from ..core.dense_stereo import dense_stereo
 
@@ -257,11 +274,17 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
         rec = replace(rec, surface_normal_rover=None if n is None else tuple(n.tolist()), normal_points=npts,
                       incidence_deg=incidence)
     rec = replace(rec, warnings=tuple(warnings))
-    if trust is not None:
-        a = assess(trust, rec)
-        rec = replace(rec, p_ok=a.p_ok, ok_tolerance_pct=a.tolerance_pct, go=a.go)
-        if a.veto:
-            rec = replace(rec, warnings=rec.warnings + (VETO_WARNING_PREFIX + a.veto,))
+    return rec if trust is None else with_trust(rec, trust)
+
+
+def with_trust(rec: Designation, trust) -> Designation:
+    """``rec`` with ``p_ok``/``ok_tolerance_pct``/``go`` from the designation trust model ``trust``
+    (:func:`~scipctl.pipeline.designation_trust.assess` at its default tolerance) and, when the model's veto makes
+    it NO-GO whatever ``p_ok``, the warning that says why."""
+    a = assess(trust, rec)
+    rec = replace(rec, p_ok=a.p_ok, ok_tolerance_pct=a.tolerance_pct, go=a.go)
+    if a.veto:
+        rec = replace(rec, warnings=rec.warnings + (VETO_WARNING_PREFIX + a.veto,))
     return rec
 
 

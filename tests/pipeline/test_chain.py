@@ -124,14 +124,22 @@ def test_chain_steps_read_back_from_json(chains):
         [(tuple(s.position), s.product_id, s.tracked_uv, s.error_px, s.p_success, s.go, s.advice) for s in steps]
 
 
-def test_every_step_has_p_success_and_go(chains):
-    """The designation is taken as given (GO, unscored); every tracking step has the step model's probability
+def test_every_step_has_p_success_and_go(dl, chains):
+    """The designation has what ``scipctl designate`` says of the same pixel (the packaged designation model's p_ok
+    and GO, from the same point stereo); every tracking step has the step model's probability
     and GO; the hazcam handoff's is scip's times its input navcam step's (scip's own kept), GO when both are;
     every NO-GO step says what to do."""
+    from scipctl.io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
     from scipctl.pipeline.chain_trust import ADVICE, chain_verdict, handoff_input
+    from scipctl.pipeline.designate import designate
 
+    model = load_packaged_trust_model(PACKAGED_DESIGNATION)
     for tid, steps in chains.items():
-        assert steps[0].kind == "designate" and steps[0].p_success is None and steps[0].go
+        d = designate(dl, dl.product(steps[0].product_id), steps[0].tracked_uv, tid, with_normal=False, trust=model)
+        assert steps[0].kind == "designate" and d.p_ok is not None
+        assert (steps[0].p_success, steps[0].go) == (d.p_ok, d.go), tid  # the same evidence, the same model
+        assert steps[0].extra["designation"]["tolerance_pct"] == d.ok_tolerance_pct
+        assert (steps[0].advice is None) == steps[0].go
         for s in steps[1:]:
             assert isinstance(s.go, bool)
             assert s.p_success is not None and 0.0 <= s.p_success <= 1.0, (tid, s.product_id)

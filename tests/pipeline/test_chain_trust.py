@@ -42,12 +42,63 @@ def _score(steps, haz_go=True):
 
 def test_every_step_scored_and_the_chain_go_when_all_are():
     steps = _score(_chain())
-    assert steps[0].p_success is None and steps[0].go  # the designation: taken as given
+    assert steps[0].p_success is None and steps[0].go  # no designation trust recorded: taken as given
     for s in steps[1:5]:
         assert s.p_success == pytest.approx(1 / (1 + np.exp(-10.0 * (1 - 0.5) / 0.5))) and s.go and s.advice is None
     assert steps[-1].p_success == 0.99 and steps[-1].go  # scip's, kept
     v = chain_verdict(steps)
     assert v.go and v.step is None and v.advice is None
+
+
+def _designation(p_ok, go, veto=None):
+    return {"p_ok": p_ok, "go": go, "tolerance_pct": 1.0, "go_min_p": 0.93, "veto": veto}
+
+
+def test_the_designation_step_carries_the_designation_models_trust():
+    """Step 0 takes ``extra["designation"]`` (what ``scipctl designate`` would say of the same point stereo): its
+    p_ok and GO. A NO-GO designation makes the chain NO-GO at step 0 and advises re-designating; a veto (no texture)
+    is NO-GO whatever p_ok says."""
+    steps = _chain()
+    steps[0].extra["designation"] = _designation(0.97, True)
+    _score(steps)
+    assert steps[0].p_success == 0.97 and steps[0].go and steps[0].advice is None
+    assert chain_verdict(steps).go
+    for d in (_designation(0.61, False), _designation(0.99, False, veto="the window has no texture to match")):
+        steps = _chain()
+        steps[0].extra["designation"] = d
+        _score(steps)
+        assert steps[0].p_success == d["p_ok"] and not steps[0].go and steps[0].advice == REDESIGNATE
+        v = chain_verdict(steps)
+        assert not v.go and v.step == 0 and v.advice == REDESIGNATE and "pancam designate" in v.why
+    # without a step model the designation is still scored and advised
+    steps = _chain()
+    steps[0].extra["designation"] = _designation(0.61, False)
+    score_steps(steps, None)
+    assert steps[0].p_success == 0.61 and not steps[0].go and steps[0].advice == REDESIGNATE
+
+
+def test_a_designation_without_its_trust_is_taken_as_given():
+    """A record made before the designation was scored (or with no designation model): p None, GO."""
+    steps = _score(_chain())
+    assert steps[0].p_success is None and steps[0].go and steps[0].advice is None
+    steps = _chain()
+    steps[0].extra["designation"] = _designation(None, False)  # a model that could not score it
+    _score(steps)
+    assert steps[0].p_success is None and steps[0].go
+
+
+def test_a_go_closure_answer_stands_over_a_nogo_designation():
+    """The closure model's p is for the final pixel itself (re-found from the 4.5 m reference in the final hazcam
+    image): a GO closure makes the chain GO as it does over a NO-GO reference step; a NO-GO closure leaves the
+    designation's NO-GO to decide."""
+    for closure_go, chain_go in ((True, True), (False, False)):
+        steps = _chain()
+        steps[0].extra["designation"] = _designation(0.5, False)
+        _score(steps)
+        steps[-1].extra.update({"answer": "closure", "closure": {"reference_step": 1}})
+        steps[-1].p_success, steps[-1].go = (0.97, True) if closure_go else (0.6, False)
+        v = chain_verdict(steps)
+        assert v.go == chain_go and (chain_go or v.step == 0)
 
 
 def test_first_track_without_a_confirmed_match_says_re_designate():
