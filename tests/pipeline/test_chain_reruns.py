@@ -1,5 +1,5 @@
 """The measurement scripts that run parts of recorded chains again (docs/scripts/closure_references.py,
-docs/scripts/first_track_rerun.py): on chains of the bundled paper-s1-straight, written as a campaign records
+docs/scripts/first_track_rerun.py, docs/scripts/designation_in_chains.py): on chains of the bundled paper-s1-straight, written as a campaign records
 them, each must give the recorded answers back before its variants mean anything."""
 
 import json
@@ -69,12 +69,51 @@ def test_the_first_track_again_gives_the_recorded_pixel_back(camp, tmp_path, cap
     assert s["variants"]["h26"]["won_4mm"] + s["variants"]["h26"]["lost_4mm"] <= 2
 
 
+def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, capsys):
+    """Today's chains carry designate's trust on step 0: the script's designate gives it back, and the verdict
+    with it is the recorded one. A record made before the designation was scored (its trust stripped) is taken as
+    given before and re-judged after: the same verdict as today's chain."""
+    di = load("designation_in_chains")
+    out = tmp_path / "rows.jsonl"
+    assert di.main(["run", str(camp), str(out)]) == 0
+    assert json.loads(capsys.readouterr().err) == {"chains": 2, "reproduced": 2, "moved": 0}
+    rows = {r["target"]: r for r in map(json.loads, out.read_text().splitlines())}
+    recs = {json.loads(x)["record"]["target"]: json.loads(x)["record"]
+            for x in (camp / "records" / "paper-s1-straight.jsonl").read_text().splitlines()[1:]}
+    for tid, r in rows.items():
+        s0 = recs[tid]["steps"][0]
+        assert (r["p_ok"], r["go"]) == (s0["p_success"], s0["go"]) and r["recorded"] == s0["extra"]["designation"]
+        assert r["before"] == r["after"] and r["after"]["go"] == recs[tid]["go"]
+    s = di.score(list(rows.values()))
+    assert s["chains"] == 2 and s["designation_nogo"] == sum(not r["go"] for r in rows.values())
+    assert s["chain_go_before"] == s["chain_go_after"]
+    # the same chains as an older campaign wrote them: no designation trust on step 0
+    old = tmp_path / "old"
+    (old / "records").mkdir(parents=True)
+    lines = (camp / "records" / "paper-s1-straight.jsonl").read_text().splitlines()
+    stripped = [lines[0]]
+    for x in lines[1:]:
+        rec = json.loads(x)
+        st0 = rec["record"]["steps"][0]
+        st0["extra"].pop("designation")
+        st0["p_success"], st0["go"], st0["advice"] = None, True, None
+        stripped.append(json.dumps(rec))
+    (old / "records" / "paper-s1-straight.jsonl").write_text("\n".join(stripped) + "\n")
+    out2 = tmp_path / "rows2.jsonl"
+    assert di.main(["run", str(old), str(out2)]) == 0
+    assert json.loads(capsys.readouterr().err) == {"chains": 2, "reproduced": 0, "moved": 0}
+    for r in map(json.loads, out2.read_text().splitlines()):
+        assert r["recorded"] is None and r["after"] == rows[r["target"]]["after"]
+
+
 @pytest.mark.parametrize("script, args", [
     ("closure_references", ["run", "{tmp}", "{tmp}/o.jsonl"]),
     ("first_track_rerun", ["run", "{tmp}", "{tmp}/o.jsonl"]),
     ("first_track_rerun", ["run", "{camp}", "{tmp}/o.jsonl", 'x={"half": 20, "other": 1}']),
     ("first_track_rerun", ["run", "{camp}", "{tmp}/o.jsonl", 'x={"params": {"feature_median_px": 2}}']),
     ("closure_references", ["score", "{tmp}/missing.jsonl"]),
+    ("designation_in_chains", ["run", "{tmp}", "{tmp}/o.jsonl"]),
+    ("designation_in_chains", ["score", "{tmp}/missing.jsonl"]),
 ])
 def test_bad_input_is_refused_with_exit_2_and_nothing_written(script, args, camp, tmp_path, capsys):
     argv = [a.replace("{tmp}", str(tmp_path)).replace("{camp}", str(camp)) for a in args]
