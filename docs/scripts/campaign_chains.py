@@ -136,3 +136,14 @@ def score_main(ap, args, score, show) -> int:
     else:
         show(out)
     return 0
+
+
+def plain_main(script: str, doc: str, run_file, what: str, score, show, argv=None) -> int:
+    """``main`` of a script with ``run CAMP OUT [--workers N]`` (no variants) and ``score ROWS [--json]``: the
+    parser of :func:`rerun_parser` (program ``script``'s file name, description ``doc``'s first line), then
+    :func:`rerun_main` or :func:`score_main`."""
+    ap, _ = rerun_parser(Path(script).name, doc.splitlines()[0])
+    a = ap.parse_args(argv)
+    if a.cmd == "run":
+        return rerun_main(ap, a, run_file, what)
+    return score_main(ap, a, score, show)

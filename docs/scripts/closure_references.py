@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
-from campaign_chains import recorded_chains, rerun_main, rerun_parser, score_main  # noqa: E402
+from campaign_chains import plain_main, recorded_chains  # noqa: E402
 
 # reference name -> closure_reference order (one kind each)
 REFERENCES = {"pancam": (("pancam", "track"),), "navcam": (("navcam", "handoff"),),
@@ -147,11 +147,7 @@ def _print(s: dict) -> None:
 
 
 def main(argv=None) -> int:
-    ap, _ = rerun_parser(Path(__file__).name, __doc__.splitlines()[0])
-    a = ap.parse_args(argv)
-    if a.cmd == "run":
-        return rerun_main(ap, a, run_file, "chains")
-    return score_main(ap, a, score, _print)
+    return plain_main(__file__, __doc__, run_file, "chains", score, _print, argv)
 
 
 if __name__ == "__main__":
