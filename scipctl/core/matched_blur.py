@@ -69,20 +69,11 @@ def blurred_crop(image, center_uv, reach_px: int, kernel, align: int = 64):
     """The part of ``image`` (H, W) within ``reach_px`` (plus the kernel's radius) of ``center_uv`` (2,), blurred by
     ``kernel`` (edges replicated), as ``(crop float32 (h, w), origin_uv (2,))``: image pixel = crop pixel + origin;
     ``(None, origin)`` when that region lies wholly outside the image. The origin is a multiple of ``align`` (a
-    tracker's pyramid stays aligned with the whole image's)."""
+    tracker's pyramid stays aligned with the whole image's). (:func:`~scipctl.core.windows.filtered_crop` with the
+    blur.)"""
     import cv2
 
-    img = np.asarray(image, np.float32)
-    H, W = img.shape
-    c = np.round(np.asarray(center_uv, float))
-    if c.shape != (2,) or not np.all(np.isfinite(c)):
-        raise ValueError(f"center_uv: expected 2 finite numbers, got {center_uv!r}")
-    m = int(reach_px) + kernel.shape[0]
-    u0 = max(0, (int(c[0]) - m) // align * align)
-    v0 = max(0, (int(c[1]) - m) // align * align)
-    u1 = min(W, int(c[0]) + m + 1)
-    v1 = min(H, int(c[1]) + m + 1)
-    if u1 <= u0 or v1 <= v0:
-        return None, np.array([u0, v0], float)
-    crop = cv2.filter2D(np.ascontiguousarray(img[v0:v1, u0:u1]), cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE)
-    return crop, np.array([u0, v0], float)
+    from .windows import filtered_crop
+
+    return filtered_crop(image, center_uv, reach_px, kernel.shape[0],
+                         lambda c: cv2.filter2D(c, cv2.CV_32F, kernel, borderType=cv2.BORDER_REPLICATE), align)

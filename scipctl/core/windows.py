@@ -69,6 +69,41 @@ def crop_window(image, center_uv, half_size_px: int) -> tuple[np.ndarray, np.nda
     return a[y0:y1, x0:x1], c - np.array([x0, y0], dtype=float), frac
 
 
+def filtered_crop(image, center_uv, reach_px: int, margin_px: int, filt, align: int = 64):
+    """The part of ``image`` (H, W) within ``reach_px + margin_px`` of the pixel nearest ``center_uv`` (2,), passed
+    through ``filt`` (a float32 (h, w) array -> one of the same shape, e.g. a blur or a median with the edges
+    replicated; ``margin_px`` at least its radius, so that the pixels within ``reach_px`` see no crop edge that is not
+    the image's), as ``(crop float32 (h, w), origin_uv (2,))``: image pixel = crop pixel + origin; ``(None, origin)``
+    when that region lies wholly outside the image. The origin is a multiple of ``align`` (a tracker's pyramid stays
+    aligned with the whole image's)."""
+    img = np.asarray(image, np.float32)
+    if img.ndim != 2:
+        raise ValueError(f"image: expected (H, W), got shape {img.shape}")
+    H, W = img.shape
+    c = np.round(np.asarray(center_uv, float))
+    if c.shape != (2,) or not np.all(np.isfinite(c)):
+        raise ValueError(f"center_uv: expected 2 finite numbers, got {center_uv!r}")
+    m = int(reach_px) + int(margin_px)
+    u0 = max(0, (int(c[0]) - m) // align * align)
+    v0 = max(0, (int(c[1]) - m) // align * align)
+    u1 = min(W, int(c[0]) + m + 1)
+    v1 = min(H, int(c[1]) + m + 1)
+    if u1 <= u0 or v1 <= v0:
+        return None, np.array([u0, v0], float)
+    return filt(np.ascontiguousarray(img[v0:v1, u0:u1])), np.array([u0, v0], float)
+
+
+def median_image(image, size_px: int) -> np.ndarray:
+    """``image`` (h, w) median-filtered over ``size_px`` x ``size_px`` pixels (an odd size >= 3; edges replicated),
+    float32: an isolated speck narrower than half the window is replaced by its surroundings, an edge is kept."""
+    from scipy.ndimage import median_filter
+
+    k = int(size_px)
+    if k < 3 or k % 2 == 0 or k != size_px:
+        raise ValueError(f"size_px: must be an odd integer >= 3, got {size_px!r}")
+    return median_filter(np.asarray(image, np.float32), size=k, mode="nearest")
+
+
 def scale_window(window, scale: float) -> np.ndarray:
     """Resample ``window`` ``(h, w)`` by ``scale`` about its centre -> float32 ``(h', w')``.
 

@@ -74,6 +74,15 @@ class ChainParams:
     # resolves grains and pits the farther one averages away, and their keypoints match nothing there
     # (detect_features; docs/stereo-and-tracking.md, "Grains")
     feature_median_px: int = 3
+    # the feature step's NCC refinement (template and new image) median-filtered over this many previous-image pixels
+    # (the new image's window: the odd size nearest to it x the zoom, at least 3): grains only the nearer view
+    # resolves are impulses the template, rendered from the farther one, lacks. None (the default): unfiltered.
+    # Measured: docs/stereo-and-tracking.md, "A median for the feature step's NCC" (session 29)
+    ncc_median_prev_px: Optional[float] = None
+    # with ncc_median_prev_px: the median-filtered NCC only finds the peak; its position and score are the unfiltered
+    # NCC's within feature_track.MEDIAN_FIND_PLACE_PX of it (the filtered one when that fails). False: the filtered
+    # NCC's own (docs/stereo-and-tracking.md, "A median for the feature step's NCC")
+    ncc_median_find: bool = False
     # the tracking steps' NCC refinement can count only the template pixels the plane places where the new image's
     # dense stereo puts them (core/relief_mask.py): within relief_max_parallax_px new pixels, given the stereo's
     # disparity error bound relief_disparity_error_px (half-resolution pixels; SGBM's measured p99 there is 0.45 px).
@@ -173,6 +182,15 @@ class ChainParams:
         m = self.feature_median_px
         if not (isinstance(m, int) and not isinstance(m, bool) and (m in (0, 1) or (m >= 3 and m % 2 == 1))):
             raise ValueError(f"ChainParams.feature_median_px: must be 0, 1 or an odd integer >= 3, got {m!r}")
+        n = self.ncc_median_prev_px
+        if n is not None and not (isinstance(n, (int, float)) and not isinstance(n, bool) and np.isfinite(n) and n > 0):
+            raise ValueError(f"ChainParams.ncc_median_prev_px: must be a number > 0 or None, got {n!r}")
+        if not isinstance(self.ncc_median_find, bool):
+            raise ValueError(f"ChainParams.ncc_median_find: must be True or False, got {self.ncc_median_find!r}")
+        if self.ncc_median_find and n is None:
+            raise ValueError("ChainParams.ncc_median_find: needs ncc_median_prev_px (the median that finds the peak)")
+        if n is not None and self.ncc_matched_blur:
+            raise ValueError("ChainParams.ncc_median_prev_px and ncc_matched_blur: one filter of the NCC's image at a time")
         r = self.relief_max_parallax_px
         if r is not None and not (isinstance(r, (int, float)) and not isinstance(r, bool) and np.isfinite(r) and r > 0):
             raise ValueError(f"ChainParams.relief_max_parallax_px: must be a number > 0 or None, got {r!r}")

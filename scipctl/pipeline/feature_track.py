@@ -12,7 +12,12 @@ import numpy as np
 from ..jsonutil import finite_or_none as _f
 from ..model import ImageProduct
 from ..core.matched_blur import blurred_crop, footprint_cov, gaussian_kernel
+from ..core.windows import filtered_crop, median_image
 from .plane_warp import plane_points_site, plane_warped_view, prev_pixels_through_plane, render_through_plane
+
+
+# ChainParams.ncc_median_find: how far (new pixels) the unfiltered NCC may move the median-filtered NCC's peak
+MEDIAN_FIND_PLACE_PX = 2.0
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
@@ -58,6 +63,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         gg = np.abs(np.stack(np.meshgrid(np.arange(-half, half + 1), np.arange(-half, half + 1)), -1)).max(-1)
         centre = (gg <= max(1, half // 4)).reshape(-1)
     img = prod.pixels_float()
+    median_px = None
+    if params.ncc_median_prev_px is not None:
+        # the median's width in new pixels: previous-image pixels x the zoom, the nearest odd size, at least 3
+        median_px = max(3, 2 * int(round((params.ncc_median_prev_px * max(float(scale), 1.0) - 1) / 2)) + 1)
     g = np.arange(-half, half + 1, dtype=float)
     c = np.round(np.asarray(pred_uv, float))
     cands, seen, reasons = [], [], []
@@ -90,9 +99,14 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         if params.ncc_matched_blur and np.all(np.isfinite(loc.uv)):
             kernel = _matched_blur_kernel(prev, prod, X_site, n_site, ys, half)
         crop = None
+        reach = int(math.ceil(params.feature_fine_radius_px)) + half + 2
         if kernel is not None:
             # None when the search region lies wholly outside the image (the plain track below says so)
-            crop, o = blurred_crop(img, loc.uv, int(math.ceil(params.feature_fine_radius_px)) + half + 2, kernel)
+            crop, o = blurred_crop(img, loc.uv, reach, kernel)
+        elif median_px is not None and np.all(np.isfinite(loc.uv)):
+            raw_tpl = tpl
+            tpl = median_image(tpl, median_px)
+            crop, o = filtered_crop(img, loc.uv, reach, median_px, lambda a: median_image(a, median_px))
         if crop is None:
             # a whole rendered window: a peak where it touches the image's edge confirms nothing
             tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
@@ -101,6 +115,12 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             tr = track(tpl, crop, loc.uv - o, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
                        min_score=0.3, accept_border_peak=False, template_mask=keep)
             tr = dataclasses.replace(tr, uv=tr.uv + o)
+            if crop is not None and median_px is not None and params.ncc_median_find and tr.ok:
+                # the median found the peak; the unfiltered NCC places it and scores it (what the trust models know)
+                raw = track(raw_tpl, img, tr.uv, MEDIAN_FIND_PLACE_PX, template_center_uv=loc.uv - (cc - half),
+                            min_score=0.3, accept_border_peak=False, template_mask=keep)
+                if raw.ok and np.all(np.isfinite(raw.uv)):
+                    tr = raw
         cands.append((loc, tr, k, reach, factor, kept, keep is not None))
 
     def confirmed(cd):

@@ -46,3 +46,40 @@ def test_window_scale_for_handoff():
     assert s == pytest.approx((1 / (r2 * i2)) / (1 / (r1 * i1)))
     with pytest.raises(ValueError):
         window_scale_for_handoff(0.0, 1.0, 1.0, 1.0)
+
+
+def test_filtered_crop_is_the_image_filtered_where_the_reach_lies():
+    """Within ``reach_px`` of the centre the crop is the whole image filtered (the margin covers the filter's radius),
+    the origin is aligned, and a region outside the image gives None."""
+    from scipctl.core.windows import filtered_crop, median_image
+
+    rng = np.random.default_rng(5)
+    img = rng.random((300, 400)).astype(np.float32)
+    crop, o = filtered_crop(img, (201.3, 150.6), 40, 3, lambda a: median_image(a, 7))
+    assert o[0] % 64 == 0 and o[1] % 64 == 0
+    whole = median_image(img, 7)
+    u0, v0 = int(o[0]), int(o[1])
+    # the pixels within the reach of the centre (201, 151)
+    sub = crop[151 - 40 - v0:151 + 41 - v0, 201 - 40 - u0:201 + 41 - u0]
+    assert np.array_equal(sub, whole[111:192, 161:242])
+    same, o2 = filtered_crop(img, (201.3, 150.6), 40, 3, lambda a: a)
+    assert np.array_equal(o2, o) and np.array_equal(same, img[v0:v0 + same.shape[0], u0:u0 + same.shape[1]])
+    assert filtered_crop(img, (-500.0, 150.0), 40, 3, lambda a: a)[0] is None
+    with pytest.raises(ValueError, match="center_uv"):
+        filtered_crop(img, (np.nan, 1.0), 40, 3, lambda a: a)
+
+
+def test_the_median_removes_a_speck_and_keeps_an_edge():
+    from scipctl.core.windows import median_image
+
+    img = np.zeros((21, 21), np.float32)
+    img[:, 11:] = 1.0  # a vertical edge
+    img[5, 4] = 1.0  # a one-pixel speck on the dark side
+    img[15, 16] = 0.0  # a one-pixel pit on the bright side
+    out = median_image(img, 3)
+    assert out.dtype == np.float32 and out.shape == img.shape
+    assert out[5, 4] == 0.0 and out[15, 16] == 1.0
+    assert np.array_equal(out[:, :11] == 0.0, np.ones((21, 11), bool)) and np.all(out[:, 11:] == 1.0)
+    for bad in (1, 2, 4, 3.5):
+        with pytest.raises(ValueError, match="size_px"):
+            median_image(img, bad)

@@ -491,6 +491,18 @@ def test_chain_params_refuse_an_unknown_answer():
         ChainParams(answer="scip").check()
 
 
+@pytest.mark.parametrize("kw, match", [
+    ({"ncc_median_prev_px": 0}, "ncc_median_prev_px"), ({"ncc_median_prev_px": float("nan")}, "ncc_median_prev_px"),
+    ({"ncc_median_prev_px": True}, "ncc_median_prev_px"), ({"ncc_median_find": True}, "needs ncc_median_prev_px"),
+    ({"ncc_median_prev_px": 3, "ncc_median_find": 1}, "ncc_median_find"),
+    ({"ncc_median_prev_px": 3, "ncc_matched_blur": True}, "one filter"),
+])
+def test_chain_params_refuse_an_ncc_median_that_cannot_run(kw, match):
+    with pytest.raises(ValueError, match=match):
+        ChainParams(**kw).check()
+    assert ChainParams(ncc_median_prev_px=3, ncc_median_find=True).check()
+
+
 @pytest.mark.parametrize("bad", [2, -1, 3.0, True])
 def test_chain_params_refuse_a_median_that_is_not_an_odd_size(bad):
     with pytest.raises(ValueError, match="ChainParams.feature_median_px"):
