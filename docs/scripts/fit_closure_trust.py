@@ -3,7 +3,7 @@
 
     # 1. the table: every confirmed closure of campaign folders run with --closure or --chain-answer closure
     python docs/scripts/fit_closure_trust.py table OUT1 OUT2 ... -o closures.jsonl.gz [--family-dir DIR=FAMILY ...] \
-        [--step-model scipctl/data/step_trust_model.json]
+        [--step-model scipctl/data/step_trust_model.json] [--add OLD.jsonl.gz]
     # 2. the model (scipctl/data/closure_trust_model.json) and the held-out report (one family out at a time)
     python docs/scripts/fit_closure_trust.py fit closures.jsonl.gz -o scipctl/data/closure_trust_model.json \
         --report r.json
@@ -37,13 +37,15 @@ def cmd_table(args) -> None:
         from scipctl.io.step_trust_model import step_trust_model_from_text
 
         step_model = step_trust_model_from_text(Path(args.step_model).read_text(encoding="utf-8"), args.step_model)
-    rows, chains = [], 0
+    # --add: the rows of an earlier table first (their campaigns need not exist any more), then the campaigns'
+    rows, chains = (read_table(args.add) if args.add else []), 0
+    added = len(rows)
     for fam, name, record in campaign_chains(args.campaigns, dirs):
         chains += 1
         row = closure_row(record, fam, name, step_model)
         if row is not None:
             rows.append(row)
-    # the same downlink in two campaigns: its first campaign's rows only
+    # the same downlink in two campaigns (or in the added table and a campaign): its first rows only
     seen, unique = set(), []
     for r in rows:
         if (r.downlink, r.target) not in seen:
@@ -52,7 +54,7 @@ def cmd_table(args) -> None:
     rows = sorted(unique, key=lambda r: (r.family, r.downlink, r.target))
     text = "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows)
     Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
-    print(json.dumps({"chains": chains, "confirmed_closures": len(rows)}), file=sys.stderr)
+    print(json.dumps({"chains": chains, "added": added, "confirmed_closures": len(rows)}), file=sys.stderr)
 
 
 def read_table(path) -> list:
@@ -132,6 +134,8 @@ def main():
     t.add_argument("campaigns", nargs="+")
     t.add_argument("-o", "--out", required=True)
     t.add_argument("--family-dir", action="append", default=[], metavar="DIR=FAMILY")
+    t.add_argument("--add", metavar="TABLE", help="keep this earlier table's rows first (its campaigns need not "
+                   "exist any more)")
     t.add_argument("--step-model", metavar="FILE", help="score the chains' tracking steps with this step model "
                    "(the reference's ref_p_success as a chain run with it would have it); default: as recorded")
     f = sub.add_parser("fit")

@@ -125,3 +125,18 @@ def test_a_step_model_scores_the_reference_again():
     assert again.evidence["ref_p_success"] == want != 0.123
     assert {k: v for k, v in again.evidence.items() if k != "ref_p_success"} == \
         {k: v for k, v in recorded.evidence.items() if k != "ref_p_success"}
+
+
+def test_a_table_grows_from_the_committed_one(tmp_path):
+    """``table --add OLD``: the earlier table's rows kept (their campaigns need not exist any more), the campaigns'
+    added. With no campaign records the committed table comes back byte for byte (the rows read and written
+    again, sorted and compressed as the command always does)."""
+    (tmp_path / "camp" / "records").mkdir(parents=True)
+    env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"}
+    r = subprocess.run([sys.executable, str(ROOT / "docs/scripts/fit_closure_trust.py"), "table", str(tmp_path / "camp"),
+                        "--add", str(ROOT / TABLE), "-o", str(tmp_path / "t.jsonl.gz")], env=env, capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stderr
+    n = len(_rows())
+    assert json.loads(r.stderr) == {"chains": 0, "added": n, "confirmed_closures": n}
+    assert (tmp_path / "t.jsonl.gz").read_bytes() == (ROOT / TABLE).read_bytes()
