@@ -9,6 +9,9 @@
         --report r.json
     # 3. a table scored by a fitted model (another population: nothing refitted)
     python docs/scripts/fit_closure_trust.py score closures.jsonl.gz --model scipctl/data/closure_trust_model.json
+    # 4. a campaign's whole chains with their adopted closures scored again by each model (the first: the one the
+    #    chains ran with, whose recorded p and GO must come back), the verdict taken again; every chain counted
+    python docs/scripts/fit_closure_trust.py chains CAMP --model scipctl/data/closure_trust_model.json --model new.json
 
 A chain's family is its campaign header's ``family``, or the first ``--family-dir DIR=FAMILY`` whose DIR is a
 component of the downlink's path (campaigns made before ``campaign`` read the family ``synth --family`` records
@@ -25,6 +28,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
 
 
 def cmd_table(args) -> None:
@@ -127,6 +132,69 @@ def cmd_score(args) -> None:
     print(json.dumps({"go_min_p": model.go_min_p, "scored": per}, indent=1, sort_keys=True))
 
 
+def chain_scores(campaigns: list, models: dict) -> dict:
+    """Per model (name -> ClosureTrustModel, the first the one the chains ran with): over every chain of the
+    campaigns, the final answer's p (an adopted closure's scored again by the model; otherwise as recorded; no final
+    answer: 0) against the final answer within 4 px: Brier, base rate, AUC, the chain GO (``chain_verdict`` with the
+    final step's p and GO replaced) and how many GO chains are within 4 px, and the chains at p >= 0.9. ValueError
+    when the first model does not give a recorded p or GO back."""
+    from campaign_chains import campaign_chains
+    from scipctl.core.closure_trust import ClosureEvidence
+    from scipctl.pipeline.chain import ChainStep
+    from scipctl.pipeline.chain_trust import chain_verdict
+    from scipctl.pipeline.closure_trust_fit import SUCCESS_PX, closure_row
+
+    names = list(models)
+    res = {n: {"p": [], "go": []} for n in names}
+    ys = []
+    for fam, name, rec in campaign_chains(campaigns, {}):
+        st = rec.get("steps") or []
+        fin = st[-1] if st and st[-1]["camera"] == "hazcam" and st[-1]["extra"].get("final") else None
+        ys.append(fin is not None and fin["error_px"] is not None and fin["error_px"] <= SUCCESS_PX)
+        row = closure_row(rec, fam, name) if fin is not None and fin["extra"].get("answer") == "closure" else None
+        for n in names:
+            if row is None:
+                res[n]["p"].append(0.0 if fin is None or fin["p_success"] is None else float(fin["p_success"]))
+                res[n]["go"].append(bool(rec.get("go")))
+                continue
+            m = models[n]
+            p = float(m.probability([ClosureEvidence.from_dict(row.evidence)])[0])
+            go = bool(p >= m.go_min_p)
+            if n == names[0] and (abs(p - float(fin["p_success"])) > 1e-9 or go != bool(fin["go"])):
+                raise ValueError(f"{name} {rec.get('target')}: model {n!r} gives p {p} (GO {go}), the record "
+                                 f"{fin['p_success']} (GO {fin['go']}): not the model the chains ran with")
+            steps = [ChainStep.from_dict(d) for d in st]
+            steps[-1].p_success, steps[-1].go = p, go
+            res[n]["p"].append(p)
+            res[n]["go"].append(chain_verdict(steps).go)
+    y = np.array(ys, bool)
+    out = {"chains": int(len(y)), "within": int(y.sum()), "models": {}}
+    for n in names:
+        p, go = np.array(res[n]["p"], float), np.array(res[n]["go"], bool)
+        pos, neg = p[y], p[~y]
+        auc = None if not len(pos) or not len(neg) else float(
+            np.mean([(a > b) + 0.5 * (a == b) for a in pos for b in neg]))
+        out["models"][n] = {"brier": float(np.mean((p - y) ** 2)) if len(y) else None,
+                            "brier_base_rate": float(np.mean((y.mean() - y) ** 2)) if len(y) else None, "auc": auc,
+                            "chain_go": int(go.sum()), "chain_go_within": int((go & y).sum()),
+                            "p_ge_0_9": int((p >= 0.9).sum()), "p_ge_0_9_within": int((y & (p >= 0.9)).sum())}
+    return out
+
+
+def cmd_chains(args) -> None:
+    from scipctl.io.closure_trust_model import closure_trust_model_from_text
+
+    models = {}
+    for f in args.model:
+        models[f] = closure_trust_model_from_text(Path(f).read_text(encoding="utf-8"), f)
+    try:
+        out = chain_scores(args.campaigns, models)
+    except ValueError as e:
+        print(f"fit_closure_trust.py chains: {e}", file=sys.stderr)
+        sys.exit(2)
+    print(json.dumps(out, indent=1, sort_keys=True))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -145,8 +213,12 @@ def main():
     s = sub.add_parser("score")
     s.add_argument("table")
     s.add_argument("--model", required=True)
+    c = sub.add_parser("chains")
+    c.add_argument("campaigns", nargs="+")
+    c.add_argument("--model", action="append", required=True, metavar="FILE",
+                   help="a closure model (repeat; the first is the one the chains ran with)")
     a = ap.parse_args()
-    {"table": cmd_table, "fit": cmd_fit, "score": cmd_score}[a.cmd](a)
+    {"table": cmd_table, "fit": cmd_fit, "score": cmd_score, "chains": cmd_chains}[a.cmd](a)
 
 
 if __name__ == "__main__":

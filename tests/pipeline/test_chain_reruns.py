@@ -90,6 +90,33 @@ def test_the_ncc_median_options_on_the_first_track(camp, tmp_path, capsys):
     assert rows["t1"]["m3"]["status"] == rows["t1"]["find"]["status"] == "failed"
 
 
+def test_chains_scored_again_by_closure_models(camp):
+    """fit_closure_trust.py chains: the model the chains ran with gives every recorded p and GO back (so its figures
+    are the campaign's own); another model is scored on the same chains; a first model that is not the chains' own
+    is refused."""
+    import dataclasses
+
+    from scipctl.io.closure_trust_model import load_packaged_closure_trust_model
+
+    fct = load("fit_closure_trust")
+    model = load_packaged_closure_trust_model()
+    recs = [json.loads(x)["record"] for x in (camp / "records" / "paper-s1-straight.jsonl").read_text().splitlines()[1:]]
+    out = fct.chain_scores([str(camp)], {"packaged": model})
+    m = out["models"]["packaged"]
+    assert out["chains"] == 2 and m["chain_go"] == sum(r["go"] for r in recs)
+    finals = [r["steps"][-1] for r in recs]
+    y = [f["error_px"] is not None and f["error_px"] <= 4.0 for f in finals]
+    assert out["within"] == sum(y)
+    assert m["brier"] == pytest.approx(np.mean([((f["p_success"] or 0.0) - w) ** 2 for f, w in zip(finals, y)]))
+    never = dataclasses.replace(model, go_min_p=1.0)  # no closure GO
+    both = fct.chain_scores([str(camp)], {"packaged": model, "never": never})
+    assert both["models"]["never"]["brier"] == m["brier"] and both["models"]["never"]["chain_go_within"] <= m["chain_go"]
+    adopted = [f for f in finals if f["extra"].get("answer") == "closure"]
+    if adopted:  # a first model that is not the chains' own
+        with pytest.raises(ValueError, match="not the model the chains ran with"):
+            fct.chain_scores([str(camp)], {"other": dataclasses.replace(model, intercept=model.intercept + 1.0)})
+
+
 def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, capsys):
     """Today's chains carry designate's trust on step 0: the script's designate gives it back, and the verdict
     with it is the recorded one. A record made before the designation was scored (its trust stripped) is taken as
