@@ -99,14 +99,14 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         if params.ncc_matched_blur and np.all(np.isfinite(loc.uv)):
             kernel = _matched_blur_kernel(prev, prod, X_site, n_site, ys, half)
         crop = None
-        reach = int(math.ceil(params.feature_fine_radius_px)) + half + 2
+        crop_reach = int(math.ceil(params.feature_fine_radius_px)) + half + 2  # (``reach`` is the candidate's)
         if kernel is not None:
             # None when the search region lies wholly outside the image (the plain track below says so)
-            crop, o = blurred_crop(img, loc.uv, reach, kernel)
+            crop, o = blurred_crop(img, loc.uv, crop_reach, kernel)
         elif median_px is not None and np.all(np.isfinite(loc.uv)):
             raw_tpl = tpl
             tpl = median_image(tpl, median_px)
-            crop, o = filtered_crop(img, loc.uv, reach, median_px, lambda a: median_image(a, median_px))
+            crop, o = filtered_crop(img, loc.uv, crop_reach, median_px, lambda a: median_image(a, median_px))
         if crop is None:
             # a whole rendered window: a peak where it touches the image's edge confirms nothing
             tr = track(tpl, img, loc.uv, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),

@@ -110,6 +110,21 @@ def test_chain_records_every_stop_against_the_marks(dl, chains):
     assert times == sorted(times)
 
 
+def test_a_feature_step_records_which_candidate_won(chains):
+    """A feature-guided step's ``feature_reach`` is the winning candidate's reach (one of ChainParams.feature_candidates',
+    or 0 for the visual-odometry candidate, then ``feature_vo`` True): what the records say of how it was found."""
+    reaches = {c[0] for c in HANDOFF.feature_candidates} | {0.0}
+    seen = 0
+    for steps in chains.values():
+        for s in steps:
+            if s.extra.get("feature_status") in ("confirmed", "unconfirmed"):
+                assert s.extra["feature_reach"] in reaches, (s.product_id, s.extra["feature_reach"])
+                if "feature_vo" in s.extra:
+                    assert s.extra["feature_vo"] == (s.extra["feature_reach"] == 0.0)
+                seen += 1
+    assert seen > 0
+
+
 def test_chain_steps_read_back_from_json(chains):
     """Every step of a real chain, written as the commands write JSON and read back, is the same record."""
     import json
