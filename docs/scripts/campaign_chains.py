@@ -147,3 +147,12 @@ def plain_main(script: str, doc: str, run_file, what: str, score, show, argv=Non
     if a.cmd == "run":
         return rerun_main(ap, a, run_file, what)
     return score_main(ap, a, score, show)
+
+
+def auc(p, y):
+    """The area under the ROC curve of scores ``p`` for the outcomes ``y`` (scikit-learn's ``roc_auc_score``: the
+    chance that a positive outranks a negative, ties counted half); None when ``y`` holds one class only."""
+    from sklearn.metrics import roc_auc_score
+
+    y = [bool(v) for v in y]
+    return float(roc_auc_score(y, list(p))) if 0 < sum(y) < len(y) else None

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
-from campaign_chains import plain_main, recorded_chains  # noqa: E402
+from campaign_chains import auc, plain_main, recorded_chains  # noqa: E402
 
 SUCCESS_PX = 4.0  # the final hazcam answer's radius (issue #14)
 
@@ -71,16 +71,6 @@ def run_file(path: str) -> tuple[list, int, int]:
     return rows, same, moved
 
 
-def _auc(p: list, y: list):
-    """The probability that a chain within 4 px has a higher p than one that is not (ties count half)."""
-    pos = [a for a, b in zip(p, y) if b]
-    neg = [a for a, b in zip(p, y) if not b]
-    if not pos or not neg:
-        return None
-    wins = sum((a > b) + 0.5 * (a == b) for a in pos for b in neg)
-    return float(wins / (len(pos) * len(neg)))
-
-
 def score(rows: list) -> dict:
     """The figures of ``score`` as a dict (see the module docstring)."""
     right = [r["final_px"] is not None and r["final_px"] <= SUCCESS_PX for r in rows]
@@ -92,16 +82,16 @@ def score(rows: list) -> dict:
             "chain_go_before": sum(r["before"]["go"] for r in rows), "chain_go_after": sum(r["after"]["go"] for r in rows),
             "go_within_turned_nogo": sum(r["before"]["go"] and w and not r["after"]["go"] for r, w in zip(rows, right)),
             "nogo_at_step0_after": sum((not r["after"]["go"]) and r["after"]["step"] == 0 for r in rows),
-            "auc_p_ok": _auc([p for p, _ in scored], [w for _, w in scored])}
+            "auc_p_ok": auc([p for p, _ in scored], [w for _, w in scored])}
 
 
 def _print(s: dict) -> None:
-    auc = "-" if s["auc_p_ok"] is None else f"{s['auc_p_ok']:.3f}"
+    auc_text = "-" if s["auc_p_ok"] is None else f"{s['auc_p_ok']:.3f}"
     print(f"chains {s['chains']} ({s['within_4px']} within 4 px); designation NO-GO {s['designation_nogo']} "
           f"({s['designation_nogo_within_4px']} of them within 4 px; the GO designations' chains: "
           f"{s['designation_go_within_4px']}); chain GO {s['chain_go_before']} -> {s['chain_go_after']}, GO and within "
           f"4 px turned NO-GO {s['go_within_turned_nogo']}; NO-GO at step 0 after: {s['nogo_at_step0_after']}; "
-          f"AUC of p_ok {auc}")
+          f"AUC of p_ok {auc_text}")
 
 
 def main(argv=None) -> int:

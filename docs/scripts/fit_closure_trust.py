@@ -138,7 +138,7 @@ def chain_scores(campaigns: list, models: dict) -> dict:
     answer: 0) against the final answer within 4 px: Brier, base rate, AUC, the chain GO (``chain_verdict`` with the
     final step's p and GO replaced) and how many GO chains are within 4 px, and the chains at p >= 0.9. ValueError
     when the first model does not give a recorded p or GO back."""
-    from campaign_chains import campaign_chains
+    from campaign_chains import auc, campaign_chains
     from scipctl.core.closure_trust import ClosureEvidence
     from scipctl.pipeline.chain import ChainStep
     from scipctl.pipeline.chain_trust import chain_verdict
@@ -171,11 +171,9 @@ def chain_scores(campaigns: list, models: dict) -> dict:
     out = {"chains": int(len(y)), "within": int(y.sum()), "models": {}}
     for n in names:
         p, go = np.array(res[n]["p"], float), np.array(res[n]["go"], bool)
-        pos, neg = p[y], p[~y]
-        auc = None if not len(pos) or not len(neg) else float(
-            np.mean([(a > b) + 0.5 * (a == b) for a in pos for b in neg]))
         out["models"][n] = {"brier": float(np.mean((p - y) ** 2)) if len(y) else None,
-                            "brier_base_rate": float(np.mean((y.mean() - y) ** 2)) if len(y) else None, "auc": auc,
+                            "brier_base_rate": float(np.mean((y.mean() - y) ** 2)) if len(y) else None,
+                            "auc": auc(p, y),
                             "chain_go": int(go.sum()), "chain_go_within": int((go & y).sum()),
                             "p_ge_0_9": int((p >= 0.9).sum()), "p_ge_0_9_within": int((y & (p >= 0.9)).sum())}
     return out

@@ -199,10 +199,11 @@ def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, ban
     match is good, the 3-D point in the rover and site frames. No surface normal and no trust (:func:`designate`
     adds them); the chain's designation step (pipeline/chain.py) builds its own from its point stereo with this."""
     uv = np.asarray(uv, float)
-    L = left.pixels_float()
     warnings = []
     k = window_px // 2 + 1
-    patch = L[max(0, int(uv[1]) - k):int(uv[1]) + k + 1, max(0, int(uv[0]) - k):int(uv[0]) + k + 1]
+    # the window's pixels as pixels_float() has them, without converting the whole image again
+    raw = left.pixels[max(0, int(uv[1]) - k):int(uv[1]) + k + 1, max(0, int(uv[0]) - k):int(uv[0]) + k + 1]
+    patch = raw.astype(np.float32) / (65535.0 if raw.dtype == np.uint16 else 255.0)
     if patch.size and float((patch >= 0.999).mean()) > 0.05:
         warnings.append(SATURATED_WARNING)
     if patch.size and float(patch.std()) < 0.01:
