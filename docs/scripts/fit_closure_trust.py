@@ -43,7 +43,11 @@ def cmd_table(args) -> None:
 
         step_model = step_trust_model_from_text(Path(args.step_model).read_text(encoding="utf-8"), args.step_model)
     # --add: the rows of an earlier table first (their campaigns need not exist any more), then the campaigns'
-    rows, chains = (read_table(args.add) if args.add else []), 0
+    try:
+        rows, chains = (read_table(args.add) if args.add else []), 0
+    except (OSError, ValueError, TypeError) as e:
+        print(f"fit_closure_trust.py table: --add {args.add}: {e}", file=sys.stderr)
+        sys.exit(2)
     added = len(rows)
     for fam, name, record in campaign_chains(args.campaigns, dirs):
         chains += 1
@@ -180,14 +184,16 @@ def chain_scores(campaigns: list, models: dict) -> dict:
 
 
 def cmd_chains(args) -> None:
+    from scipctl.errors import InputError
     from scipctl.io.closure_trust_model import closure_trust_model_from_text
 
-    models = {}
-    for f in args.model:
-        models[f] = closure_trust_model_from_text(Path(f).read_text(encoding="utf-8"), f)
     try:
+        for c in args.campaigns:
+            if not Path(c, "records").is_dir():
+                raise ValueError(f"{c}: no records/ (not a campaign folder)")
+        models = {f: closure_trust_model_from_text(Path(f).read_text(encoding="utf-8"), f) for f in args.model}
         out = chain_scores(args.campaigns, models)
-    except ValueError as e:
+    except (OSError, ValueError, InputError) as e:
         print(f"fit_closure_trust.py chains: {e}", file=sys.stderr)
         sys.exit(2)
     print(json.dumps(out, indent=1, sort_keys=True))

@@ -140,3 +140,23 @@ def test_a_table_grows_from_the_committed_one(tmp_path):
     n = len(_rows())
     assert json.loads(r.stderr) == {"chains": 0, "added": n, "confirmed_closures": n}
     assert (tmp_path / "t.jsonl.gz").read_bytes() == (ROOT / TABLE).read_bytes()
+
+
+@pytest.mark.parametrize("args", [
+    ["chains", "{tmp}/none", "--model", str(MODEL)],
+    ["chains", "{tmp}/camp", "--model", "{tmp}/missing.json"],
+    ["chains", "{tmp}/camp", "--model", "{tmp}/camp/bad.json"],
+    ["table", "{tmp}/camp", "--add", "{tmp}/missing.jsonl.gz", "-o", "{tmp}/out.jsonl.gz"],
+])
+def test_bad_input_is_one_line_and_exit_2(args, tmp_path):
+    """A folder that is no campaign, a missing or unreadable model, a missing table to add: one line naming it, exit
+    code 2, nothing written."""
+    (tmp_path / "camp" / "records").mkdir(parents=True)
+    (tmp_path / "camp" / "bad.json").write_text("not json")
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"}
+    r = subprocess.run([sys.executable, str(ROOT / "docs/scripts/fit_closure_trust.py"), *argv], cwd=ROOT, env=env,
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and r.stderr.startswith(f"fit_closure_trust.py {argv[0]}:")
+    assert not (tmp_path / "out.jsonl.gz").exists()
