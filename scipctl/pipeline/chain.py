@@ -108,6 +108,11 @@ class ChainParams:
     # answer within 4 px 169 -> 179 of 260 chains (tuning) and 122 -> 131 of 186 (held out), for +17-19 % of the
     # chain's CPU on the bundled sols; the closure trust model is fitted on such closures (session 18)
     closure_vo: bool = True
+    # the feature step of a handoff across a drive (the navcam at the approach's imaging stop found from the ~10 m
+    # pancam designation, when the pancam track there is not trusted) takes the visual-odometry candidate too: the
+    # 10 m pancam and the 4.5 m navcam see the ground at about the same scale, so the whole images match where the
+    # target's surroundings alone do not (docs/stereo-and-tracking.md, "Visual odometry for the cross-drive handoff")
+    vo_handoff: bool = False
     # when the closure would start from the navcam handoff at the imaging stop (its pancam track there not trusted),
     # it first starts from the pancam image of that stop at the navcam handoff's point projected into it
     # (chain_closure.pancam_from_navcam), and keeps that closure when it is confirmed (docs/stereo-and-tracking.md,
@@ -213,6 +218,8 @@ class ChainParams:
             raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
         if not isinstance(self.closure_vo, bool):
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
+        if not isinstance(self.vo_handoff, bool):
+            raise ValueError(f"ChainParams.vo_handoff: must be true or false, got {self.vo_handoff!r}")
         if not isinstance(self.closure_pancam_from_navcam, bool):
             raise ValueError(f"ChainParams.closure_pancam_from_navcam: must be true or false, got "
                              f"{self.closure_pancam_from_navcam!r}")
@@ -478,7 +485,8 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                 # the new image's own stereo says which template pixels the plane misplaces (relief_mask)
                 new_stereo = None if params.relief_max_parallax_px is None else near_dense_stereo(dl, prod, rng_new)
                 vo = None
-                if kind == "track" and c in params.vo_cameras:
+                if (kind == "track" and c in params.vo_cameras) or (kind == "handoff" and params.vo_handoff):
+                    # (a handoff here is across a drive: the block's condition)
                     vo = vo_correction(dl, prev, prod, prev_range, feats, params, prev_stereo)
                 tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params,
                                           new_stereo, vo=vo)

@@ -114,6 +114,74 @@ def test_visual_odometry_is_an_option_of_the_navcam_tracks(dl):
     assert any("vo_inliers" in s.extra for s in tracks)
 
 
+def _without_imaging_stop_pancam(dl):
+    """``dl`` without the pancam images of the approach's imaging stop (the second pancam stop): the chain then
+    hands the target from the ~10 m designation straight to that stop's navcam, across the drive, as it does when
+    its pancam track there is not trusted. ``(start pancam, that downlink, the imaging stop's left navcam)``."""
+    import dataclasses
+
+    pancams = sorted((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    start, mid = pancams[0], pancams[1]
+    nav = next(im for im in _navcams(dl) if im.position == mid.position)
+    return start, dataclasses.replace(dl, images=[im for im in dl.images
+                                                  if not (im.camera == "pancam" and im.position == mid.position)]), nav
+
+
+def test_visual_odometry_across_the_drive_from_the_designation_to_the_navcam(dl):
+    """From the ~10 m pancam to the imaging stop's navcam (two cameras, one drive): the whole-image correction
+    (>= 100 RANSAC inliers; measured 201-212) puts each marked target's designation (the pancam's point stereo at
+    its mark) within 3 px of its navcam mark, where the pose estimate puts it 80-225 px away. Measured 0.69-1.25 px
+    (OpenCV 5.0.0) and 0.51-1.62 px (4.14.0) over the five targets of the two sols (/tmp/vo_only.py of session 30);
+    bound = the largest x ~1.85, rounded to 0.5 px: the error is the designation's stereo and the fit's."""
+    from scipctl.core.point_stereo import on_left_ray
+    from scipctl.pipeline.chain import stereo_at
+
+    start, _, mid_nav = _without_imaging_stop_pancam(dl)
+    params = ChainParams()
+    seen = 0
+    for t in dl.targets:
+        m0, m1 = t.mark_in(start.product_id), t.mark_in(mid_nav.product_id)
+        if m0 is None or m1 is None:
+            continue
+        uv = np.array([m0.u, m0.v])
+        ps = stereo_at(dl, start, uv, params)
+        assert ps is not None and ps.ok
+        X_site = start.pose.T_site_rover.apply(on_left_ray(start.camera_model, uv, ps.xyz))
+        X_nav = mid_nav.pose.T_site_rover.inverse().apply(X_site)
+        corr = vo_correction(dl, start, mid_nav, float(ps.range_m), {}, params)
+        assert corr is not None and corr.n_inliers >= 100
+        pose_err = np.linalg.norm(mid_nav.camera_model.project(X_nav[None])[0] - [m1.u, m1.v])
+        vo_err = np.linalg.norm(mid_nav.camera_model.project(corr.apply(X_nav[None]))[0] - [m1.u, m1.v])
+        assert vo_err < 3.0, f"{t.id}: {vo_err:.2f} px (pose estimate {pose_err:.1f} px)"
+        assert pose_err > 3 * vo_err
+        seen += 1
+    assert seen >= 2
+
+
+def test_visual_odometry_is_an_option_of_the_cross_drive_handoff(dl):
+    """ChainParams.vo_handoff: off (the default) the chain's handoff from the designation to the imaging stop's
+    navcam records no odometry; on, it records whether the odometry's candidate won (feature_vo) and its inliers,
+    and its pixel stays confirmed within 2.5 px of the mark (measured 0.12 px for paper-s1-straight t1, both ways);
+    the designation is the same."""
+    if Path(dl.source).stem != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains)")
+    start, dl2, _ = _without_imaging_stop_pancam(dl)
+    tid = dl.targets[0].id
+    mk = dl.target(tid).mark_in(start.product_id)
+    runs = {on: run_chain(dl2, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="handoff", vo_handoff=on))
+            for on in (False, True)}
+    assert ChainParams().vo_handoff is False
+    off, on = runs[False][1], runs[True][1]
+    for s in (off, on):
+        assert (s.camera, s.kind, s.extra["reference"]) == ("navcam", "handoff", start.product_id)
+    assert "vo_inliers" not in off.extra and "feature_vo" not in off.extra
+    assert isinstance(on.extra["feature_vo"], bool) and on.extra["vo_inliers"] >= ChainParams().vo_min_inliers
+    assert on.extra["feature_status"] == "confirmed" and on.ok and on.error_px < 2.5
+    assert runs[True][0].tracked_uv == runs[False][0].tracked_uv
+    with pytest.raises(ValueError, match="ChainParams.vo_handoff"):
+        ChainParams(vo_handoff=1).check()
+
+
 def _first_pancam_track(dl, tid, params):
     """The chain's first pancam track (10 m -> 4.5 m) of target ``tid``, as run_chain sets it up: (TrackResult or
     None, info, the 4.5 m mark)."""
