@@ -22,8 +22,10 @@ SUCCESS_PX = 4.0
 
 
 def load(campaign: Path) -> dict:
-    """(family, file name, target) -> chain record, from a campaign folder's records."""
-    out = {}
+    """(family, file name, target) -> chain record, from a campaign folder's records. ValueError when two downlinks
+    of one family share a file name there (e.g. two populations in one campaign): their chains could not be told
+    apart, and pairing would silently keep one of them."""
+    out, paths = {}, {}
     for f in sorted(glob.glob(str(campaign / "records" / "*.jsonl"))):
         head, chains = None, []
         with open(f) as fh:
@@ -35,7 +37,12 @@ def load(campaign: Path) -> dict:
                     chains.append(d["record"])
         if head is None or head.get("status") != "ok":
             continue
-        name = Path(head["job"].get("path") or head["downlink"]).name
+        path = head["job"].get("path") or head["downlink"]
+        name = Path(path).name
+        other = paths.setdefault((head["family"], name), path)
+        if other != path:
+            raise ValueError(f"{campaign}: two {head['family']} downlinks named {name} ({other}, {path}); chains are "
+                             f"paired by family and file name: run one population per campaign")
         for r in chains:
             out[(head["family"], name, r["target"])] = r
     return out
@@ -100,10 +107,14 @@ def main(argv=None) -> int:
     for p in [a.control, *a.variants]:
         if not (p / "records").is_dir():
             ap.error(f"{p}: not a campaign folder (no records/)")
-    ctrl = load(a.control)
+    try:
+        ctrl = load(a.control)
+        variants = [(v, load(v)) for v in a.variants]
+    except ValueError as e:
+        print(f"chain_pairs.py: error: {e}", file=sys.stderr)
+        return 2
     report = {"control": str(a.control), "variants": []}
-    for v in a.variants:
-        var = load(v)
+    for v, var in variants:
         keys = sorted(set(ctrl) & set(var))
         won = [k for k in keys if within(final_error(var[k])) and not within(final_error(ctrl[k]))]
         lost = [k for k in keys if within(final_error(ctrl[k])) and not within(final_error(var[k]))]

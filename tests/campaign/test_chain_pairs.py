@@ -51,3 +51,20 @@ def test_a_folder_without_records_is_refused_with_exit_2(tmp_path):
     with pytest.raises(SystemExit) as ex:
         cp.main([str(tmp_path), str(tmp_path)])
     assert ex.value.code == 2
+
+
+def test_two_downlinks_of_one_family_and_name_in_one_campaign_are_refused(tmp_path, capsys):
+    """Two populations in one campaign give two `default` downlinks named paper-s1-straight.mcap: their chains
+    cannot be paired by (family, file name, target), so the script says so in one line and exits 2 instead of
+    silently keeping one of them."""
+    cp = doc_scripts.load("chain_pairs")
+    ctrl, var = tmp_path / "ctrl", tmp_path / "var"
+    _campaign(ctrl, "pop1/default-1", "default", [_chain("t1", 1.0, 1.0)])
+    head = {"kind": "downlink", "status": "ok", "family": "default", "downlink": "paper-s1-straight.mcap",
+            "job": {"path": "/somewhere/pop2/default-2/paper-s1-straight.mcap"}}
+    (ctrl / "records" / "second.jsonl").write_text(json.dumps(head) + "\n" + json.dumps(
+        {"kind": "chain", "record": _chain("t1", 1.0, 9.0)}) + "\n")
+    _campaign(var, "pop1/default-1", "default", [_chain("t1", 1.0, 1.0)])
+    assert cp.main([str(ctrl), str(var)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "two default downlinks named paper-s1-straight.mcap" in err[0]
