@@ -27,6 +27,8 @@ import json
 import sys
 from pathlib import Path
 
+from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
+
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
@@ -62,7 +64,7 @@ def cmd_table(args) -> None:
             unique.append(r)
     rows = sorted(unique, key=lambda r: (r.family, r.downlink, r.target))
     text = "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows)
-    Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
+    atomic_write_bytes(args.out, gzip.compress(text.encode("utf-8"), mtime=0))
     print(json.dumps({"chains": chains, "added": added, "confirmed_closures": len(rows)}), file=sys.stderr)
 
 
@@ -110,14 +112,14 @@ def cmd_fit(args) -> None:
                             "of the time; 1.0 (never GO) when none is",
                  "command": f"python docs/scripts/fit_closure_trust.py fit {args.table} -o {args.out}"})
     model = fit_closure_model(ev, y, SUCCESS_PX, go_min_p=go_min_p, provenance=prov)
-    Path(args.out).write_text(closure_trust_model_json(model), encoding="utf-8")
+    atomic_write_text(args.out, closure_trust_model_json(model))
     if args.report:
         per = {}
         for fam in sorted({r.family for r, _, _ in pairs}):
             per[fam] = stats([x for x in pairs if x[0].family == fam], go_min_p)
         per["pooled"] = stats(pairs, go_min_p)
         report = {"go_min_p": go_min_p, "held_out": per, "coef": dict(zip(model.features, model.coef))}
-        Path(args.report).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+        atomic_write_text(args.report, json.dumps(report, indent=1, sort_keys=True) + "\n")
     print(json.dumps({"out": str(args.out), "go_min_p": go_min_p, "rows": int(len(y)), "within": int(y.sum())}),
           file=sys.stderr)
 

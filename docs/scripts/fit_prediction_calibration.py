@@ -25,6 +25,8 @@ import json
 import sys
 from pathlib import Path
 
+from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
+
 ROUTES = ("plan", "downlink")
 
 
@@ -40,7 +42,7 @@ def cmd_table(args) -> None:
 
     rows = approach_rows(args.pred, args.chains)
     text = "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows)
-    Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
+    atomic_write_bytes(args.out, gzip.compress(text.encode("utf-8"), mtime=0))
     print(json.dumps({"approaches": len(rows), "routes": sorted({r.route for r in rows})}), file=sys.stderr)
 
 
@@ -95,7 +97,7 @@ def cmd_fit(args) -> None:
                      "training_families": sorted(set(fams)), "scikit_learn": sklearn.__version__,
                      "command": f"python docs/scripts/fit_prediction_calibration.py fit {args.table} -o {args.out}"})
         model = fit_calibration(ev, y, SUCCESS_PX, provenance=prov)
-        out.write_text(prediction_calibration_json(model), encoding="utf-8")
+        atomic_write_text(out, prediction_calibration_json(model))
         raw = _per_family([(r, r.p_simulated, r.success(SUCCESS_PX)) for r in R])
         cal = _per_family([x for x in pairs if x[0].route == route])
         report[route] = {"held_out": cal, "p_simulated": raw, "coef": dict(zip(model.features, model.coef)),
@@ -105,7 +107,7 @@ def cmd_fit(args) -> None:
                _markdown(f"route {route}: calibrated, each family held out", cal)]
         print(json.dumps({"out": str(out), "rows": int(len(y)), "success": int(y.sum())}), file=sys.stderr)
     if args.report:
-        Path(args.report).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+        atomic_write_text(args.report, json.dumps(report, indent=1, sort_keys=True) + "\n")
     if args.markdown:
         print("\n".join(md))
 

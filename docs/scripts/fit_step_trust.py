@@ -19,6 +19,8 @@ import json
 import sys
 from pathlib import Path
 
+from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
+
 import numpy as np
 
 
@@ -41,7 +43,7 @@ def cmd_table(args) -> None:
             unique.append(c)
     rows = unique
     text = "".join(json.dumps(c.to_dict(), sort_keys=True, allow_nan=False) + "\n" for c in rows)
-    Path(args.out).write_bytes(gzip.compress(text.encode("utf-8"), mtime=0))
+    atomic_write_bytes(args.out, gzip.compress(text.encode("utf-8"), mtime=0))
     fams = {}
     for c in rows:
         fams[c.family] = fams.get(c.family, 0) + 1
@@ -115,7 +117,7 @@ def cmd_fit(args) -> None:
                  "success_mm": success_mm, "command": "python docs/scripts/fit_step_trust.py fit " + " ".join(
                      [str(args.table), "-o", str(args.out)])})
     model = fit_logistic(ev, y, success_mm, go_min_p=go_min_p, provenance=prov)
-    Path(args.out).write_text(step_trust_model_json(model), encoding="utf-8")
+    atomic_write_text(args.out, step_trust_model_json(model))
     if args.report:
         report = {"success_mm": success_mm, "go_min_p": go_min_p, "held_out": {}, "fit": {}}
         all_out, all_fit = [], []
@@ -161,7 +163,7 @@ def cmd_fit(args) -> None:
                                           "mean_p": float(p[m].mean()) if m.any() else None,
                                           "observed": float(yy[m].mean()) if m.any() else None})
         report["coef"] = dict(zip(model.features, model.coef))
-        Path(args.report).write_text(json.dumps(report, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+        atomic_write_text(args.report, json.dumps(report, indent=1, sort_keys=True) + "\n")
         if args.markdown:
             print(markdown(report))
     print(json.dumps({"out": str(args.out), "go_min_p": go_min_p, "success_mm": success_mm, "steps": int(len(y))}),
