@@ -18,6 +18,10 @@ from .plane_warp import plane_points_site, plane_warped_view, prev_pixels_throug
 
 # ChainParams.ncc_median_find: how far (new pixels) the unfiltered NCC may move the median-filtered NCC's peak
 MEDIAN_FIND_PLACE_PX = 2.0
+# vo_correction with the new image's range: when one image's pixel covers at least this many times the other's on the
+# ground at the target, the finer image's keypoints are detected on it downsampled by that ratio (Mars 2020's Mastcam-Z
+# at 10 m against its navcam at 4.5 m: ~3x; MER's pancam against its navcam: ~1.3x, left as it is)
+VO_SCALE_MATCH_MIN = 1.5
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
@@ -276,7 +280,7 @@ def _vo_location(prod: ImageProduct, X_site, n_site, pred_uv, half: int, vo, loc
 
 
 def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: float, feats: dict, params,
-                  prev_stereo=...):
+                  prev_stereo=..., new_range_m=None):
     """Whole-image visual odometry of ``prod`` from ``prev`` (:mod:`scipctl.core.visual_odometry`): SIFT keypoints of
     both whole images (full resolution, median-filtered as the feature step's; cached in ``feats`` under the
     feature step's keys), matched (2-NN ratio ``params.vo_ratio``), ``prev``'s matched keypoints placed in 3-D by
@@ -286,7 +290,11 @@ def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: floa
     ``near_dense_stereo(dl, prev, prev_range_m)`` when the caller has it, None included (its stereo failed: no
     odometry, and no second try); left out (``...``): computed here. The whole images'
     2-NN matches depend on the two images only: cached in ``feats`` under ``("knn", prev, prod, median)``, so the
-    targets of one downlink share them."""
+    targets of one downlink share them. ``new_range_m`` (the target's range from ``prod``'s camera, m; None: not
+    used): when the two images' pixels differ on the ground at the target by :data:`VO_SCALE_MATCH_MIN` or more, the
+    finer image's keypoints are detected at the coarser one's resolution (``detect_features``' ``downsample``, cached
+    under that factor; the 2-NN under ``("knn", prev, prod, median, prev factor, new factor)``) and a downsampled
+    new image's RANSAC threshold grows by its factor."""
     from ..core.features import detect_features, knn_matches
     from ..core.visual_odometry import camera_correction
     from .plane_warp import near_dense_stereo
@@ -294,16 +302,26 @@ def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: floa
     ds = near_dense_stereo(dl, prev, prev_range_m) if prev_stereo is ... else prev_stereo
     if ds is None:
         return None
+    d_prev = d_new = 1.0
+    if new_range_m is not None:
+        # new-image pixels per previous-image pixel on the ground at the target (> 1: the new image is the coarser)
+        ratio = (float(new_range_m) / prod.camera_model.hs) / (float(prev_range_m) / prev.camera_model.hs)
+        if ratio >= VO_SCALE_MATCH_MIN:
+            d_prev = ratio
+        elif 1.0 / ratio >= VO_SCALE_MATCH_MIN:
+            d_new = 1.0 / ratio
     kps = []
-    for im in (prev, prod):
-        key = (im.product_id, 1.0, params.feature_median_px)
+    for im, d in ((prev, d_prev), (prod, d_new)):
+        key = (im.product_id, d, params.feature_median_px)
         if key not in feats:
-            feats[key] = detect_features(im.pixels_float(), downsample=1.0, median_px=params.feature_median_px)
+            feats[key] = detect_features(im.pixels_float(), downsample=d, median_px=params.feature_median_px)
         kps.append(feats[key])
     f_prev, f_new = kps
     if len(f_prev) < 2 or len(f_new) < 2:
         return None
     key = ("knn", prev.product_id, prod.product_id, params.feature_median_px)
+    if (d_prev, d_new) != (1.0, 1.0):
+        key = key + (d_prev, d_new)
     if key not in feats:
         feats[key] = knn_matches(f_prev, f_new)
     knn = feats[key]
@@ -312,7 +330,8 @@ def vo_correction(dl, prev: ImageProduct, prod: ImageProduct, prev_range_m: floa
     fin = np.all(np.isfinite(X_roverprev), 1)
     X_rovernew = prod.pose.T_site_rover.inverse().apply(prev.pose.T_site_rover.apply(X_roverprev[fin]))
     uv_new = f_new.uv[knn.best[good]][fin]
-    return camera_correction(X_rovernew, uv_new, prod.camera_model, params.vo_threshold_px, params.vo_min_inliers)
+    return camera_correction(X_rovernew, uv_new, prod.camera_model, params.vo_threshold_px * d_new,
+                             params.vo_min_inliers)
 
 
 def geometric_median(points, weights, iterations: int = 100, tol_px: float = 1e-6) -> np.ndarray:
