@@ -127,15 +127,24 @@ def _without_imaging_stop_pancam(dl):
                                                   if not (im.camera == "pancam" and im.position == mid.position)]), nav
 
 
+def _designation(dl, start, mark, params):
+    """The chain's designation of ``mark`` in ``start``: its point stereo (range, m) and its point on the pixel's ray,
+    site frame ``(3,)``, as run_chain keeps it."""
+    from scipctl.core.point_stereo import on_left_ray
+    from scipctl.pipeline.chain import stereo_at
+
+    uv = np.array([mark.u, mark.v])
+    ps = stereo_at(dl, start, uv, params)
+    assert ps is not None and ps.ok
+    return float(ps.range_m), start.pose.T_site_rover.apply(on_left_ray(start.camera_model, uv, ps.xyz))
+
+
 def test_visual_odometry_across_the_drive_from_the_designation_to_the_navcam(dl):
     """From the ~10 m pancam to the imaging stop's navcam (two cameras, one drive): the whole-image correction
     (>= 100 RANSAC inliers; measured 201-212) puts each marked target's designation (the pancam's point stereo at
     its mark) within 3 px of its navcam mark, where the pose estimate puts it 80-225 px away. Measured 0.69-1.25 px
     (OpenCV 5.0.0) and 0.51-1.62 px (4.14.0) over the five targets of the two sols (/tmp/vo_only.py of session 30);
     bound = the largest x ~1.85, rounded to 0.5 px: the error is the designation's stereo and the fit's."""
-    from scipctl.core.point_stereo import on_left_ray
-    from scipctl.pipeline.chain import stereo_at
-
     start, _, mid_nav = _without_imaging_stop_pancam(dl)
     params = ChainParams()
     seen = 0
@@ -143,12 +152,9 @@ def test_visual_odometry_across_the_drive_from_the_designation_to_the_navcam(dl)
         m0, m1 = t.mark_in(start.product_id), t.mark_in(mid_nav.product_id)
         if m0 is None or m1 is None:
             continue
-        uv = np.array([m0.u, m0.v])
-        ps = stereo_at(dl, start, uv, params)
-        assert ps is not None and ps.ok
-        X_site = start.pose.T_site_rover.apply(on_left_ray(start.camera_model, uv, ps.xyz))
+        rng, X_site = _designation(dl, start, m0, params)
         X_nav = mid_nav.pose.T_site_rover.inverse().apply(X_site)
-        corr = vo_correction(dl, start, mid_nav, float(ps.range_m), {}, params)
+        corr = vo_correction(dl, start, mid_nav, rng, {}, params)
         assert corr is not None and corr.n_inliers >= 100
         pose_err = np.linalg.norm(mid_nav.camera_model.project(X_nav[None])[0] - [m1.u, m1.v])
         vo_err = np.linalg.norm(mid_nav.camera_model.project(corr.apply(X_nav[None]))[0] - [m1.u, m1.v])
@@ -164,27 +170,23 @@ def test_visual_odometry_matches_the_two_images_resolutions_only_when_they_diffe
     told a range that makes the navcam's pixel 2x the pancam's on the ground, the pancam's keypoints are detected at
     half resolution (cached under that factor, the 2-NN under both factors) and the correction still holds (>= 20
     inliers)."""
-    from scipctl.core.point_stereo import on_left_ray
-    from scipctl.pipeline.chain import stereo_at
     from scipctl.pipeline.feature_track import VO_SCALE_MATCH_MIN
 
     start, _, nav = _without_imaging_stop_pancam(dl)
     params = ChainParams()
     t = next(t for t in dl.targets if t.mark_in(start.product_id) is not None)
-    m0 = t.mark_in(start.product_id)
-    ps = stereo_at(dl, start, np.array([m0.u, m0.v]), params)
-    X_site = start.pose.T_site_rover.apply(on_left_ray(start.camera_model, np.array([m0.u, m0.v]), ps.xyz))
+    rng, X_site = _designation(dl, start, t.mark_in(start.product_id), params)
     rng_nav = float(np.linalg.norm(nav.pose.T_site_rover.inverse().apply(X_site) - nav.camera_model.C))
-    ratio = (rng_nav / nav.camera_model.hs) / (float(ps.range_m) / start.camera_model.hs)
+    ratio = (rng_nav / nav.camera_model.hs) / (rng / start.camera_model.hs)
     assert 1.0 < ratio < VO_SCALE_MATCH_MIN
     f0, f1 = {}, {}
-    c0 = vo_correction(dl, start, nav, float(ps.range_m), f0, params)
-    c1 = vo_correction(dl, start, nav, float(ps.range_m), f1, params, new_range_m=rng_nav)
+    c0 = vo_correction(dl, start, nav, rng, f0, params)
+    c1 = vo_correction(dl, start, nav, rng, f1, params, new_range_m=rng_nav)
     assert set(f0) == set(f1)
     assert np.array_equal(c0.R_camtrue_camest, c1.R_camtrue_camest)
     assert np.array_equal(c0.t_camtrue_camest_m, c1.t_camtrue_camest_m)
     f2 = {}
-    c2 = vo_correction(dl, start, nav, float(ps.range_m), f2, params, new_range_m=rng_nav * 2.0 / ratio)
+    c2 = vo_correction(dl, start, nav, rng, f2, params, new_range_m=rng_nav * 2.0 / ratio)
     m = params.feature_median_px
     assert any(len(k) == 3 and k[0] == start.product_id and abs(k[1] - 2.0) < 1e-9 and k[2] == m for k in f2)
     assert any(len(k) == 6 and k[0] == "knn" and abs(k[4] - 2.0) < 1e-9 and k[5] == 1.0 for k in f2)
