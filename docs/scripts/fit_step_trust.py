@@ -1,8 +1,9 @@
 """The chain's step trust model: its data table from campaign records, the fit, and the held-out figures
 (docs/stereo-and-tracking.md, "Trust along the chain").
 
-    # 1. the table: every chain record of campaign folders, each with its scene family
-    python docs/scripts/fit_step_trust.py table OUT1 OUT2 ... -o chains.jsonl.gz [--family-dir DIR=FAMILY ...]
+    # 1. the table: every chain record of campaign folders, each with its scene family (--add: an earlier table's
+    #    chains kept first, e.g. the committed one, whose campaigns are gone)
+    python docs/scripts/fit_step_trust.py table OUT1 OUT2 ... -o chains.jsonl.gz [--family-dir DIR=FAMILY ...] [--add T]
     # 2. the model (scipctl/data/step_trust_model.json) and the report (held out by family)
     python docs/scripts/fit_step_trust.py fit chains.jsonl.gz -o scipctl/data/step_trust_model.json --report report.json
 
@@ -29,25 +30,34 @@ def cmd_table(args) -> None:
     from scipctl.pipeline.step_trust_fit import chain_row
 
     dirs = dict(x.split("=", 1) for x in args.family_dir)
+    # --add: the rows of an earlier table first (their campaigns need not exist any more), then the campaigns'
+    try:
+        added = read_table(args.add) if args.add else []
+    except (OSError, ValueError, TypeError, KeyError) as e:
+        print(f"fit_step_trust.py table: --add {args.add}: {e}", file=sys.stderr)
+        sys.exit(2)
     rows = []
     for fam, name, record in campaign_chains(args.campaigns, dirs):
         row = chain_row(record, fam)
         row.downlink = name
         rows.append(row)
     rows.sort(key=lambda c: (c.family, c.downlink, c.target))
-    # the same downlink run by two campaigns: its first chains only
+    # the same downlink run by two campaigns (or in the added table and a campaign): its first chains only
     seen, unique = set(), []
-    for c in rows:
+    for c in added + rows:
         if (c.downlink, c.target) not in seen:
             seen.add((c.downlink, c.target))
             unique.append(c)
-    rows = unique
+    rows = sorted(unique, key=lambda c: (c.family, c.downlink, c.target))
     text = "".join(json.dumps(c.to_dict(), sort_keys=True, allow_nan=False) + "\n" for c in rows)
     atomic_write_bytes(args.out, gzip.compress(text.encode("utf-8"), mtime=0))
     fams = {}
     for c in rows:
         fams[c.family] = fams.get(c.family, 0) + 1
-    print(json.dumps({"chains": len(rows), "per_family": fams}), file=sys.stderr)
+    out = {"chains": len(rows), "per_family": fams}
+    if args.add:
+        out["added"] = len(added)
+    print(json.dumps(out), file=sys.stderr)
 
 
 def read_table(path) -> list:
@@ -205,6 +215,8 @@ def main(argv=None) -> None:
     t.add_argument("campaigns", nargs="+")
     t.add_argument("-o", "--out", required=True)
     t.add_argument("--family-dir", action="append", default=[], help="DIR=FAMILY for downlink files")
+    t.add_argument("--add", metavar="TABLE", help="keep this earlier table's chains first (its campaigns need not "
+                   "exist any more)")
     f = sub.add_parser("fit", help="the model (and report) from a chain table")
     f.add_argument("table")
     f.add_argument("-o", "--out", required=True)

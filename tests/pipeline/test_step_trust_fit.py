@@ -71,3 +71,32 @@ def test_packaged_model_scores_the_table_as_its_provenance_says(chains):
     p = m.probability(ev)
     # in-sample, the fitted probabilities separate the outcomes (the held-out figures are in the docs)
     assert np.mean(p[y]) > np.mean(p[~y])
+
+
+def test_a_table_grows_from_the_committed_one(tmp_path):
+    """``table --add OLD``: the earlier table's chains kept (their campaigns need not exist any more), the campaigns'
+    added. With no campaign records the committed table comes back byte for byte (read and written again, sorted and
+    compressed as the command always does)."""
+    import json
+
+    (tmp_path / "camp" / "records").mkdir(parents=True)
+    env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"}
+    r = subprocess.run([sys.executable, str(ROOT / "docs/scripts/fit_step_trust.py"), "table", str(tmp_path / "camp"),
+                        "--add", str(ROOT / TABLE), "-o", str(tmp_path / "t.jsonl.gz")], env=env, capture_output=True,
+                       text=True)
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stderr)
+    assert out["added"] == out["chains"] > 0
+    assert (tmp_path / "t.jsonl.gz").read_bytes() == (ROOT / TABLE).read_bytes()
+
+
+def test_a_missing_table_to_add_is_one_line_and_exit_2(tmp_path):
+    """``table --add`` of a file that is not there: one line naming it, exit code 2, nothing written."""
+    (tmp_path / "camp" / "records").mkdir(parents=True)
+    env = {"PYTHONPATH": str(ROOT), "OPENBLAS_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"}
+    r = subprocess.run([sys.executable, str(ROOT / "docs/scripts/fit_step_trust.py"), "table", str(tmp_path / "camp"),
+                        "--add", str(tmp_path / "missing.jsonl.gz"), "-o", str(tmp_path / "out.jsonl.gz")], env=env,
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and "missing.jsonl.gz" in r.stderr
+    assert not (tmp_path / "out.jsonl.gz").exists()
