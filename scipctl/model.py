@@ -27,6 +27,13 @@ class MastAngles:
     tilt_rad: float
 
 
+def unit_float(px: np.ndarray) -> np.ndarray:
+    """Pixels ``px`` (any shape) as float32 in [0, 1]: 16-bit values scaled by 65535, others by 255 (what
+    :meth:`ImageProduct.pixels_float` gives for a whole image; a window of it converted alone gives the same values)."""
+    scale = 65535.0 if px.dtype == np.uint16 else 255.0
+    return px.astype(np.float32) / scale
+
+
 @dataclass
 class ImageProduct:
     product_id: str
@@ -60,9 +67,7 @@ class ImageProduct:
 
     def pixels_float(self) -> np.ndarray:
         """Image as float32 in [0, 1] (16-bit images scaled by 65535)."""
-        px = self.pixels
-        scale = 65535.0 if px.dtype == np.uint16 else 255.0
-        return px.astype(np.float32) / scale
+        return unit_float(self.pixels)
 
 
 @dataclass(frozen=True)

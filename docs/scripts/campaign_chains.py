@@ -39,6 +39,18 @@ def campaign_chains(campaigns: list, dirs: dict):
                     yield fam, name, rec["record"]
 
 
+def first_per_target(rows: list) -> list:
+    """Table rows (each with ``family``, ``downlink`` and ``target``) with every row of a (downlink, target) seen
+    before dropped (the same downlink in two campaigns, or in an added table and a campaign: its first rows kept),
+    sorted by (family, downlink, target): the fit scripts' tables."""
+    seen, unique = set(), []
+    for r in rows:
+        if (r.downlink, r.target) not in seen:
+            seen.add((r.downlink, r.target))
+            unique.append(r)
+    return sorted(unique, key=lambda r: (r.family, r.downlink, r.target))
+
+
 def recorded_chains(path) -> tuple[dict, list]:
     """One campaign records file: ``(header, [(chain record, its ChainStep list), ...])``, the chains with steps of
     a downlink that ran (none when its header's status is not ``ok``)."""

@@ -27,15 +27,15 @@ import json
 import sys
 from pathlib import Path
 
-from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
-
 import numpy as np
+
+from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # campaign_chains, beside this script
 
 
 def cmd_table(args) -> None:
-    from campaign_chains import campaign_chains
+    from campaign_chains import campaign_chains, first_per_target
     from scipctl.pipeline.closure_trust_fit import closure_row
 
     dirs = dict(x.split("=", 1) for x in args.family_dir)
@@ -56,13 +56,7 @@ def cmd_table(args) -> None:
         row = closure_row(record, fam, name, step_model)
         if row is not None:
             rows.append(row)
-    # the same downlink in two campaigns (or in the added table and a campaign): its first rows only
-    seen, unique = set(), []
-    for r in rows:
-        if (r.downlink, r.target) not in seen:
-            seen.add((r.downlink, r.target))
-            unique.append(r)
-    rows = sorted(unique, key=lambda r: (r.family, r.downlink, r.target))
+    rows = first_per_target(rows)
     text = "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows)
     atomic_write_bytes(args.out, gzip.compress(text.encode("utf-8"), mtime=0))
     print(json.dumps({"chains": chains, "added": added, "confirmed_closures": len(rows)}), file=sys.stderr)

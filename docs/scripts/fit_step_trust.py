@@ -20,13 +20,13 @@ import json
 import sys
 from pathlib import Path
 
-from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
-
 import numpy as np
+
+from scipctl.io.atomic import atomic_write_bytes, atomic_write_text
 
 
 def cmd_table(args) -> None:
-    from campaign_chains import campaign_chains
+    from campaign_chains import campaign_chains, first_per_target
     from scipctl.pipeline.step_trust_fit import chain_row
 
     dirs = dict(x.split("=", 1) for x in args.family_dir)
@@ -42,13 +42,7 @@ def cmd_table(args) -> None:
         row.downlink = name
         rows.append(row)
     rows.sort(key=lambda c: (c.family, c.downlink, c.target))
-    # the same downlink run by two campaigns (or in the added table and a campaign): its first chains only
-    seen, unique = set(), []
-    for c in added + rows:
-        if (c.downlink, c.target) not in seen:
-            seen.add((c.downlink, c.target))
-            unique.append(c)
-    rows = sorted(unique, key=lambda c: (c.family, c.downlink, c.target))
+    rows = first_per_target(added + rows)
     text = "".join(json.dumps(c.to_dict(), sort_keys=True, allow_nan=False) + "\n" for c in rows)
     atomic_write_bytes(args.out, gzip.compress(text.encode("utf-8"), mtime=0))
     fams = {}

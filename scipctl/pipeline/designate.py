@@ -13,7 +13,7 @@ import numpy as np
 
 from ..core.point_stereo import PointStereoParams
 from ..jsonutil import RecordReader, finite_or_none
-from ..model import Downlink, ImageProduct, InputError
+from ..model import Downlink, ImageProduct, InputError, unit_float
 from .designation_trust import LOW_TEXTURE_WARNING, SATURATED_WARNING, VETO_WARNING_PREFIX, assess
 
 EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warned about
@@ -202,8 +202,8 @@ def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, ban
     warnings = []
     k = window_px // 2 + 1
     # the window's pixels as pixels_float() has them, without converting the whole image again
-    raw = left.pixels[max(0, int(uv[1]) - k):int(uv[1]) + k + 1, max(0, int(uv[0]) - k):int(uv[0]) + k + 1]
-    patch = raw.astype(np.float32) / (65535.0 if raw.dtype == np.uint16 else 255.0)
+    rows, cols = slice(max(0, int(uv[1]) - k), int(uv[1]) + k + 1), slice(max(0, int(uv[0]) - k), int(uv[0]) + k + 1)
+    patch = unit_float(left.pixels[rows, cols])
     if patch.size and float((patch >= 0.999).mean()) > 0.05:
         warnings.append(SATURATED_WARNING)
     if patch.size and float(patch.std()) < 0.01:

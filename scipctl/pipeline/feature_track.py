@@ -119,7 +119,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
             tr = track(tpl, crop, loc.uv - o, params.feature_fine_radius_px, template_center_uv=loc.uv - (cc - half),
                        min_score=0.3, accept_border_peak=False, template_mask=keep)
             tr = dataclasses.replace(tr, uv=tr.uv + o)
-            if crop is not None and median_px is not None and params.ncc_median_find and tr.ok:
+            if median_px is not None and params.ncc_median_find and tr.ok:
                 # the median found the peak; the unfiltered NCC places it and scores it (what the trust models know)
                 raw = track(raw_tpl, img, tr.uv, MEDIAN_FIND_PLACE_PX, template_center_uv=loc.uv - (cc - half),
                             min_score=0.3, accept_border_peak=False, template_mask=keep)
