@@ -196,10 +196,10 @@ def test_visual_odometry_matches_the_two_images_resolutions_only_when_they_diffe
 
 def test_visual_odometry_is_an_option_of_the_cross_drive_handoff(dl):
     """ChainParams.vo_handoff: off, the chain's handoff from the designation to the imaging stop's navcam records
-    no odometry; on (the default since session 31), it records whether the odometry's candidate won (feature_vo) and its inliers,
-    and its pixel stays confirmed within 2.5 px of the mark (measured for paper-s1-straight t1: 0.12 px on OpenCV 5.0,
-    0.25 px on 4.14; the bound is the handoff's own, the designation's stereo and one navcam NCC peak);
-    the designation is the same."""
+    no odometry; on (the default since session 31), it records whether the odometry's candidate won (feature_vo)
+    and its inliers, and its pixel stays confirmed within 2.5 px of the mark (measured for paper-s1-straight t1:
+    0.12 px on OpenCV 5.0, 0.25 px on 4.14; the bound is the handoff's own, the designation's stereo and one navcam
+    NCC peak); the designation is the same."""
     if Path(dl.source).stem != "paper-s1-straight":
         pytest.skip("one sol is enough (two whole chains)")
     start, dl2, _ = _without_imaging_stop_pancam(dl)
