@@ -114,8 +114,8 @@ class ChainParams:
     # target's surroundings alone do not (docs/stereo-and-tracking.md, "Visual odometry for the cross-drive handoff").
     # The default since session 31: over nine populations (486 chains; pop18 held out for the decision) the final
     # answer within 4 px 309 -> 330 (21 won, none lost), chain GO never wrong, the final p as well calibrated as
-    # without it (reliability 0.0064 -> 0.0048); it answers chains that had no answer, at ~50 % right and NO-GO
-    # ("Visual odometry for the cross-drive handoff"); +2-8 % of the chain's CPU
+    # without it (reliability 0.0064 -> 0.0048); it answers chains that had no answer, at ~50 % right and NO-GO;
+    # +2-8 % of the chain's CPU
     vo_handoff: bool = True
     # when the closure would start from the navcam handoff at the imaging stop (its pancam track there not trusted),
     # it first starts from the pancam image of that stop at the navcam handoff's point projected into it
