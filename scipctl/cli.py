@@ -112,12 +112,17 @@ def synth(
     family: Optional[str] = typer.Option(
         None, "--family", help="Scene family (terrain, rocks, texture, sun, error scale, rover), e.g. default, bedrock-slabs, "
                                "sand-sheet, low-sun, errors-double, m2020, mixed; all in docs/simulator.md."),
+    error_draw: int = typer.Option(
+        0, "--error-draw", help="0: the seed's own errors. N > 0: draw the random errors of every stop after the first "
+                                "(odometry, pointing, vibration, sensor noise) anew; the scene, the targets and the first "
+                                "stop's images stay the seed's."),
 ):
     """Render synthetic downlinks with exact truth."""
     from .commands import synth as command
 
     command.synth(scenario, seed, out, container, runs, no_errors, json_out, rover=rover, rover_dir=rover_dir,
-        texture_from=texture_from, texture_crop=texture_crop, texture_pixel_mm=texture_pixel_mm, family=family)
+        texture_from=texture_from, texture_crop=texture_crop, texture_pixel_mm=texture_pixel_mm, family=family,
+        error_draw=error_draw)
 
 
 @app.command()

@@ -143,7 +143,8 @@ _plain = json_default
 
 def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
         rover: str = "default", rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
-        texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5, family: Optional[str] = None) -> None:
+        texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5, family: Optional[str] = None,
+        error_draw: int = 0) -> None:
     from ..sim.scenarios import SCENARIOS, list_runs
 
     if scenario not in SCENARIOS:
@@ -162,6 +163,10 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError(str(out), "-o/--out", "exists and is not a directory")
+    if error_draw < 0:
+        raise InputError("synth", "--error-draw", f"{error_draw}: want an integer >= 0")
+    if error_draw and no_errors:
+        raise InputError("synth", "--error-draw", "not with --no-errors (there are no random errors to draw anew)")
     image_scale, supersample = _env_quality()
     # everything that can be bad input is checked before anything is written
     if family is not None:
@@ -176,14 +181,14 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
             rovers = [family_rover(family_of_run(fam, scenario, r, seed)) for r in selected]
         for rv in rovers:
             _check_scale(image_scale, rv)
-        extra = [f"--family {family}"]
+        extra = [f"--family {family}"] + ([f"--error-draw {error_draw}"] if error_draw else [])
         if rover_dir is not None:
             extra.append(f"--rover-dir {rover_dir}")
         if texture_from is not None:
             extra.append(f"--texture-from {texture_from}")
         written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale,
                              supersample=supersample, rover=sim_rover, texture=texture, extra_args=" ".join(extra),
-                             family=fam)
+                             family=fam, error_draw=error_draw)
     else:
         sim_rover = load_rover(rover, rover_dir)
         _check_scale(image_scale, sim_rover)
@@ -200,8 +205,10 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
                          + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
         elif texture_crop is not None or texture_pixel_mm != 2.5:
             raise InputError("synth", "--texture-crop" if texture_crop is not None else "--texture-pixel-mm", "only with --texture-from")
+        if error_draw:
+            extra.append(f"--error-draw {error_draw}")
         written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale, supersample=supersample,
-                             rover=sim_rover, texture=texture, extra_args=" ".join(extra))
+                             rover=sim_rover, texture=texture, extra_args=" ".join(extra), error_draw=error_draw)
     if json_out:
         emit_json({"scenario": scenario, "seed": seed, "container": container, "no_errors": no_errors, "runs": written})
     else:
@@ -246,13 +253,13 @@ def _check_scale(scale: float, sim_rover) -> None:
 
 def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, no_errors: bool,
                image_scale: float = 1.0, supersample: int = 2, show_progress: bool = True,
-               rover=None, texture=None, extra_args: str = "", family=None) -> list[dict]:
+               rover=None, texture=None, extra_args: str = "", family=None, error_draw: int = 0) -> list[dict]:
     """Build and write each run; returns one summary per run (path, counts, sha256).
 
     ``rover``: a :class:`~scipctl.sim.rover.SimRover` (None: default, or the family's); ``texture``: a
     :class:`~scipctl.sim.texture.TextureSources` (None: procedural, or the family's); ``family``: a
     :class:`~scipctl.sim.families.SceneFamily` or None; ``extra_args``: their options, for the record's
-    ``regenerate`` command."""
+    ``regenerate`` command; ``error_draw``: :func:`~scipctl.sim.build.build_run`'s."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.atomic import atomic_write_text
@@ -281,7 +288,7 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
             else:
                 errors = default_errors(scenario)
             sim = build_run(scenario, run_name, seed, errors=errors, image_scale=image_scale, supersample=supersample, progress=cb,
-                            rover=rover, texture=texture, family=family)
+                            rover=rover, texture=texture, family=family, error_draw=error_draw)
             path = out / (f"{name}.mcap" if container == "mcap" else name)
             bar.update(task, description=f"{name}: writing {path.name}")
             write_downlink(sim.downlink, path, container)

@@ -18,7 +18,7 @@ from . import rover as rover_mod
 from .errors import ErrorSettings
 from .families import FAMILIES, SceneFamily, family_of_run, family_rover, family_texture
 from .marks import compute_marks
-from .products import estimated_pose, plan_products
+from .products import error_stream, estimated_pose, plan_products
 from .scenarios import RunPlan, _rng, default_errors, list_runs, plan_run
 from .scene import Scene, make_scene
 from .targets import choose_targets
@@ -84,7 +84,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
               supersample: int = 2, render: bool = True, bits: Optional[dict] = None,
               progress: Optional[Callable[[int, int, str], None]] = None,
               rover: Optional[rover_mod.SimRover] = None, texture=None,
-              family: Union[SceneFamily, str, None] = None) -> SimRun:
+              family: Union[SceneFamily, str, None] = None, error_draw: int = 0) -> SimRun:
     """Simulate one run into an in-memory :class:`~scipctl.model.Downlink` with truth.
 
     ``errors`` defaults to :func:`default_errors` (all errors on); ``image_scale`` resamples every camera
@@ -123,7 +123,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     calibrated = rover_mod.default_rover_config() if rover is None else rover.config
     if image_scale != 1.0:
         calibrated = rover_mod.scale_rover_config(calibrated, image_scale)
-    products, geo_rec = plan_products(plan, scene, calibrated, errors)
+    products, geo_rec = plan_products(plan, scene, calibrated, errors, error_draw)
     targets, tgt_rec = choose_targets(scene, plan, products, _rng(seed, scenario, run, "targets"))
     marks = compute_marks(scene, products, targets)
     bits = dict(DEFAULT_BITS, **(bits or {}))
@@ -141,7 +141,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
             if p.eye == "left" or key not in exposure_of:
                 exposure_of[key] = auto_exposure(rad, sensor) * (errors.washed_out_factor if washed else 1.0)
             exposure = exposure_of[key]
-            rng = _rng(seed, scenario, run, "sensor", p.product_id) if errors.sensor_noise else None
+            rng = error_stream(plan, "sensor", p.stop_index > 0, error_draw, p.product_id) if errors.sensor_noise else None
             px = expose(rad, exposure, resp, sensor, rng)
         else:
             exposure = 1.0
@@ -175,6 +175,8 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
         record["texture"] = dict(texture.to_record(), **scene.appearance.texture.to_record())
     if fam is not None:
         record["family"] = fam.to_dict()
+    if error_draw:
+        record["error_draw"] = int(error_draw)
     return SimRun(plan, dl, record, scene, products, targets)
 
 
@@ -200,6 +202,7 @@ def render_stops(sim: SimRun, errors: ErrorSettings, stops, supersample: int = 2
         key = (p.stop, p.camera)
         if p.eye == "left" or key not in exposure_of:
             exposure_of[key] = auto_exposure(rad, sensor) * (errors.washed_out_factor if washed else 1.0)
-        rng = _rng(seed, scenario, run, "sensor", p.product_id) if errors.sensor_noise else None
+        rng = (error_stream(sim.plan, "sensor", p.stop_index > 0, int(sim.record.get("error_draw", 0)), p.product_id)
+               if errors.sensor_noise else None)
         out[p.product_id] = encode_png(expose(rad, exposure_of[key], resp, sensor, rng))
     return out

@@ -57,8 +57,12 @@ def _pose_dict(T_site_rover: RigidTransform) -> dict:
     return {"position_m": T_site_rover.t.tolist(), "orientation_wxyz": T_site_rover.quat_wxyz.tolist()}
 
 
-def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: ErrorSettings):
-    """Geometry of every image of a run: poses, pointing, calibrated and true models. Returns (products, record)."""
+def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: ErrorSettings, error_draw: int = 0):
+    """Geometry of every image of a run: poses, pointing, calibrated and true models. Returns (products, record).
+
+    ``error_draw``: 0 draws the random errors from the run's own streams; ``N > 0`` draws those of every stop after
+    the first (the drive's odometry, the mast's pointing noise and vibration) from other streams, keyed by ``N``,
+    so the first stop (today's images) is the same and tomorrow's errors are a new draw (:func:`error_stream`)."""
     true_cfg = true_rover_config(calibrated, errors)
     aim_site = scene.target_rock.aim_point_site()
     wheels = None if plan.rover is None else plan.rover.wheels_xy_m
@@ -68,11 +72,14 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
         s1 = plan.stops[k]
         s1.path_length_m = float(np.linalg.norm(T_site_rover_true_by_stop[k].t[:2] - T_site_rover_true_by_stop[k - 1].t[:2])) \
             * (1.05 if s1.arc_leg else 1.0)
-    r_odo = _rng(plan.seed, plan.scenario, plan.run, "odometry")
+    r_odo = error_stream(plan, "odometry", True, error_draw)  # the first pose is exact: the stream serves the drive only
     T_site_rover_est_by_stop, odo_rec = estimate_poses(T_site_rover_true_by_stop, [s.path_length_m for s in plan.stops],
                                                        [s.turn_rad for s in plan.stops], errors, r_odo)
-    r_point = _rng(plan.seed, plan.scenario, plan.run, "pointing")
-    r_vib = _rng(plan.seed, plan.scenario, plan.run, "vibration")
+    # stop after stop from one stream each; with a new draw, the stops after the first from another
+    r_point_today = error_stream(plan, "pointing", False)
+    r_vib_today = error_stream(plan, "vibration", False)
+    r_point_later = r_point_today if error_draw == 0 else error_stream(plan, "pointing", True, error_draw)
+    r_vib_later = r_vib_today if error_draw == 0 else error_stream(plan, "vibration", True, error_draw)
     head = np.asarray(calibrated.mast.tilt.origin_m)
     products, stops_rec = [], []
     t = 1000.0
@@ -82,6 +89,7 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
         t += s.path_length_m / DRIVE_SPEED_M_S + abs(s.turn_rad) / TURN_RATE_RAD_S + (SETTLE_S if k else 0.0)
         cum += s.path_length_m
         aim_rover = T_site_rover_true.inverse().apply(aim_site)
+        r_point, r_vib = (r_point_today, r_vib_today) if k == 0 else (r_point_later, r_vib_later)
         srec = {"label": s.label, "drive": k,
                 "true_pose": _pose_dict(T_site_rover_true), "estimated_pose": _pose_dict(T_site_rover_est),
                 "position_error_m": float(np.linalg.norm(T_site_rover_est.t - T_site_rover_true.t)),
@@ -118,6 +126,18 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
     rec = {"odometry": odo_rec, "stops": stops_rec,
            "mast_true": {"tilt_axis": true_cfg.mast.tilt.axis.tolist(), "tilt_origin_m": true_cfg.mast.tilt.origin_m.tolist()}}
     return products, rec
+
+
+def error_stream(plan: RunPlan, name: str, later: bool, error_draw: int = 0, *extra) -> np.random.Generator:
+    """A new generator of the random error ``name`` (``"odometry"``, ``"pointing"``, ``"vibration"``; ``"sensor"``
+    with the product id in ``extra``) of ``plan``'s run: the run's own stream, or for a stop after the first
+    (``later``) of draw ``error_draw > 0`` a stream keyed by the draw as well."""
+    if isinstance(error_draw, bool) or not isinstance(error_draw, (int, np.integer)) or error_draw < 0:
+        raise ValueError(f"error_draw: want an integer >= 0, got {error_draw!r}")
+    key = (plan.seed, plan.scenario, plan.run, name) + tuple(extra)
+    if later and error_draw > 0:
+        key = key + ("draw", int(error_draw))
+    return _rng(*key)
 
 
 def estimated_pose(T_site_rover_est: RigidTransform, cumulative_path_m: float, n_legs: int,
