@@ -105,6 +105,8 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     from ..io.images import encode_png
     from .render import Sensor, auto_exposure, expose, render_radiance
 
+    if isinstance(error_draw, bool) or not isinstance(error_draw, (int, np.integer)) or error_draw < 0:
+        raise ValueError(f"error_draw: want an integer >= 0, got {error_draw!r}")
     fam = None if family is None else family_of_run(family, scenario, run, seed)
     if fam is not None:
         if rover is None:

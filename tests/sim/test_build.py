@@ -56,3 +56,64 @@ def test_render_stops_renders_as_build_run_does():
     want = {im.product_id: im.png for im in full.downlink.images if "-near-" in im.product_id or "-far-" in im.product_id}
     assert sorted(pngs) == sorted(want) and all(pngs[k] == want[k] for k in want)
     assert all(im.png != pngs.get(im.product_id) for im in bare.downlink.images)  # bare's own images untouched
+
+
+def _same_pose(a, b) -> bool:
+    return bool(np.array_equal(a.T_site_rover.R, b.T_site_rover.R) and np.array_equal(a.T_site_rover.t, b.T_site_rover.t))
+
+
+def test_error_draw_keeps_todays_stop_and_draws_tomorrows_errors_anew(run_errors):
+    """``error_draw=N``: the first stop's images and poses and the truth stay the seed's; every later image, the
+    odometry and the later stops' pointing and vibration are another draw; the fixed errors are unchanged."""
+    drawn = build_run("paper", "s1-straight", 1, image_scale=SMALL, supersample=1, error_draw=1)
+    a, b = run_errors.downlink, drawn.downlink
+    stop0 = run_errors.plan.stops[0].label
+    assert stop0 == "pan10"
+    assert [i.product_id for i in a.images] == [i.product_id for i in b.images]
+    for ia, ib in zip(a.images, b.images):
+        if f"-{stop0}-" in ia.product_id:
+            assert ia.png == ib.png and _same_pose(ia.pose, ib.pose)
+        else:
+            assert ia.png != ib.png
+    for ta, tb in zip(a.truth_images, b.truth_images):  # true poses are the plan's; true models differ by pointing
+        assert _same_pose(ta.pose, tb.pose)
+    assert [t.id for t in a.targets] == [t.id for t in b.targets]
+    assert all(np.array_equal(x.xyz_site_m, y.xyz_site_m) for x, y in zip(a.truth_targets, b.truth_targets))
+    ra, rb = run_errors.record, drawn.record
+    assert "error_draw" not in ra and rb["error_draw"] == 1
+    assert ra["errors"] == rb["errors"] and ra["mast_true"] == rb["mast_true"]
+    assert ra["stops"][0]["pairs"] == rb["stops"][0]["pairs"]
+    assert ra["stops"][0]["estimated_pose"] == rb["stops"][0]["estimated_pose"]
+    for sa, sb in zip(ra["stops"][1:], rb["stops"][1:]):
+        assert sa["true_pose"] == sb["true_pose"] and sa["estimated_pose"] != sb["estimated_pose"]
+        assert [p["pan_rad"] for p in sa["pairs"]] != [p["pan_rad"] for p in sb["pairs"]] or not sa["pairs"][0]["pan_rad"]
+    assert ra["odometry"]["run_heading_drift_rad_per_m"] != rb["odometry"]["run_heading_drift_rad_per_m"]
+    again = build_run("paper", "s1-straight", 1, image_scale=SMALL, supersample=1, error_draw=1)
+    assert [i.png for i in again.downlink.images] == [i.png for i in b.images]  # a draw is as deterministic as a seed
+    other = build_run("paper", "s1-straight", 1, image_scale=SMALL, supersample=1, error_draw=2, render=False)
+    assert other.record["odometry"] != rb["odometry"]
+
+
+def test_error_draw_zero_is_the_seeds_own_errors(run_errors):
+    same = build_run("paper", "s1-straight", 1, image_scale=SMALL, supersample=1, error_draw=0)
+    assert [i.png for i in same.downlink.images] == [i.png for i in run_errors.downlink.images]
+    assert same.record == run_errors.record
+
+
+def test_render_stops_follows_the_error_draw():
+    from scipctl.sim.build import render_stops
+    from scipctl.sim.scenarios import default_errors
+
+    full = build_run("paper", "s1-straight", 3, image_scale=0.125, supersample=1, error_draw=2)
+    bare = build_run("paper", "s1-straight", 3, image_scale=0.125, supersample=1, render=False, error_draw=2)
+    pngs = render_stops(bare, default_errors("paper"), {"pan10", "near"}, supersample=1)
+    want = {im.product_id: im.png for im in full.downlink.images if "-near-" in im.product_id or "-pan10-" in im.product_id}
+    assert sorted(pngs) == sorted(want) and all(pngs[k] == want[k] for k in want)
+
+
+def test_error_draw_must_be_a_whole_number_at_least_zero():
+    import pytest
+
+    for bad in (-1, True, 1.5):
+        with pytest.raises(ValueError, match="error_draw"):
+            build_run("paper", "s1-straight", 1, image_scale=SMALL, supersample=1, render=False, error_draw=bad)

@@ -160,3 +160,24 @@ def test_default_output_is_byte_identical_to_a_reference_checkout(tmp_path):
     for name in ("paper-s2-arc.mcap", "paper-s2-arc.sim.json"):
         assert (tmp_path / "ref" / name).read_bytes() == (tmp_path / "new" / name).read_bytes(), name
     assert (tmp_path / "ref" / "paper-s2-arc.mcap").read_bytes() == (tmp_path / "fam" / "paper-s2-arc.mcap").read_bytes()
+
+
+def test_error_draw_is_recorded_and_regenerates(written, tmp_path):
+    base, res = written
+    r = _synth(tmp_path / "d", "--error-draw", "2", "--json")
+    assert r.exit_code == 0, r.stderr
+    got = json.loads(r.stdout)["runs"][0]
+    assert got["sha256"] != res["mcap"]["runs"][0]["sha256"] and got["targets"] == ["t1", "t2", "t3"]
+    rec = json.loads((tmp_path / "d" / "paper-s1-straight.sim.json").read_text())
+    assert rec["error_draw"] == 2 and " --error-draw 2 " in rec["written_by"]["regenerate"]
+    a = read_downlink(base / "a" / "paper-s1-straight.mcap")
+    b = read_downlink(tmp_path / "d" / "paper-s1-straight.mcap")
+    assert [i.png for i in a.images if "-pan10-" in i.product_id] == [i.png for i in b.images if "-pan10-" in i.product_id]
+
+
+@pytest.mark.parametrize("args", [["--error-draw", "-1"], ["--error-draw", "1", "--no-errors"]])
+def test_bad_error_draw_exits_2_naming_the_option(tmp_path, args):
+    r = runner.invoke(app, ["synth", "-o", str(tmp_path / "o"), *args], env=SMALL_ENV)
+    assert r.exit_code == 2 and "--error-draw" in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
