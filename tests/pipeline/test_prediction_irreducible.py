@@ -1,0 +1,100 @@
+"""docs/scripts/prediction_irreducible.py: the unbiased p(1 - p) estimator (exact expectation), reading campaigns
+over error draws, the figures on hand-made records, and its exit codes."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from tests import doc_scripts
+
+pi = doc_scripts.load("prediction_irreducible")
+
+
+def test_variance_estimate_on_hand_values():
+    got = pi.variance_unbiased(np.array([0, 1, 2, 3, 4]), 4)
+    assert got.tolist() == [0.0, 3 / 12, 4 / 12, 3 / 12, 0.0]
+
+
+@pytest.mark.parametrize("n_draws", [2, 3, 4, 7])
+@pytest.mark.parametrize("p", [0.0, 0.1, 0.5, 0.73, 1.0])
+def test_variance_estimate_is_unbiased_exactly(n_draws, p):
+    """Its expectation under Binomial(K, p), summed exactly over k, is p (1 - p) (to float rounding)."""
+    k = np.arange(n_draws + 1)
+    pmf = np.array([math.comb(n_draws, int(i)) * p**i * (1 - p) ** (n_draws - i) for i in k])
+    assert float(np.sum(pmf * pi.variance_unbiased(k, n_draws))) == pytest.approx(p * (1 - p), abs=1e-12)
+
+
+def test_variance_estimate_refuses_bad_counts():
+    with pytest.raises(ValueError, match="n_draws"):
+        pi.variance_unbiased(np.array([0]), 1)
+    with pytest.raises(ValueError, match="k"):
+        pi.variance_unbiased(np.array([5]), 4)
+
+
+def test_scene_and_draw():
+    assert pi.scene_and_draw("default-551-d2") == ("default-551", 2)
+    assert pi.scene_and_draw("default-551") == ("default-551", 0)
+    assert pi.scene_and_draw("errors-double-563-d13") == ("errors-double-563", 13)
+
+
+def _campaign(root, name, downlinks):
+    """A campaign folder: ``downlinks`` = [(scene_folder, {target: (hazcam error px or None, P, written)},
+    {target: truth xyz})]."""
+    rec_dir = root / name / "records"
+    rec_dir.mkdir(parents=True)
+    for i, (folder, per_target, truth) in enumerate(downlinks):
+        dl = root / "scenes" / folder / "paper-s1-straight.mcap"
+        dl.parent.mkdir(parents=True, exist_ok=True)
+        dl.write_bytes(b"x")
+        (dl.parent / "paper-s1-straight.sim.json").write_text(json.dumps(
+            {"targets": [{"id": t, "xyz_site_m": list(xyz)} for t, xyz in truth.items()]}))
+        lines = [{"kind": "downlink", "status": "ok", "job": {"path": str(dl)}}]
+        for t, (err, p, written) in per_target.items():
+            steps = [{"camera": "navcam", "error_px": 1.0}] + ([{"camera": "hazcam", "error_px": err}] if err is not None else [])
+            lines.append({"kind": "chain", "record": {"target": t, "steps": steps}})
+            if p is not None:
+                lines.append({"kind": "prediction", "record": {"target": t, "confidence": p, "sequence_written": written}})
+        (rec_dir / f"job{i}.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    return root / name
+
+
+def test_reads_draws_and_scores_them(tmp_path):
+    T = {"t1": (1.0, 2.0, 0.0), "t2": (3.0, 1.0, 0.0), "t3": (0.0, 0.0, 0.0)}
+    moved = dict(T, t3=(0.5, 0.0, 0.0))
+    c0 = _campaign(tmp_path, "c0", [("a-1", {"t1": (1.0, 0.8, True), "t2": (9.0, 0.6, True), "t3": (1.0, 0.5, False)}, T),
+                                    ("b-2", {"t1": (None, 0.4, False)}, {"t1": T["t1"]})])
+    cd = _campaign(tmp_path, "cd", [("a-1-d1", {"t1": (2.0, 0.8, True), "t2": (1.0, 0.6, True), "t3": (1.0, 0.5, False)}, moved),
+                                    ("b-2-d1", {"t1": (3.0, 0.4, False)}, {"t1": T["t1"]}),
+                                    ("a-1-d2", {"t1": (3.9, 0.8, True), "t2": (5.0, 0.6, True), "t3": (1.0, 0.5, False)}, T),
+                                    ("b-2-d2", {"t1": (None, 0.4, False)}, {"t1": T["t1"]})])
+    apps, excluded, draws = pi.read_campaigns([c0, cd], 4.0)
+    assert draws == [0, 1, 2]
+    assert excluded == [("a-1", "t3", "another truth target in some draw")]
+    got = {(a.scene, a.target): a.outcomes.tolist() for a in apps}
+    assert got == {("a-1", "t1"): [True, True, True], ("a-1", "t2"): [False, True, False], ("b-2", "t1"): [False, True, False]}
+    f = pi.figures(apps)
+    # k = 3, 1, 1 of K = 3: p(1-p) estimates 0, 1/3, 1/3
+    assert f["b_star"] == pytest.approx(2 / 9) and (f["all_succeed"], f["all_miss"], f["mixed"]) == (1, 0, 2)
+    y = np.array([[1, 1, 1], [0, 1, 0], [0, 1, 0]], float)
+    p = np.array([[0.8], [0.6], [0.4]])
+    assert f["brier_predicted"] == pytest.approx(np.mean((p - y) ** 2))
+    assert f["brier_base_rate"] == pytest.approx(np.mean((5 / 9 - y) ** 2))
+    assert (f["written"], f["written_runs_missed"], f["successes_with_sequence"], f["successes"]) == (2, 2, 4, 5)
+    rows = pi.oracle_writing(apps, thresholds=(0.3, 1.0))
+    assert rows[0]["written"] == 3 and rows[0]["runs_missed_share"] == pytest.approx(4 / 9)
+    assert rows[1] == {"t": 1.0, "written": 1, "runs_missed_share": 0.0, "successes_with_sequence_share": pytest.approx(3 / 5)}
+    lo_hi = pi.bootstrap(apps, 200)["b_star"]
+    assert 0.0 <= lo_hi[0] <= f["b_star"] <= lo_hi[1] <= 1 / 3
+
+
+def test_main_needs_two_draws_and_prints_json(tmp_path, capsys):
+    T = {"t1": (1.0, 2.0, 0.0)}
+    c0 = _campaign(tmp_path, "c0", [("a-1", {"t1": (1.0, 0.8, True)}, T)])
+    assert pi.main([str(c0)]) == 2
+    cd = _campaign(tmp_path, "cd", [("a-1-d1", {"t1": (7.0, 0.8, True)}, T)])
+    capsys.readouterr()
+    assert pi.main([str(c0), str(cd), "--json", "--boot", "50"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["draws"] == [0, 1] and rep["with_prediction"]["b_star"] == pytest.approx(0.5)
