@@ -46,7 +46,12 @@ class SynthSpec:
         """The recipe's identity: same recipe and tool version, same bytes (``synth`` is deterministic)."""
         from .. import __version__
 
-        text = json.dumps({"synth": self.to_dict(), "version": __version__}, sort_keys=True)
+        doc = {"synth": self.to_dict(), "version": __version__}
+        if self.family != DEFAULT_FAMILY:
+            # a family's jobs rendered with the scenario's unscaled errors before session 32: a new identity, so that
+            # resuming an older campaign folder renders them again rather than keeping those records
+            doc["family_errors"] = "scaled"
+        text = json.dumps(doc, sort_keys=True)
         return hashlib.sha256(text.encode()).hexdigest()
 
     def regenerate_command(self) -> str:

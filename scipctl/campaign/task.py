@@ -85,8 +85,13 @@ def load_downlink(job: DownlinkJob):
     from ..sim.scenarios import default_errors
 
     s = job.synth
-    errors = ErrorSettings.none() if s.no_errors else default_errors(s.scenario)
     extra = {} if s.family == DEFAULT_FAMILY else {"family": s.family}
+    # as `synth` renders it: a family's errors are the scenario's scaled by the family's error scale (build_run
+    # does that when given no errors), so only --no-errors and the default family pass errors explicitly
+    if s.no_errors:
+        errors = ErrorSettings.none()
+    else:
+        errors = None if extra else default_errors(s.scenario)
     return build_run(s.scenario, s.run, s.seed, errors=errors, image_scale=s.image_scale, supersample=s.supersample,
                      **extra).downlink
 

@@ -148,3 +148,31 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
         seen.clear()
         task._chain(dl, job, DownlinkResult(job, "k"), closure, answer)
         assert seen and all(s == want for s in seen), (closure, answer, seen)
+
+
+@pytest.mark.parametrize("family", ["errors-double", "errors-none", "sand-sheet"])
+def test_a_synthetic_job_renders_what_synth_renders_for_its_family(family):
+    """campaign --synth --families F and `synth --family F` give the same downlink: the family's error scale
+    included (before session 32 the campaign passed the scenario's default errors, so errors-double and
+    errors-none rendered with today's errors)."""
+    from scipctl.campaign.task import load_downlink
+    from scipctl.sim.build import build_run
+
+    job = synth_jobs("paper", [3], ["s1-straight"], [family], image_scale=0.125, supersample=1)[0]
+    want = build_run("paper", "s1-straight", 3, image_scale=0.125, supersample=1, family=family).downlink
+    got = load_downlink(job)
+    assert [im.png for im in got.images] == [im.png for im in want.images]
+
+
+def test_a_family_jobs_identity_changed_with_its_errors_and_the_default_did_not():
+    import hashlib
+    import json
+
+    from scipctl import __version__
+
+    plain = synth_jobs("paper", [0], ["s1-straight"])[0]
+    old = json.dumps({"synth": plain.synth.to_dict(), "version": __version__}, sort_keys=True)
+    assert plain.input_sha256 == hashlib.sha256(old.encode()).hexdigest()  # default-family campaigns resume as before
+    fam = synth_jobs("paper", [0], ["s1-straight"], ["errors-double"])[0]
+    old = json.dumps({"synth": fam.synth.to_dict(), "version": __version__}, sort_keys=True)
+    assert fam.input_sha256 != hashlib.sha256(old.encode()).hexdigest()
