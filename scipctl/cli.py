@@ -271,6 +271,7 @@ def campaign(
     runs: Optional[str] = typer.Option(None, "--runs", help="With --synth: comma-separated run names (default: all of the scenario)."),
     families: Optional[str] = typer.Option(None, "--families", help="With --synth: comma-separated scene families (default: default)."),
     no_errors: bool = typer.Option(False, "--no-errors", help="With --synth: inject no errors."),
+    error_draws: Optional[str] = typer.Option(None, "--error-draws", help="With --synth: error draws A-B or A,B,C (default 0, the seeds' own errors); each draw N > 0 renders every scene again with tomorrow's random errors drawn anew (synth --error-draw)."),
     handoff: bool = typer.Option(True, "--handoff/--no-handoff", help="Run the handoff methods."),
     chain: bool = typer.Option(True, "--chain/--no-chain", help="Run the chain from the pancam designation."),
     predict: bool = typer.Option(True, "--predict/--no-predict", help="Run the pre-uplink prediction of each marked target."),
@@ -292,7 +293,8 @@ def campaign(
     from .commands import campaign as command
 
     command.campaign(srcs, out, synth, seeds, runs, families, no_errors, handoff, chain, predict, methods, success_px,
-        fast, scheduler, workers, memory_limit, summarize, json_out, predict_route, closure, chain_answer)
+        fast, scheduler, workers, memory_limit, summarize, json_out, predict_route, closure, chain_answer,
+        error_draws=error_draws)
 
 
 def main() -> None:

@@ -8,7 +8,8 @@ errors anew (docs/sequence.md, "What today's stop cannot know").
 
 Each campaign folder holds chain and prediction records; a downlink's scene is the name of the folder holding it,
 without a trailing ``-dN`` (draw N; no suffix: draw 0, the seed's own errors), so draw 0 may come from the
-campaign of the original renders (PRED0). An approach is a (scene, target) with a chain in every draw and the same
+campaign of the original renders (PRED0). A campaign that rendered its scenes itself
+(``campaign --synth paper --seeds A-B --families ... --error-draws 0-3``) names its jobs the same way. An approach is a (scene, target) with a chain in every draw and the same
 truth target in every draw (read from the ``.sim.json`` beside each downlink). Its outcome in a draw: the chain's
 last hazcam answer within ``--success-px`` of the mark (no hazcam answer: a miss), as
 ``prediction_vs_chain.py`` scores it.
@@ -71,13 +72,19 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
             head = [r for r in recs if r.get("kind") == "downlink"]
             if not head or head[0].get("status") != "ok":
                 continue
-            path = Path(head[0]["job"]["path"])
-            scene, draw = scene_and_draw(path.parent.name)
+            job = head[0]["job"]
+            if job.get("synth"):  # campaign --synth --error-draws: the job's name ends in -dN, its recipe says N
+                scene, draw = scene_and_draw(job["name"])[0], int(job["synth"].get("error_draw", 0))
+            else:
+                scene, draw = scene_and_draw(Path(job["path"]).parent.name)
             if (scene, draw) in seen:
                 continue
-            sim = json.loads(path.with_name(path.name.removesuffix(".mcap") + ".sim.json").read_text())
-            truth = {t["id"]: tuple(float(x) for x in t["xyz_site_m"]) for t in sim["targets"]}
-            seen[(scene, draw)] = (recs, truth)
+            truth = head[0].get("truth_targets")
+            if not truth:  # records from before the header kept them: the simulation record beside the file
+                path = Path(job["path"])
+                sim = json.loads(path.with_name(path.name.removesuffix(".mcap") + ".sim.json").read_text())
+                truth = {t["id"]: t["xyz_site_m"] for t in sim["targets"]}
+            seen[(scene, draw)] = (recs, {k: tuple(float(x) for x in v) for k, v in truth.items()})
     draws = sorted({dr for _, dr in seen})
     by = collections.defaultdict(dict)
     for (scene, draw), (recs, truth) in seen.items():

@@ -23,7 +23,8 @@ FILES_FAMILY = "files"  # a downlink file with no simulation record beside it
 
 @dataclass(frozen=True)
 class SynthSpec:
-    """A synthetic downlink: ``sim.build.build_run(scenario, run, seed, errors, image_scale, supersample, family)``."""
+    """A synthetic downlink: ``sim.build.build_run(scenario, run, seed, errors, image_scale, supersample, family,
+    error_draw)``."""
 
     scenario: str
     run: str
@@ -32,15 +33,19 @@ class SynthSpec:
     no_errors: bool = False
     image_scale: float = 1.0
     supersample: int = 2
+    error_draw: int = 0  # 0: the seed's own errors; N > 0: tomorrow's random errors drawn anew (synth --error-draw)
 
     def to_dict(self) -> dict:
-        return {"scenario": self.scenario, "run": self.run, "seed": int(self.seed), "family": self.family,
-                "no_errors": self.no_errors, "image_scale": float(self.image_scale), "supersample": int(self.supersample)}
+        d = {"scenario": self.scenario, "run": self.run, "seed": int(self.seed), "family": self.family,
+             "no_errors": self.no_errors, "image_scale": float(self.image_scale), "supersample": int(self.supersample)}
+        if self.error_draw:  # absent for draw 0: recipes (and their identities) as before the option
+            d["error_draw"] = int(self.error_draw)
+        return d
 
     @classmethod
     def from_dict(cls, d: dict) -> "SynthSpec":
         return cls(d["scenario"], d["run"], int(d["seed"]), d.get("family", DEFAULT_FAMILY), bool(d["no_errors"]),
-                   float(d["image_scale"]), int(d["supersample"]))
+                   float(d["image_scale"]), int(d["supersample"]), int(d.get("error_draw", 0)))
 
     def sha256(self) -> str:
         """The recipe's identity: same recipe and tool version, same bytes (``synth`` is deterministic)."""
@@ -61,11 +66,10 @@ class SynthSpec:
             env += f"SCIPCTL_SYNTH_IMAGE_SCALE={self.image_scale:g} "
         if self.supersample != 2:
             env += f"SCIPCTL_SYNTH_SUPERSAMPLE={self.supersample} "
-        cmd = (f"{env}scipctl synth --scenario {self.scenario} --seed {self.seed} --runs {self.run}"
-               + (" --no-errors" if self.no_errors else "") + " -o OUT")
-        if self.family != DEFAULT_FAMILY:
-            cmd += f"  # scene family {self.family}: scipctl.sim.build.build_run(..., family={self.family!r})"
-        return cmd
+        return (f"{env}scipctl synth --scenario {self.scenario} --seed {self.seed} --runs {self.run}"
+                + (f" --family {self.family}" if self.family != DEFAULT_FAMILY else "")
+                + (" --no-errors" if self.no_errors else "")
+                + (f" --error-draw {self.error_draw}" if self.error_draw else "") + " -o OUT")
 
 
 @dataclass(frozen=True)
@@ -198,8 +202,8 @@ def known_families() -> tuple:
     return (DEFAULT_FAMILY,) + tuple(k for k in FAMILIES if k != DEFAULT_FAMILY)
 
 
-def parse_seeds(text: str) -> list:
-    """``"A-B"`` (inclusive) or ``"A"`` or ``"A,B,C-D"`` -> seeds in order, each once."""
+def parse_seeds(text: str, option: str = "--seeds") -> list:
+    """``"A-B"`` (inclusive) or ``"A"`` or ``"A,B,C-D"`` -> seeds (or error draws: ``option``) in order, each once."""
     seeds = []
     try:
         for part in str(text).split(","):
@@ -212,15 +216,17 @@ def parse_seeds(text: str) -> list:
                 raise ValueError
             seeds.extend(range(lo, hi + 1))
     except ValueError:
-        raise InputError("campaign", "--seeds", f"{text!r}: want A-B (0 <= A <= B), A, or a comma-separated list") from None
+        raise InputError("campaign", option, f"{text!r}: want A-B (0 <= A <= B), A, or a comma-separated list") from None
     if not seeds:
-        raise InputError("campaign", "--seeds", "no seed given")
+        raise InputError("campaign", option, "nothing given")
     return list(dict.fromkeys(seeds))
 
 
 def synth_jobs(scenario: str, seeds: list, runs: Optional[list] = None, families: Optional[list] = None,
-               no_errors: bool = False, image_scale: float = 1.0, supersample: int = 2) -> list:
-    """One job per (family, seed, run): ``runs`` default to the scenario's own, ``families`` to ``default``."""
+               no_errors: bool = False, image_scale: float = 1.0, supersample: int = 2,
+               error_draws: Optional[list] = None) -> list:
+    """One job per (family, seed, run, error draw): ``runs`` default to the scenario's own, ``families`` to
+    ``default``, ``error_draws`` to ``[0]`` (the seeds' own errors; a draw N > 0 names its job ``...-dN``)."""
     from ..sim.scenarios import SCENARIOS, list_runs
 
     if scenario not in SCENARIOS:
@@ -237,11 +243,18 @@ def synth_jobs(scenario: str, seeds: list, runs: Optional[list] = None, families
     if bad:
         raise InputError("campaign", "--families", f"unknown famil{'ies' if len(bad) > 1 else 'y'} {', '.join(bad)} "
                          f"(known: {', '.join(known)})")
+    draws = list(dict.fromkeys(int(d) for d in error_draws)) if error_draws else [0]
+    if any(d < 0 for d in draws):
+        raise InputError("campaign", "--error-draws", f"{draws}: want draws >= 0")
+    if no_errors and draws != [0]:
+        raise InputError("campaign", "--error-draws", "not with --no-errors (there are no random errors to draw anew)")
     jobs = []
     for fam in fams:
         for seed in seeds:
             for run in runs:
-                spec = SynthSpec(scenario, run, int(seed), fam, no_errors, image_scale, supersample)
-                name = f"{scenario}-{run}-seed{seed}" + ("" if fam == DEFAULT_FAMILY else f"-{fam}")
-                jobs.append(DownlinkJob(name, fam, spec.sha256(), synth=spec))
+                for draw in draws:
+                    spec = SynthSpec(scenario, run, int(seed), fam, no_errors, image_scale, supersample, draw)
+                    name = (f"{scenario}-{run}-seed{seed}" + ("" if fam == DEFAULT_FAMILY else f"-{fam}")
+                            + (f"-d{draw}" if draw else ""))
+                    jobs.append(DownlinkJob(name, fam, spec.sha256(), synth=spec))
     return jobs

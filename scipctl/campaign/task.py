@@ -93,7 +93,7 @@ def load_downlink(job: DownlinkJob):
     else:
         errors = None if extra else default_errors(s.scenario)
     return build_run(s.scenario, s.run, s.seed, errors=errors, image_scale=s.image_scale, supersample=s.supersample,
-                     **extra).downlink
+                     error_draw=s.error_draw, **extra).downlink
 
 
 def _handoff(dl, job: DownlinkJob, options: CampaignOptions, res: DownlinkResult) -> None:
@@ -170,6 +170,7 @@ def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int =
     res.cpu_s_by_stage["load"] = time.process_time() - c0
     if dl is not None:
         res.downlink_sha256 = dl.source_sha256
+        res.truth_targets = {t.id: [float(x) for x in t.xyz_site_m] for t in dl.truth_targets}
         if job.path is not None and dl.source_sha256 not in (None, job.input_sha256):
             res.fail("load", InputError(job.path, "sha256", "the file changed after the campaign hashed it"))
         stages = (("handoff", options.handoff, lambda: _handoff(dl, job, options, res)),

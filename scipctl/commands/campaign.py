@@ -30,11 +30,11 @@ def _options(handoff, chain, predict, methods, success_px, fast, predict_route="
                            predict_route, closure, *([] if chain_answer is None else [chain_answer])).check()
 
 
-def _jobs(srcs, synth, seeds, runs, families, no_errors):
+def _jobs(srcs, synth, seeds, runs, families, no_errors, error_draws=None):
     from ..campaign.jobs import file_jobs, parse_seeds, synth_jobs
 
     if synth is None:
-        for flag, v in (("--seeds", seeds), ("--runs", runs), ("--families", families)):
+        for flag, v in (("--seeds", seeds), ("--runs", runs), ("--families", families), ("--error-draws", error_draws)):
             if v is not None:
                 raise InputError("campaign", flag, "only with --synth")
         if no_errors:
@@ -50,7 +50,9 @@ def _jobs(srcs, synth, seeds, runs, families, no_errors):
 
     image_scale, supersample = _env_quality()
     split = lambda t: None if t is None else [x.strip() for x in t.split(",") if x.strip()]  # noqa: E731
-    return synth_jobs(synth, parse_seeds(seeds), split(runs), split(families), no_errors, image_scale, supersample)
+    draws = None if error_draws is None else parse_seeds(error_draws, "--error-draws")
+    return synth_jobs(synth, parse_seeds(seeds), split(runs), split(families), no_errors, image_scale, supersample,
+                      draws)
 
 
 class _Progress:
@@ -115,7 +117,8 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
              families: Optional[str], no_errors: bool, handoff: bool, chain: bool, predict: bool,
              methods: Optional[str], success_px: float, fast: bool, scheduler: Optional[str], workers: Optional[int],
              memory_limit: Optional[str], summarize_dir: Optional[Path], json_out: bool,
-             predict_route: str = "plan", closure: bool = False, chain_answer: Optional[str] = None) -> None:
+             predict_route: str = "plan", closure: bool = False, chain_answer: Optional[str] = None,
+             error_draws: Optional[str] = None) -> None:
     """``scipctl campaign``: run (or with ``summarize_dir`` only re-aggregate) and write the summary."""
     from ..campaign.cluster import ClusterSpec
     from ..campaign.store import CampaignStore
@@ -139,7 +142,7 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
         raise InputError("campaign", "-o/--out", "give the output folder")
     options = _options(handoff, chain, predict, methods, success_px, fast, predict_route, closure, chain_answer)
     cluster = ClusterSpec(scheduler, workers, memory_limit).check()
-    jobs = _jobs(srcs, synth, seeds, runs, families, no_errors)
+    jobs = _jobs(srcs, synth, seeds, runs, families, no_errors, error_draws)
     store = CampaignStore(out)
     from ..campaign.run import run_campaign
 

@@ -176,3 +176,40 @@ def test_a_family_jobs_identity_changed_with_its_errors_and_the_default_did_not(
     fam = synth_jobs("paper", [0], ["s1-straight"], ["errors-double"])[0]
     old = json.dumps({"synth": fam.synth.to_dict(), "version": __version__}, sort_keys=True)
     assert fam.input_sha256 != hashlib.sha256(old.encode()).hexdigest()
+
+
+def test_error_draws_make_one_job_per_draw_named_and_hashed():
+    jobs = synth_jobs("paper", [5], ["s1-straight"], ["sand-sheet"], error_draws=[0, 1, 2])
+    assert [j.name for j in jobs] == ["paper-s1-straight-seed5-sand-sheet", "paper-s1-straight-seed5-sand-sheet-d1",
+                                      "paper-s1-straight-seed5-sand-sheet-d2"]
+    assert jobs[0].input_sha256 == synth_jobs("paper", [5], ["s1-straight"], ["sand-sheet"])[0].input_sha256
+    assert len({j.input_sha256 for j in jobs}) == 3
+    assert "error_draw" not in jobs[0].synth.to_dict() and jobs[2].synth.to_dict()["error_draw"] == 2
+    for j in jobs:
+        assert type(j.synth).from_dict(j.synth.to_dict()) == j.synth
+    assert jobs[2].synth.regenerate_command() == ("scipctl synth --scenario paper --seed 5 --runs s1-straight "
+                                                  "--family sand-sheet --error-draw 2 -o OUT")
+    with pytest.raises(InputError, match="--error-draws"):
+        synth_jobs("paper", [5], ["s1-straight"], error_draws=[1], no_errors=True)
+    with pytest.raises(InputError, match="--error-draws"):
+        synth_jobs("paper", [5], ["s1-straight"], error_draws=[-1])
+    assert parse_seeds("0-2", "--error-draws") == [0, 1, 2]
+    with pytest.raises(InputError, match="--error-draws"):
+        parse_seeds("x", "--error-draws")
+
+
+def test_a_drawn_job_renders_what_synth_error_draw_renders():
+    from scipctl.campaign.task import load_downlink
+    from scipctl.sim.build import build_run
+
+    job = synth_jobs("paper", [3], ["s1-straight"], error_draws=[2], image_scale=0.125, supersample=1)[0]
+    want = build_run("paper", "s1-straight", 3, image_scale=0.125, supersample=1, error_draw=2).downlink
+    assert [im.png for im in load_downlink(job).images] == [im.png for im in want.images]
+
+
+def test_records_keep_the_truth_targets():
+    job = synth_jobs("paper", [0], ["s1-straight"])[0]
+    res = DownlinkResult(job, "k", truth_targets={"t1": [1.0, 2.0, 0.5]})
+    back = DownlinkResult.from_jsonl(res.to_jsonl())
+    assert back.truth_targets == {"t1": [1.0, 2.0, 0.5]}
+    assert DownlinkResult.from_jsonl(DownlinkResult(job, "k").to_jsonl()).truth_targets == {}

@@ -25,6 +25,10 @@ def test_predictions_are_those_of_sequence(dask_cluster, tmp_path):
     (path,) = (out / "records").glob("*.jsonl")
     res = DownlinkResult.from_jsonl(path.read_text())
     assert not res.handoff and not res.chains
+    from scipctl.io.downlink import read_downlink
+
+    truth = {t.id: t.xyz_site_m.tolist() for t in read_downlink(sol).truth_targets}
+    assert res.truth_targets == truth and sorted(truth) == ["t1", "t2", "t3"]  # the header keeps the truth targets
     preds = {p["target"]: p for p in res.predictions}
     assert sorted(preds) == ["t1", "t2", "t3"]  # every marked target
     # one target compared with `sequence` (no handoff.json beside the copy: the default handoff method, as here)

@@ -98,3 +98,19 @@ def test_main_needs_two_draws_and_prints_json(tmp_path, capsys):
     assert pi.main([str(c0), str(cd), "--json", "--boot", "50"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["draws"] == [0, 1] and rep["with_prediction"]["b_star"] == pytest.approx(0.5)
+
+
+def test_reads_a_synth_campaigns_jobs_and_header_truth(tmp_path):
+    rec_dir = tmp_path / "c" / "records"
+    rec_dir.mkdir(parents=True)
+    for draw, err in ((0, 1.0), (1, 6.0), (2, 2.0)):
+        name = "paper-s1-straight-seed5-sand-sheet" + (f"-d{draw}" if draw else "")
+        synth = {"scenario": "paper", "seed": 5, **({"error_draw": draw} if draw else {})}
+        lines = [{"kind": "downlink", "status": "ok", "job": {"name": name, "path": None, "synth": synth},
+                  "truth_targets": {"t1": [1.0, 2.0, 0.0]}},
+                 {"kind": "chain", "record": {"target": "t1", "steps": [{"camera": "hazcam", "error_px": err}]}}]
+        (rec_dir / f"{draw}.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    apps, excluded, draws = pi.read_campaigns([tmp_path / "c"], 4.0)
+    assert draws == [0, 1, 2] and not excluded
+    assert [(a.scene, a.target, a.outcomes.tolist(), a.p_predicted) for a in apps] == [
+        ("paper-s1-straight-seed5-sand-sheet", "t1", [True, False, True], None)]
