@@ -40,7 +40,7 @@ DRAW_SUFFIX = re.compile(r"^(?P<scene>.+)-d(?P<draw>[1-9][0-9]*)$")
 class Approach:
     """One (scene, target): ``outcomes`` ``(K,)`` bool, one per draw (draw order); ``p_predicted`` the packaged
     P(success) of draw 0 (None without a prediction record) and ``p_spread`` its max - min over the draws;
-    ``written`` whether draw 0's prediction wrote a sequence."""
+    ``written`` whether draw 0's prediction wrote a sequence; ``draws`` the draws, in the order of ``outcomes``."""
 
     scene: str
     target: str
@@ -48,6 +48,7 @@ class Approach:
     p_predicted: float | None
     p_spread: float
     written: bool | None
+    draws: list
 
 
 def scene_and_draw(folder_name: str) -> tuple[str, int]:
@@ -64,7 +65,9 @@ def chain_success(chain: dict, success_px: float) -> bool:
 
 def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
     """Approaches over every draw found in the campaign folders ``dirs``; returns ``(approaches, excluded, draws)``
-    (``excluded``: ``(scene, target, why)``). A (scene, draw) in two folders is taken from the first."""
+    (``excluded``: ``(scene, target, why)``; ``draws``: every draw seen). A scene's approaches need a chain in each
+    draw of that scene (scenes may have different numbers of draws, at least 2). A (scene, draw) in two folders is
+    taken from the first."""
     seen = {}
     for d in dirs:
         for f in sorted((Path(d) / "records").glob("*.jsonl")):
@@ -85,7 +88,9 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
                 sim = json.loads(path.with_name(path.name.removesuffix(".mcap") + ".sim.json").read_text())
                 truth = {t["id"]: t["xyz_site_m"] for t in sim["targets"]}
             seen[(scene, draw)] = (recs, {k: tuple(float(x) for x in v) for k, v in truth.items()})
-    draws = sorted({dr for _, dr in seen})
+    draws_of = collections.defaultdict(list)
+    for scene, draw in sorted(seen):
+        draws_of[scene].append(draw)
     by = collections.defaultdict(dict)
     for (scene, draw), (recs, truth) in seen.items():
         for r in recs:
@@ -95,6 +100,10 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
                 e[r["kind"]] = r["record"]
     approaches, excluded = [], []
     for (scene, tgt), v in sorted(by.items()):
+        draws = draws_of[scene]
+        if len(draws) < 2:
+            excluded.append((scene, tgt, "one draw only"))
+            continue
         if sorted(v) != draws or any("chain" not in v[d] for d in draws):
             excluded.append((scene, tgt, "no chain in some draw"))
             continue
@@ -106,37 +115,38 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
         approaches.append(Approach(scene, tgt, np.array([chain_success(v[d]["chain"], success_px) for d in draws]),
                                    None if pred0 is None else (pred0.get("confidence") or 0.0),
                                    float(max(ps) - min(ps)) if ps else 0.0,
-                                   None if pred0 is None else bool(pred0.get("sequence_written"))))
-    return approaches, excluded, draws
+                                   None if pred0 is None else bool(pred0.get("sequence_written")), draws))
+    return approaches, excluded, sorted({d for _, d in seen})
 
 
-def variance_unbiased(k: np.ndarray, n_draws: int) -> np.ndarray:
-    """Unbiased estimate of ``p (1 - p)`` from ``k`` ``(N,)`` successes in ``n_draws`` >= 2 Bernoulli(p) draws:
-    ``k (K - k) / (K (K - 1))`` (the sample variance with Bessel's correction)."""
+def variance_unbiased(k: np.ndarray, n_draws) -> np.ndarray:
+    """Unbiased estimate of ``p (1 - p)`` from ``k`` ``(N,)`` successes in ``n_draws`` (a number, or ``(N,)``) >= 2
+    Bernoulli(p) draws: ``k (K - k) / (K (K - 1))`` (the sample variance with Bessel's correction)."""
     k = np.asarray(k, float)
-    if n_draws < 2:
+    n = np.broadcast_to(np.asarray(n_draws, float), k.shape)
+    if np.any(n < 2):
         raise ValueError(f"n_draws: need at least 2 draws, got {n_draws}")
-    if np.any((k < 0) | (k > n_draws)):
+    if np.any((k < 0) | (k > n)):
         raise ValueError("k: successes must lie in [0, n_draws]")
-    return k * (n_draws - k) / (n_draws * (n_draws - 1.0))
+    return k * (n - k) / (n * (n - 1.0))
 
 
 def figures(apps: list) -> dict:
-    """B*, the packaged prediction's Brier score over every draw, the base rate's, and how the outcomes split."""
-    y = np.stack([a.outcomes for a in apps]).astype(float)  # (N, K)
-    n_draws = y.shape[1]
-    k = y.sum(1)
-    out = {"approaches": len(apps), "draws": n_draws, "runs": int(y.size), "success_rate": float(y.mean()),
-           "b_star": float(variance_unbiased(k, n_draws).mean()),
-           "all_succeed": int(np.sum(k == n_draws)), "all_miss": int(np.sum(k == 0)),
-           "mixed": int(np.sum((k > 0) & (k < n_draws)))}
+    """B*, the packaged prediction's Brier score, the base rate's, and how the outcomes split. Every figure is a
+    mean over approaches of that approach's mean over its draws (so an approach weighs the same whatever its K)."""
+    k = np.array([a.outcomes.sum() for a in apps], float)
+    n = np.array([len(a.outcomes) for a in apps], float)
+    rate = float(np.mean(k / n))
+    out = {"approaches": len(apps), "runs": int(n.sum()), "draws_per_approach": sorted({int(x) for x in n}),
+           "success_rate": rate, "b_star": float(variance_unbiased(k, n).mean()),
+           "all_succeed": int(np.sum(k == n)), "all_miss": int(np.sum(k == 0)), "mixed": int(np.sum((k > 0) & (k < n)))}
     if all(a.p_predicted is not None for a in apps):
-        p = np.array([a.p_predicted for a in apps])[:, None]
-        out["brier_predicted"] = float(np.mean((p - y) ** 2))
-        out["brier_base_rate"] = float(np.mean((y.mean() - y) ** 2))
+        out["brier_predicted"] = float(np.mean([np.mean((a.p_predicted - a.outcomes) ** 2) for a in apps]))
+        out["brier_base_rate"] = float(np.mean([np.mean((rate - a.outcomes) ** 2) for a in apps]))
         w = np.array([bool(a.written) for a in apps])
         out["written"] = int(w.sum())
-        out["written_runs_missed"] = int(np.sum(n_draws - k[w]))
+        out["written_runs"] = int(n[w].sum())
+        out["written_runs_missed"] = int(np.sum(n[w] - k[w]))
         out["successes_with_sequence"] = int(k[w].sum())
         out["successes"] = int(k.sum())
     return out
@@ -161,12 +171,12 @@ def oracle_writing(apps: list, thresholds=(0.25, 0.5, 0.75, 1.0)) -> list:
     """A prediction that knew each approach's k / K and wrote a sequence when it is >= t: written approaches, the
     share of their runs that missed and the share of all successes that had a sequence (in-sample: the same draws
     set p and score it, so this flatters the oracle)."""
-    y = np.stack([a.outcomes for a in apps]).astype(float)
-    n_draws, k = y.shape[1], y.sum(1)
+    k = np.array([a.outcomes.sum() for a in apps], float)
+    n = np.array([len(a.outcomes) for a in apps], float)
     rows = []
     for t in thresholds:
-        w = k / n_draws >= t - 1e-12
-        runs = int(w.sum()) * n_draws
+        w = k / n >= t - 1e-12
+        runs = float(n[w].sum())
         rows.append({"t": t, "written": int(w.sum()), "runs_missed_share": (runs - float(k[w].sum())) / runs if runs else 0.0,
                      "successes_with_sequence_share": float(k[w].sum() / k.sum()) if k.sum() else 0.0})
     return rows
@@ -180,7 +190,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     apps, excluded, draws = read_campaigns(a.campaigns, a.success_px)
-    if len(draws) < 2 or not apps:
+    if not apps:
         print(f"need approaches in at least 2 draws (draws found: {draws})", file=sys.stderr)
         return 2
     with_p = [x for x in apps if x.p_predicted is not None]
@@ -189,7 +199,8 @@ def main(argv=None) -> int:
               "interval_90": bootstrap(with_p or apps, a.boot),
               "max_prediction_spread_over_draws": max((x.p_spread for x in apps), default=0.0),
               "oracle_writing": oracle_writing(with_p or apps),
-              "per_draw_success": [float(np.mean([x.outcomes[i] for x in apps])) for i in range(len(draws))],
+              "per_draw_success": {d: float(np.mean([x.outcomes[x.draws.index(d)] for x in apps if d in x.draws]))
+                                   for d in draws},
               "per_scene": {s: {x.target: int(x.outcomes.sum()) for x in apps if x.scene == s}
                             for s in sorted({x.scene for x in apps})}}
     if a.json:
@@ -197,18 +208,18 @@ def main(argv=None) -> int:
         return 0
     f = report["with_prediction"] or report["all"]
     lo, hi = report["interval_90"]["b_star"]
-    print(f"draws {draws}; approaches {f['approaches']} ({len(excluded)} excluded); runs {f['runs']}; "
+    print(f"draws {draws} ({f['draws_per_approach']} per approach); approaches {f['approaches']} "
+          f"({len(excluded)} excluded); runs {f['runs']}; "
           f"chain within {a.success_px:g} px {100 * f['success_rate']:.0f} %")
     print(f"outcome the same in every draw: {f['all_succeed']} succeed, {f['all_miss']} miss; mixed {f['mixed']}")
-    print(f"B* = {f['b_star']:.3f} (90 % {lo:.3f} - {hi:.3f})")
+    print(f"B* = {f['b_star']:.4f} (90 % {lo:.4f} - {hi:.4f})")
     if "brier_predicted" in f:
         plo, phi = report["interval_90"]["brier_predicted"]
         print(f"packaged prediction: Brier {f['brier_predicted']:.3f} (90 % {plo:.3f} - {phi:.3f}); base rate "
               f"{f['brier_base_rate']:.3f}; its P differs between draws by at most "
               f"{report['max_prediction_spread_over_draws']:.3g}")
         print(f"packaged sequences: {f['written']} written, {f['written_runs_missed']} of their "
-              f"{f['written'] * f['draws']} runs missed; {f['successes_with_sequence']} of {f['successes']} successes "
-              "had one")
+              f"{f['written_runs']} runs missed; {f['successes_with_sequence']} of {f['successes']} successes had one")
     for r in report["oracle_writing"]:
         print(f"oracle writes when k/K >= {r['t']:.2f}: {r['written']} approaches, "
               f"{100 * r['runs_missed_share']:.0f} % of their runs missed, "

@@ -31,6 +31,9 @@ def test_variance_estimate_refuses_bad_counts():
         pi.variance_unbiased(np.array([0]), 1)
     with pytest.raises(ValueError, match="k"):
         pi.variance_unbiased(np.array([5]), 4)
+    with pytest.raises(ValueError, match="n_draws"):
+        pi.variance_unbiased(np.array([0, 1]), np.array([3, 1]))
+    assert pi.variance_unbiased(np.array([1, 1]), np.array([2, 4])).tolist() == [0.5, 0.25]
 
 
 def test_scene_and_draw():
@@ -81,7 +84,7 @@ def test_reads_draws_and_scores_them(tmp_path):
     p = np.array([[0.8], [0.6], [0.4]])
     assert f["brier_predicted"] == pytest.approx(np.mean((p - y) ** 2))
     assert f["brier_base_rate"] == pytest.approx(np.mean((5 / 9 - y) ** 2))
-    assert (f["written"], f["written_runs_missed"], f["successes_with_sequence"], f["successes"]) == (2, 2, 4, 5)
+    assert (f["written"], f["written_runs"], f["written_runs_missed"], f["successes_with_sequence"], f["successes"]) == (2, 6, 2, 4, 5)
     rows = pi.oracle_writing(apps, thresholds=(0.3, 1.0))
     assert rows[0]["written"] == 3 and rows[0]["runs_missed_share"] == pytest.approx(4 / 9)
     assert rows[1] == {"t": 1.0, "written": 1, "runs_missed_share": 0.0, "successes_with_sequence_share": pytest.approx(3 / 5)}
@@ -114,3 +117,20 @@ def test_reads_a_synth_campaigns_jobs_and_header_truth(tmp_path):
     assert draws == [0, 1, 2] and not excluded
     assert [(a.scene, a.target, a.outcomes.tolist(), a.p_predicted) for a in apps] == [
         ("paper-s1-straight-seed5-sand-sheet", "t1", [True, False, True], None)]
+
+
+def test_scenes_with_different_numbers_of_draws_pool_per_approach(tmp_path):
+    """One scene with 2 draws, one with 4: each approach is scored over its own scene's draws, each weighs the same."""
+    T = {"t1": (1.0, 2.0, 0.0)}
+    c = _campaign(tmp_path, "c", [("a-1", {"t1": (1.0, 0.5, True)}, T), ("a-1-d1", {"t1": (9.0, 0.5, True)}, T),
+                                  ("b-2", {"t1": (1.0, 0.9, True)}, T), ("b-2-d1", {"t1": (1.0, 0.9, True)}, T),
+                                  ("b-2-d2", {"t1": (1.0, 0.9, True)}, T), ("b-2-d3", {"t1": (9.0, 0.9, True)}, T),
+                                  ("c-3", {"t1": (1.0, 0.9, True)}, T)])
+    apps, excluded, draws = pi.read_campaigns([c], 4.0)
+    assert draws == [0, 1, 2, 3] and excluded == [("c-3", "t1", "one draw only")]
+    assert [(a.scene, a.draws, a.outcomes.tolist()) for a in apps] == [
+        ("a-1", [0, 1], [True, False]), ("b-2", [0, 1, 2, 3], [True, True, True, False])]
+    f = pi.figures(apps)
+    assert f["b_star"] == pytest.approx((1 * 1 / 2 + 3 * 1 / 12) / 2)
+    assert f["success_rate"] == pytest.approx((0.5 + 0.75) / 2) and f["runs"] == 6
+    assert f["brier_predicted"] == pytest.approx((0.25 + (3 * 0.01 + 0.81) / 4) / 2)
