@@ -58,8 +58,9 @@ def scene_and_draw(folder_name: str) -> tuple[str, int]:
 
 
 def chain_success(chain: dict, success_px: float) -> bool:
-    haz = [s for s in chain.get("steps", []) if s.get("camera") == "hazcam"]
-    err = haz[-1].get("error_px") if haz else None
+    from scipctl.pipeline.prediction_calibration_fit import last_hazcam_error_px
+
+    err = last_hazcam_error_px(chain.get("steps", []))
     return err is not None and err <= success_px
 
 
@@ -68,36 +69,36 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
     (``excluded``: ``(scene, target, why)``; ``draws``: every draw seen). A scene's approaches need a chain in each
     draw of that scene (scenes may have different numbers of draws, at least 2). A (scene, draw) in two folders is
     taken from the first."""
+    from scipctl.campaign.results import DownlinkResult
+
     seen = {}
     for d in dirs:
         for f in sorted((Path(d) / "records").glob("*.jsonl")):
-            recs = [json.loads(line) for line in f.read_text().splitlines() if line.strip()]
-            head = [r for r in recs if r.get("kind") == "downlink"]
-            if not head or head[0].get("status") != "ok":
+            res = DownlinkResult.from_jsonl(f.read_text())
+            if res.status != "ok":
                 continue
-            job = head[0]["job"]
-            if job.get("synth"):  # campaign --synth --error-draws: the job's name ends in -dN, its recipe says N
-                scene, draw = scene_and_draw(job["name"])[0], int(job["synth"].get("error_draw", 0))
+            job = res.job
+            if job.synth is not None:  # campaign --synth --error-draws: the job's name ends in -dN, its recipe says N
+                scene, draw = scene_and_draw(job.name)[0], job.synth.error_draw
             else:
-                scene, draw = scene_and_draw(Path(job["path"]).parent.name)
+                scene, draw = scene_and_draw(Path(job.path).parent.name)
             if (scene, draw) in seen:
                 continue
-            truth = head[0].get("truth_targets")
+            truth = res.truth_targets
             if not truth:  # records from before the header kept them: the simulation record beside the file
-                path = Path(job["path"])
+                path = Path(job.path)
                 sim = json.loads(path.with_name(path.name.removesuffix(".mcap") + ".sim.json").read_text())
                 truth = {t["id"]: t["xyz_site_m"] for t in sim["targets"]}
+            recs = [("chain", c) for c in res.chains] + [("prediction", p) for p in res.predictions]
             seen[(scene, draw)] = (recs, {k: tuple(float(x) for x in v) for k, v in truth.items()})
     draws_of = collections.defaultdict(list)
     for scene, draw in sorted(seen):
         draws_of[scene].append(draw)
     by = collections.defaultdict(dict)
     for (scene, draw), (recs, truth) in seen.items():
-        for r in recs:
-            if r.get("kind") in ("chain", "prediction"):
-                tgt = r["record"]["target"]
-                e = by[(scene, tgt)].setdefault(draw, {"truth": truth.get(tgt)})
-                e[r["kind"]] = r["record"]
+        for kind, rec in recs:
+            e = by[(scene, rec["target"])].setdefault(draw, {"truth": truth.get(rec["target"])})
+            e[kind] = rec
     approaches, excluded = [], []
     for (scene, tgt), v in sorted(by.items()):
         draws = draws_of[scene]

@@ -31,6 +31,8 @@ def _records(folder: Path) -> dict:
 
 
 def approaches(chain_dirs: list, pred_dir: Path, success_px: float, folder_of: dict) -> list:
+    from scipctl.pipeline.prediction_calibration_fit import last_hazcam_error_px
+
     chains, preds = {}, _records(pred_dir)
     for d in chain_dirs:
         for k, v in _records(d).items():
@@ -44,8 +46,7 @@ def approaches(chain_dirs: list, pred_dir: Path, success_px: float, folder_of: d
             if r.get("kind") != "prediction" or r["record"]["target"] not in ch:
                 continue
             p, c = r["record"], ch[r["record"]["target"]]
-            haz = [s for s in c["steps"] if s.get("camera") == "hazcam"]
-            err = haz[-1].get("error_px") if haz else None
+            err = last_hazcam_error_px(c["steps"])
             rows.append({"family": folder_of.get(sha, r.get("family")), "P": p.get("confidence") or 0.0,
                          "written": bool(p.get("sequence_written")), "success": err is not None and err <= success_px,
                          "last": c["steps"][-1] if c["steps"] else {}})

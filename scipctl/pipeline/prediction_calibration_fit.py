@@ -25,6 +25,13 @@ from .trust_fit import CLIP_Z, fit_logistic, round_sig, standardise
 SUCCESS_PX = 4.0  # the final hazcam radius of issue #15's outcome (the chain's, issue #14's: 1 cm at 1 m)
 
 
+def last_hazcam_error_px(steps: list) -> Optional[float]:
+    """The chain's outcome the prediction is scored against: the error (px) of its last hazcam step, from a campaign
+    chain record's ``steps`` (dicts); None when the chain made no hazcam step or that step has no error."""
+    haz = [s for s in steps if s.get("camera") == "hazcam"]
+    return haz[-1].get("error_px") if haz else None
+
+
 @dataclass
 class PredictionRow:
     """One approach: its route, family, downlink (``folder/file`` name and SHA-256), target, what the prediction
@@ -95,8 +102,7 @@ def approach_rows(pred_dirs: list, chain_dirs: list) -> list:
                 p = p_simulated_of(rec)
                 if p is None:
                     continue
-                haz = [s for s in ch[rec["target"]].get("steps", []) if s.get("camera") == "hazcam"]
-                err = haz[-1].get("error_px") if haz else None
+                err = last_hazcam_error_px(ch[rec["target"]].get("steps", []))
                 rows.append(PredictionRow(route, str(head.get("family") or "default"), name,
                                           head["downlink_sha256"], str(rec["target"]), p,
                                           None if err is None else float(err)))

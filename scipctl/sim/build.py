@@ -18,7 +18,7 @@ from . import rover as rover_mod
 from .errors import ErrorSettings
 from .families import FAMILIES, SceneFamily, family_of_run, family_rover, family_texture
 from .marks import compute_marks
-from .products import error_stream, estimated_pose, plan_products
+from .products import check_error_draw, error_stream, estimated_pose, plan_products
 from .scenarios import RunPlan, _rng, default_errors, list_runs, plan_run
 from .scene import Scene, make_scene
 from .targets import choose_targets
@@ -105,8 +105,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     from ..io.images import encode_png
     from .render import Sensor, auto_exposure, expose, render_radiance
 
-    if isinstance(error_draw, bool) or not isinstance(error_draw, (int, np.integer)) or error_draw < 0:
-        raise ValueError(f"error_draw: want an integer >= 0, got {error_draw!r}")
+    error_draw = check_error_draw(error_draw)
     fam = None if family is None else family_of_run(family, scenario, run, seed)
     if fam is not None:
         if rover is None:
@@ -178,7 +177,7 @@ def build_run(scenario: str, run: str, seed: int, errors: Optional[ErrorSettings
     if fam is not None:
         record["family"] = fam.to_dict()
     if error_draw:
-        record["error_draw"] = int(error_draw)
+        record["error_draw"] = error_draw
     return SimRun(plan, dl, record, scene, products, targets)
 
 

@@ -128,12 +128,18 @@ def plan_products(plan: RunPlan, scene: Scene, calibrated: RoverConfig, errors: 
     return products, rec
 
 
+def check_error_draw(error_draw) -> int:
+    """``error_draw`` as an int; ``ValueError`` unless it is a whole number >= 0 (not a bool)."""
+    if isinstance(error_draw, bool) or not isinstance(error_draw, (int, np.integer)) or error_draw < 0:
+        raise ValueError(f"error_draw: want an integer >= 0, got {error_draw!r}")
+    return int(error_draw)
+
+
 def error_stream(plan: RunPlan, name: str, later: bool, error_draw: int = 0, *extra) -> np.random.Generator:
     """A new generator of the random error ``name`` (``"odometry"``, ``"pointing"``, ``"vibration"``; ``"sensor"``
     with the product id in ``extra``) of ``plan``'s run: the run's own stream, or for a stop after the first
     (``later``) of draw ``error_draw > 0`` a stream keyed by the draw as well."""
-    if isinstance(error_draw, bool) or not isinstance(error_draw, (int, np.integer)) or error_draw < 0:
-        raise ValueError(f"error_draw: want an integer >= 0, got {error_draw!r}")
+    check_error_draw(error_draw)
     key = (plan.seed, plan.scenario, plan.run, name) + tuple(extra)
     if later and error_draw > 0:
         key = key + ("draw", int(error_draw))

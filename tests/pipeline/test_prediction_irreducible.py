@@ -7,6 +7,8 @@ import math
 import numpy as np
 import pytest
 
+from scipctl.campaign.jobs import DownlinkJob, synth_jobs
+from scipctl.campaign.results import DownlinkResult
 from tests import doc_scripts
 
 pi = doc_scripts.load("prediction_irreducible")
@@ -53,13 +55,13 @@ def _campaign(root, name, downlinks):
         dl.write_bytes(b"x")
         (dl.parent / "paper-s1-straight.sim.json").write_text(json.dumps(
             {"targets": [{"id": t, "xyz_site_m": list(xyz)} for t, xyz in truth.items()]}))
-        lines = [{"kind": "downlink", "status": "ok", "job": {"path": str(dl)}}]
+        res = DownlinkResult(DownlinkJob(dl.name, "default", f"sha{i}", path=str(dl)), "k")
         for t, (err, p, written) in per_target.items():
             steps = [{"camera": "navcam", "error_px": 1.0}] + ([{"camera": "hazcam", "error_px": err}] if err is not None else [])
-            lines.append({"kind": "chain", "record": {"target": t, "steps": steps}})
+            res.chains.append({"target": t, "steps": steps})
             if p is not None:
-                lines.append({"kind": "prediction", "record": {"target": t, "confidence": p, "sequence_written": written}})
-        (rec_dir / f"job{i}.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+                res.predictions.append({"target": t, "confidence": p, "sequence_written": written})
+        (rec_dir / f"job{i}.jsonl").write_text(res.to_jsonl())
     return root / name
 
 
@@ -107,12 +109,10 @@ def test_reads_a_synth_campaigns_jobs_and_header_truth(tmp_path):
     rec_dir = tmp_path / "c" / "records"
     rec_dir.mkdir(parents=True)
     for draw, err in ((0, 1.0), (1, 6.0), (2, 2.0)):
-        name = "paper-s1-straight-seed5-sand-sheet" + (f"-d{draw}" if draw else "")
-        synth = {"scenario": "paper", "seed": 5, **({"error_draw": draw} if draw else {})}
-        lines = [{"kind": "downlink", "status": "ok", "job": {"name": name, "path": None, "synth": synth},
-                  "truth_targets": {"t1": [1.0, 2.0, 0.0]}},
-                 {"kind": "chain", "record": {"target": "t1", "steps": [{"camera": "hazcam", "error_px": err}]}}]
-        (rec_dir / f"{draw}.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+        (job,) = synth_jobs("paper", [5], ["s1-straight"], ["sand-sheet"], error_draws=[draw])
+        res = DownlinkResult(job, "k", truth_targets={"t1": [1.0, 2.0, 0.0]},
+                             chains=[{"target": "t1", "steps": [{"camera": "hazcam", "error_px": err}]}])
+        (rec_dir / f"{draw}.jsonl").write_text(res.to_jsonl())
     apps, excluded, draws = pi.read_campaigns([tmp_path / "c"], 4.0)
     assert draws == [0, 1, 2] and not excluded
     assert [(a.scene, a.target, a.outcomes.tolist(), a.p_predicted) for a in apps] == [
