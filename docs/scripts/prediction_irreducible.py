@@ -7,7 +7,7 @@ errors anew (docs/sequence.md, "What today's stop cannot know").
     python docs/scripts/prediction_irreducible.py PRED0 predD [--success-px 4] [--boot 2000] [--json]
 
 Each campaign folder holds chain and prediction records; a downlink's scene is the name of the folder holding it,
-without a trailing ``-dN`` (draw N; no suffix: draw 0, the seed's own errors), so draw 0 may come from the
+without a trailing ``-dN`` (draw N; no suffix: draw 0, the seed's own errors), and the file's name, so draw 0 may come from the
 campaign of the original renders (PRED0). A campaign that rendered its scenes itself
 (``campaign --synth paper --seeds A-B --families ... --error-draws 0-3``) names its jobs the same way. An approach is a (scene, target) with a chain in every draw and the same
 truth target in every draw (read from the ``.sim.json`` beside each downlink). Its outcome in a draw: the chain's
@@ -80,8 +80,9 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
             job = res.job
             if job.synth is not None:  # campaign --synth --error-draws: the job's name ends in -dN, its recipe says N
                 scene, draw = scene_and_draw(job.name)[0], job.synth.error_draw
-            else:
-                scene, draw = scene_and_draw(Path(job.path).parent.name)
+            else:  # a folder may hold several runs: the scene is the folder (without -dN) and the file's name
+                base, draw = scene_and_draw(Path(job.path).parent.name)
+                scene = f"{base}/{Path(job.path).name}"
             if (scene, draw) in seen:
                 continue
             truth = res.truth_targets
@@ -190,7 +191,11 @@ def main(argv=None) -> int:
     ap.add_argument("--boot", type=int, default=2000)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
-    apps, excluded, draws = read_campaigns(a.campaigns, a.success_px)
+    try:
+        apps, excluded, draws = read_campaigns(a.campaigns, a.success_px)
+    except (OSError, ValueError, KeyError) as e:  # a records file or a simulation record that cannot be read
+        print(f"prediction_irreducible: {type(e).__name__}: {e}", file=sys.stderr)
+        return 2
     if not apps:
         print(f"need approaches in at least 2 draws (draws found: {draws})", file=sys.stderr)
         return 2

@@ -44,16 +44,16 @@ def test_scene_and_draw():
     assert pi.scene_and_draw("errors-double-563-d13") == ("errors-double-563", 13)
 
 
-def _campaign(root, name, downlinks):
+def _campaign(root, name, downlinks, run="s1-straight"):
     """A campaign folder: ``downlinks`` = [(scene_folder, {target: (hazcam error px or None, P, written)},
-    {target: truth xyz})]."""
+    {target: truth xyz})], each file ``paper-RUN.mcap``."""
     rec_dir = root / name / "records"
     rec_dir.mkdir(parents=True)
     for i, (folder, per_target, truth) in enumerate(downlinks):
-        dl = root / "scenes" / folder / "paper-s1-straight.mcap"
+        dl = root / "scenes" / folder / f"paper-{run}.mcap"
         dl.parent.mkdir(parents=True, exist_ok=True)
         dl.write_bytes(b"x")
-        (dl.parent / "paper-s1-straight.sim.json").write_text(json.dumps(
+        (dl.parent / f"paper-{run}.sim.json").write_text(json.dumps(
             {"targets": [{"id": t, "xyz_site_m": list(xyz)} for t, xyz in truth.items()]}))
         res = DownlinkResult(DownlinkJob(dl.name, "default", f"sha{i}", path=str(dl)), "k")
         for t, (err, p, written) in per_target.items():
@@ -61,7 +61,7 @@ def _campaign(root, name, downlinks):
             res.chains.append({"target": t, "steps": steps})
             if p is not None:
                 res.predictions.append({"target": t, "confidence": p, "sequence_written": written})
-        (rec_dir / f"job{i}.jsonl").write_text(res.to_jsonl())
+        (rec_dir / f"job{run}{i}.jsonl").write_text(res.to_jsonl())
     return root / name
 
 
@@ -76,9 +76,10 @@ def test_reads_draws_and_scores_them(tmp_path):
                                     ("b-2-d2", {"t1": (None, 0.4, False)}, {"t1": T["t1"]})])
     apps, excluded, draws = pi.read_campaigns([c0, cd], 4.0)
     assert draws == [0, 1, 2]
-    assert excluded == [("a-1", "t3", "another truth target in some draw")]
+    A, B = "a-1/paper-s1-straight.mcap", "b-2/paper-s1-straight.mcap"
+    assert excluded == [(A, "t3", "another truth target in some draw")]
     got = {(a.scene, a.target): a.outcomes.tolist() for a in apps}
-    assert got == {("a-1", "t1"): [True, True, True], ("a-1", "t2"): [False, True, False], ("b-2", "t1"): [False, True, False]}
+    assert got == {(A, "t1"): [True, True, True], (A, "t2"): [False, True, False], (B, "t1"): [False, True, False]}
     f = pi.figures(apps)
     # k = 3, 1, 1 of K = 3: p(1-p) estimates 0, 1/3, 1/3
     assert f["b_star"] == pytest.approx(2 / 9) and (f["all_succeed"], f["all_miss"], f["mixed"]) == (1, 0, 2)
@@ -127,10 +128,31 @@ def test_scenes_with_different_numbers_of_draws_pool_per_approach(tmp_path):
                                   ("b-2-d2", {"t1": (1.0, 0.9, True)}, T), ("b-2-d3", {"t1": (9.0, 0.9, True)}, T),
                                   ("c-3", {"t1": (1.0, 0.9, True)}, T)])
     apps, excluded, draws = pi.read_campaigns([c], 4.0)
-    assert draws == [0, 1, 2, 3] and excluded == [("c-3", "t1", "one draw only")]
+    assert draws == [0, 1, 2, 3] and excluded == [("c-3/paper-s1-straight.mcap", "t1", "one draw only")]
     assert [(a.scene, a.draws, a.outcomes.tolist()) for a in apps] == [
-        ("a-1", [0, 1], [True, False]), ("b-2", [0, 1, 2, 3], [True, True, True, False])]
+        ("a-1/paper-s1-straight.mcap", [0, 1], [True, False]), ("b-2/paper-s1-straight.mcap", [0, 1, 2, 3], [True, True, True, False])]
     f = pi.figures(apps)
     assert f["b_star"] == pytest.approx((1 * 1 / 2 + 3 * 1 / 12) / 2)
     assert f["success_rate"] == pytest.approx((0.5 + 0.75) / 2) and f["runs"] == 6
     assert f["brier_predicted"] == pytest.approx((0.25 + (3 * 0.01 + 0.81) / 4) / 2)
+
+
+def test_two_runs_in_one_folder_are_two_scenes(tmp_path):
+    """A folder holding s1-straight and s2-arc (as `synth --runs s1-straight,s2-arc` writes): each run is its own
+    scene with its own draws, not one run taken for the other's draw."""
+    T = {"t1": (1.0, 2.0, 0.0)}
+    _campaign(tmp_path, "c", [("a-1", {"t1": (1.0, 0.5, True)}, T), ("a-1-d1", {"t1": (9.0, 0.5, True)}, T)])
+    _campaign(tmp_path, "c2", [("a-1", {"t1": (2.0, 0.5, True)}, T), ("a-1-d1", {"t1": (3.0, 0.5, True)}, T)],
+              run="s2-arc")
+    apps, excluded, _ = pi.read_campaigns([tmp_path / "c", tmp_path / "c2"], 4.0)
+    assert not excluded
+    assert [(a.scene, a.outcomes.tolist()) for a in apps] == [("a-1/paper-s1-straight.mcap", [True, False]),
+                                                              ("a-1/paper-s2-arc.mcap", [True, True])]
+
+
+def test_an_unreadable_records_file_exits_2_in_one_line(tmp_path, capsys):
+    (tmp_path / "c" / "records").mkdir(parents=True)
+    (tmp_path / "c" / "records" / "x.jsonl").write_text("{}\n")
+    assert pi.main([str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "records file" in err
