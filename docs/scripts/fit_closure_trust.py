@@ -159,7 +159,8 @@ def chain_scores(campaigns: list, models: dict) -> dict:
                 continue
             m = models[n]
             p = float(m.probability([ClosureEvidence.from_dict(row.evidence)])[0])
-            go = bool(p >= m.go_min_p)
+            # as run_chain's _adopt_closure: GO needs point stereo at the closure's pixel (the step's ok) too
+            go = bool(fin["ok"]) and bool(p >= m.go_min_p)
             if n == names[0] and (abs(p - float(fin["p_success"])) > 1e-9 or go != bool(fin["go"])):
                 raise ValueError(f"{name} {rec.get('target')}: model {n!r} gives p {p} (GO {go}), the record "
                                  f"{fin['p_success']} (GO {fin['go']}): not the model the chains ran with")

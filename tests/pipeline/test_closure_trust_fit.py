@@ -142,6 +142,40 @@ def test_a_table_grows_from_the_committed_one(tmp_path):
     assert (tmp_path / "t.jsonl.gz").read_bytes() == (ROOT / TABLE).read_bytes()
 
 
+def test_chains_keep_an_adopted_closure_without_stereo_no_go(tmp_path):
+    """``chains`` scores each adopted closure again as run_chain does: GO needs point stereo at the closure's pixel
+    (the final step's ok) as well as p at the model's threshold. A closure recorded at a p above the threshold but
+    NO-GO for want of stereo gives its record back (before, the check called it another model's and exited 2)."""
+    sys.path.insert(0, str(ROOT / "docs" / "scripts"))
+    import fit_closure_trust as fct
+    from scipctl.core.closure_trust import ClosureEvidence
+    from scipctl.io.closure_trust_model import load_packaged_closure_trust_model
+    from scipctl.pipeline.closure_trust_fit import closure_row
+
+    model = load_packaged_closure_trust_model()
+    blank = {k: None for k in ("predicted_uv", "tracked_uv", "mark_uv", "error_px", "ncc_peak", "range_m",
+                               "xyz_site_m", "truth_xyz_site_m", "error_3d_m", "p_success")}
+    blank.update(ok=True, reason="", go=True, advice=None)
+    ref = dict(blank, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.99, extra={})
+    cl = {"status": "confirmed", "uv": [101.0, 201.0], "reference_step": 0, "ncc_peak": 0.97, "closure_px": 0.5,
+          "feature_local_inliers": 40, "feature_confirmed": 4, "feature_shift_px": 10.0, "scale": 0.7,
+          "feature_pooled": 4, "feature_refine_px": 0.3}
+    fin = dict(blank, camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
+               tracked_uv=[101.0, 201.0], error_px=2.0 ** 0.5,
+               extra={"final": True, "closure": cl, "answer": "closure", "handoff": {"uv": [101.5, 201.0]}})
+    row = closure_row({"target": "t1", "steps": [ref, fin]}, "fam", "d")
+    p = float(model.probability([ClosureEvidence.from_dict(row.evidence)])[0])
+    assert p >= model.go_min_p  # the case the check must get right: a p that alone would be GO
+    fin.update(p_success=p, ok=False, go=False, reason="stereo: no match")
+    (tmp_path / "camp" / "records").mkdir(parents=True)
+    header = {"kind": "downlink", "status": "ok", "family": "fam", "job": {"path": str(tmp_path / "x" / "d.mcap")}}
+    chain = {"kind": "chain", "record": {"target": "t1", "go": False, "steps": [ref, fin]}}
+    (tmp_path / "camp" / "records" / "d.jsonl").write_text(json.dumps(header) + "\n" + json.dumps(chain) + "\n")
+    out = fct.chain_scores([str(tmp_path / "camp")], {"packaged": model})
+    assert out["chains"] == 1 and out["within"] == 1
+    assert out["models"]["packaged"]["chain_go"] == 0 and out["models"]["packaged"]["p_ge_0_9"] == 1
+
+
 @pytest.mark.parametrize("args", [
     ["chains", "{tmp}/none", "--model", str(MODEL)],
     ["chains", "{tmp}/camp", "--model", "{tmp}/missing.json"],
