@@ -25,6 +25,13 @@ def _rows():
     return [ClosureRow.from_dict(json.loads(line)) for line in text.splitlines() if line.strip()]
 
 
+def _step(go: bool = False, **fields) -> dict:
+    """A chain step's record: every optional field None, ok, no reason, then ``fields``."""
+    blank = {k: None for k in ("predicted_uv", "tracked_uv", "mark_uv", "error_px", "ncc_peak", "range_m",
+                               "xyz_site_m", "truth_xyz_site_m", "error_3d_m", "p_success")}
+    return dict(blank, ok=True, reason="", go=go, advice=None, **fields)
+
+
 def test_packaged_model_is_reproduced_bit_for_bit_by_its_command(tmp_path):
     """The command of the model's provenance, run on the committed table (same relative paths), writes the same
     bytes as the packaged file."""
@@ -68,15 +75,12 @@ def test_a_row_is_made_from_a_chain_record_with_a_confirmed_closure():
     closure."""
     from scipctl.pipeline.closure_trust_fit import closure_row
 
-    blank = {k: None for k in ("predicted_uv", "tracked_uv", "mark_uv", "error_px", "ncc_peak", "range_m",
-                               "xyz_site_m", "truth_xyz_site_m", "error_3d_m", "p_success")}
-    blank.update(ok=True, reason="", go=False, advice=None)
-    ref = dict(blank, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.7, extra={})
+    ref = _step(camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.7, extra={})
     cl = {"status": "confirmed", "uv": [103.0, 204.0], "reference_step": 0, "ncc_peak": 0.8, "closure_px": 5.0,
           "feature_local_inliers": 9, "feature_confirmed": 2, "feature_shift_px": 40.0, "scale": 0.6,
           "feature_pooled": 3, "feature_refine_px": 1.25}
-    fin = dict(blank, camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
-               tracked_uv=[103.0, 209.0], extra={"final": True, "closure": cl})
+    fin = _step(camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
+                tracked_uv=[103.0, 209.0], extra={"final": True, "closure": cl})
     row = closure_row({"target": "t1", "steps": [ref, fin]}, "fam", "d")
     assert row.closure_error_px == pytest.approx(5.0) and row.handoff_error_px == pytest.approx(3.0 * 10 ** 0.5)
     assert row.evidence["from_pancam"] == 1.0 and row.evidence["ref_p_success"] == 0.7
@@ -153,16 +157,13 @@ def test_chains_keep_an_adopted_closure_without_stereo_no_go(tmp_path):
     from scipctl.pipeline.closure_trust_fit import closure_row
 
     model = load_packaged_closure_trust_model()
-    blank = {k: None for k in ("predicted_uv", "tracked_uv", "mark_uv", "error_px", "ncc_peak", "range_m",
-                               "xyz_site_m", "truth_xyz_site_m", "error_3d_m", "p_success")}
-    blank.update(ok=True, reason="", go=True, advice=None)
-    ref = dict(blank, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.99, extra={})
+    ref = _step(go=True, camera="pancam", kind="track", position=[1, 1], product_id="p", p_success=0.99, extra={})
     cl = {"status": "confirmed", "uv": [101.0, 201.0], "reference_step": 0, "ncc_peak": 0.97, "closure_px": 0.5,
           "feature_local_inliers": 40, "feature_confirmed": 4, "feature_shift_px": 10.0, "scale": 0.7,
           "feature_pooled": 4, "feature_refine_px": 0.3}
-    fin = dict(blank, camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
-               tracked_uv=[101.0, 201.0], error_px=2.0 ** 0.5,
-               extra={"final": True, "closure": cl, "answer": "closure", "handoff": {"uv": [101.5, 201.0]}})
+    fin = _step(camera="hazcam", kind="handoff", position=[1, 3], product_id="h", mark_uv=[100.0, 200.0],
+                tracked_uv=[101.0, 201.0], error_px=2.0 ** 0.5,
+                extra={"final": True, "closure": cl, "answer": "closure", "handoff": {"uv": [101.5, 201.0]}})
     row = closure_row({"target": "t1", "steps": [ref, fin]}, "fam", "d")
     p = float(model.probability([ClosureEvidence.from_dict(row.evidence)])[0])
     assert p >= model.go_min_p  # the case the check must get right: a p that alone would be GO
