@@ -133,11 +133,15 @@ def variance_unbiased(k: np.ndarray, n_draws) -> np.ndarray:
     return k * (n - k) / (n * (n - 1.0))
 
 
+def _counts(apps: list) -> tuple[np.ndarray, np.ndarray]:
+    """Per approach ``(successes k, draws K)``, each ``(N,)`` float."""
+    return (np.array([a.outcomes.sum() for a in apps], float), np.array([len(a.outcomes) for a in apps], float))
+
+
 def figures(apps: list) -> dict:
     """B*, the packaged prediction's Brier score, the base rate's, and how the outcomes split. Every figure is a
     mean over approaches of that approach's mean over its draws (so an approach weighs the same whatever its K)."""
-    k = np.array([a.outcomes.sum() for a in apps], float)
-    n = np.array([len(a.outcomes) for a in apps], float)
+    k, n = _counts(apps)
     rate = float(np.mean(k / n))
     out = {"approaches": len(apps), "runs": int(n.sum()), "draws_per_approach": sorted({int(x) for x in n}),
            "success_rate": rate, "b_star": float(variance_unbiased(k, n).mean()),
@@ -173,8 +177,7 @@ def oracle_writing(apps: list, thresholds=(0.25, 0.5, 0.75, 1.0)) -> list:
     """A prediction that knew each approach's k / K and wrote a sequence when it is >= t: written approaches, the
     share of their runs that missed and the share of all successes that had a sequence (in-sample: the same draws
     set p and score it, so this flatters the oracle)."""
-    k = np.array([a.outcomes.sum() for a in apps], float)
-    n = np.array([len(a.outcomes) for a in apps], float)
+    k, n = _counts(apps)
     rows = []
     for t in thresholds:
         w = k / n >= t - 1e-12

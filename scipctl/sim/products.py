@@ -139,10 +139,10 @@ def error_stream(plan: RunPlan, name: str, later: bool, error_draw: int = 0, *ex
     """A new generator of the random error ``name`` (``"odometry"``, ``"pointing"``, ``"vibration"``; ``"sensor"``
     with the product id in ``extra``) of ``plan``'s run: the run's own stream, or for a stop after the first
     (``later``) of draw ``error_draw > 0`` a stream keyed by the draw as well."""
-    check_error_draw(error_draw)
+    error_draw = check_error_draw(error_draw)
     key = (plan.seed, plan.scenario, plan.run, name) + tuple(extra)
     if later and error_draw > 0:
-        key = key + ("draw", int(error_draw))
+        key = key + ("draw", error_draw)
     return _rng(*key)
 
 

@@ -166,7 +166,9 @@ def test_chains_keep_an_adopted_closure_without_stereo_no_go(tmp_path):
                 extra={"final": True, "closure": cl, "answer": "closure", "handoff": {"uv": [101.5, 201.0]}})
     row = closure_row({"target": "t1", "steps": [ref, fin]}, "fam", "d")
     p = float(model.probability([ClosureEvidence.from_dict(row.evidence)])[0])
-    assert p >= model.go_min_p  # the case the check must get right: a p that alone would be GO
+    # the case the check must get right: a p that alone would be GO (0.970 against 0.94 with the packaged model, a
+    # numpy logistic of this fixed evidence: the margin does not depend on the build)
+    assert p >= model.go_min_p
     fin.update(p_success=p, ok=False, go=False, reason="stereo: no match")
     (tmp_path / "camp" / "records").mkdir(parents=True)
     header = {"kind": "downlink", "status": "ok", "family": "fam", "job": {"path": str(tmp_path / "x" / "d.mcap")}}
