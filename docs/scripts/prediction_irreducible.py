@@ -74,7 +74,10 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
     seen = {}
     for d in dirs:
         for f in sorted((Path(d) / "records").glob("*.jsonl")):
-            res = DownlinkResult.from_jsonl(f.read_text())
+            try:
+                res = DownlinkResult.from_jsonl(f.read_text())
+            except ValueError as e:  # named here: main's one line says which file
+                raise ValueError(f"{f}: {e}") from None
             if res.status != "ok":
                 continue
             job = res.job
@@ -88,8 +91,11 @@ def read_campaigns(dirs, success_px: float) -> tuple[list, list, list]:
             truth = res.truth_targets
             if not truth:  # records from before the header kept them: the simulation record beside the file
                 path = Path(job.path)
-                sim = json.loads(path.with_name(path.name.removesuffix(".mcap") + ".sim.json").read_text())
-                truth = {t["id"]: t["xyz_site_m"] for t in sim["targets"]}
+                sim_path = path.with_name(path.name.removesuffix(".mcap") + ".sim.json")
+                try:
+                    truth = {t["id"]: t["xyz_site_m"] for t in json.loads(sim_path.read_text())["targets"]}
+                except (OSError, ValueError, KeyError, TypeError) as e:
+                    raise ValueError(f"{sim_path}: targets: {type(e).__name__}: {e}") from None
             recs = [("chain", c) for c in res.chains] + [("prediction", p) for p in res.predictions]
             seen[(scene, draw)] = (recs, {k: tuple(float(x) for x in v) for k, v in truth.items()})
     draws_of = collections.defaultdict(list)

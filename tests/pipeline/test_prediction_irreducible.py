@@ -155,4 +155,15 @@ def test_an_unreadable_records_file_exits_2_in_one_line(tmp_path, capsys):
     (tmp_path / "c" / "records" / "x.jsonl").write_text("{}\n")
     assert pi.main([str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err.strip()
-    assert "\n" not in err and "records file" in err
+    assert "\n" not in err and "records file" in err and "x.jsonl" in err
+
+
+def test_a_missing_simulation_record_exits_2_naming_it(tmp_path, capsys):
+    """Records from before the header kept the truth targets read them from the .sim.json beside the downlink; when
+    it is gone the one line names that file and its field."""
+    c = _campaign(tmp_path, "c", [("a-1", {"t1": (1.0, 0.5, True)}, {"t1": (1.0, 2.0, 0.0)})])
+    sim = tmp_path / "scenes" / "a-1" / "paper-s1-straight.sim.json"
+    sim.unlink()
+    assert pi.main([str(c)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and str(sim) in err and "targets" in err
