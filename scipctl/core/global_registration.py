@@ -218,10 +218,10 @@ def global_registration(source_m: np.ndarray, source_origin_m, target_m: np.ndar
     pt, ft = fpfh_features(tgt, target_origin_m, p)
     si, ti = mutual_matches(fs, ft)
     if prior is not None:
-        T_seed, radius_m = prior
+        T_target_source_seed, radius_m = prior
         if not (np.isfinite(radius_m) and radius_m > 0):
             raise ValueError(f"prior radius must be finite and > 0, got {radius_m!r}")
-        near = np.sqrt(((T_seed.apply(ps[si]) - pt[ti]) ** 2).sum(axis=1)) < radius_m
+        near = np.sqrt(((T_target_source_seed.apply(ps[si]) - pt[ti]) ** 2).sum(axis=1)) < radius_m
         si, ti = si[near], ti[near]
     A, B = ps[si], pt[ti]
     M, inl = ransac_rigid(A, B, p)

@@ -159,16 +159,16 @@ def _fit_homographies(S: np.ndarray, D: np.ndarray) -> list:
         d = np.add.reduce(np.sqrt(((p - c[:, None, :]) ** 2).sum(axis=2)), axis=1) / n
         pos = d > 0
         sc = np.where(pos, np.sqrt(2.0) / np.where(pos, d, 1.0), 1.0)
-        T = np.zeros((B, 3, 3))
-        T[:, 0, 0], T[:, 1, 1], T[:, 2, 2] = sc, sc, 1.0
-        T[:, 0, 2], T[:, 1, 2] = -sc * c[:, 0], -sc * c[:, 1]
-        return T
+        T_norm_pix = np.zeros((B, 3, 3))
+        T_norm_pix[:, 0, 0], T_norm_pix[:, 1, 1], T_norm_pix[:, 2, 2] = sc, sc, 1.0
+        T_norm_pix[:, 0, 2], T_norm_pix[:, 1, 2] = -sc * c[:, 0], -sc * c[:, 1]
+        return T_norm_pix
 
-    def applied(T, p):  # apply_model of each sample
+    def applied(T_norm_pix, p):  # apply_model of each sample
         h = np.empty((B, n, 3))
         h[..., :2] = p
         h[..., 2] = 1.0
-        q = h @ T.transpose(0, 2, 1)
+        q = h @ T_norm_pix.transpose(0, 2, 1)
         with np.errstate(divide="ignore", invalid="ignore"):
             return q[..., :2] / q[..., 2:3]
 

@@ -193,7 +193,7 @@ class CheckedRegistration:
         return [] if self.chosen_basin is None else list(self.basins[self.chosen_basin].seeds)
 
 
-def perturbed_seeds(T_prior: RigidTransform, sigma: SeedSigma, k: float) -> list:
+def perturbed_seeds(T_target_source_prior: RigidTransform, sigma: SeedSigma, k: float) -> list:
     """``[(name, T_target_source)]``: the prior moved by ``+-k`` sigmas along the target x and y axes and turned
     by ``+-k`` sigmas about the vertical (z) through ``sigma.pivot_m``."""
     out = []
@@ -201,10 +201,10 @@ def perturbed_seeds(T_prior: RigidTransform, sigma: SeedSigma, k: float) -> list
         for sgn, s in ((1, "+"), (-1, "-")):
             t = np.zeros(3)
             t[axis] = sgn * k * sigma.translation_m
-            out.append((f"prior{s}{name}", RigidTransform(np.eye(3), t) @ T_prior))
+            out.append((f"prior{s}{name}", RigidTransform(np.eye(3), t) @ T_target_source_prior))
     for sgn, s in ((1, "+"), (-1, "-")):
-        out.append((f"prior{s}yaw", RigidTransform.rotation_about_line([0.0, 0.0, 1.0], sigma.pivot_m,
-                                                                       sgn * k * sigma.rotation_rad) @ T_prior))
+        turn = RigidTransform.rotation_about_line([0.0, 0.0, 1.0], sigma.pivot_m, sgn * k * sigma.rotation_rad)
+        out.append((f"prior{s}yaw", turn @ T_target_source_prior))
     return out
 
 
@@ -227,18 +227,22 @@ def checked_registration(prepared: PreparedClouds, sigma: SeedSigma, params: Reg
     o3d = open3d()
 
     p = params
-    T_prior = prepared.T_target_source_init
-    T_seeded_prior = T_prior.inverse()
-    plain = register_clouds(None, None, T_prior, method=method, max_iterations=max_iterations, prepared=prepared)
+    T_target_source_prior = prepared.T_target_source_init
+    # "seeded": source points already moved by the prior (target-frame coordinates); the ICP runs below answer
+    # M_target_seeded, a correction of the prior
+    T_source_seeded = T_target_source_prior.inverse()
+    plain = register_clouds(None, None, T_target_source_prior, method=method, max_iterations=max_iterations,
+                            prepared=prepared)
     scales = prepared.scales_m
     coarse = tuple(v for v in scales if v >= p.fine_below_m) or scales[:1]
     fine = scales[len(coarse):]
     probe = np.asarray(prepared.grids[max(scales)][1].points)  # the coarsest target grid, target frame
 
     poses = [("prior", np.eye(4))]
-    poses += [(name, (T @ T_seeded_prior).matrix) for name, T in perturbed_seeds(T_prior, sigma, p.perturb_sigmas)]
+    poses += [(name, (T_target_source @ T_source_seeded).matrix)
+              for name, T_target_source in perturbed_seeds(T_target_source_prior, sigma, p.perturb_sigmas)]
     if global_result is not None and global_result.T_target_source is not None:
-        poses.append(("global", (global_result.T_target_source @ T_seeded_prior).matrix))
+        poses.append(("global", (global_result.T_target_source @ T_source_seeded).matrix))
     # a seed is a start pose and a start scale: the coarsest scales' long correspondences can pull a whole cloud
     # into a wrong alignment (measured: a far registration that walked 940 px off from the seed and from the
     # truth at 0.32 m, and stayed right when started at 0.16 m)
@@ -269,14 +273,14 @@ def checked_registration(prepared: PreparedClouds, sigma: SeedSigma, params: Reg
     centre = prepared.centre_m
     sig_c = float(sigma.displacement_sigma_m(centre[None])[0])
 
-    def evaluate(T: RigidTransform, names: list) -> Basin:
-        M = (T @ T_seeded_prior).matrix
+    def evaluate(T_target_source: RigidTransform, names: list) -> Basin:
+        M = (T_target_source @ T_source_seeded).matrix
         ev = o3d.pipelines.registration.evaluate_registration(s_all, t_eval, radius, M)
-        corr = float(np.linalg.norm(T.apply(T_seeded_prior.apply(centre[None]))[0] - centre)) / sig_c
-        return Basin(T, names, float(ev.fitness), float(ev.inlier_rmse), corr, corr <= p.max_seed_sigmas)
+        corr = float(np.linalg.norm(T_target_source.apply(T_source_seeded.apply(centre[None]))[0] - centre)) / sig_c
+        return Basin(T_target_source, names, float(ev.fitness), float(ev.inlier_rmse), corr, corr <= p.max_seed_sigmas)
 
     basins = [evaluate(plain.T_target_source, basin_seeds[0])]
-    finals = [(plain.T_target_source @ T_seeded_prior).matrix]
+    finals = [(plain.T_target_source @ T_source_seeded).matrix]
     for Mc, names in zip(basin_coarse[1:], basin_seeds[1:]):
         run = icp_from(prepared, Mc, fine, method=method, max_iterations=max_iterations) if fine else None
         M = run.M_target_seeded if run is not None and run.reg is not None else Mc
@@ -285,20 +289,20 @@ def checked_registration(prepared: PreparedClouds, sigma: SeedSigma, params: Reg
             basins[same[0]].seeds.extend(names)
             continue
         finals.append(M)
-        basins.append(evaluate(RigidTransform.from_matrix(M) @ T_prior, names))
+        basins.append(evaluate(RigidTransform.from_matrix(M) @ T_target_source_prior, names))
 
     # the seed itself, unmoved, is an answer too (ICP can walk off a seed that was already right)
     same = [i for i, Mf in enumerate(finals) if _rms_displacement(np.eye(4), Mf, probe) < p.same_final_m]
     if same:
         basins[same[0]].seeds.append("seed")
     else:
-        basins.append(evaluate(T_prior, ["seed"]))
+        basins.append(evaluate(T_target_source_prior, ["seed"]))
 
     plausible = [i for i, b in enumerate(basins) if b.plausible]
     if not plausible:
-        seed_only = RegistrationResult(T_prior, basins[0].fitness, basins[0].inlier_rmse_m, plain.n_source,
-                                       plain.n_target, 0.0, 0.0, kept_seed=True)
-        return CheckedRegistration(seed_only, None, basins, global_result, T_prior, sigma,
+        seed_only = RegistrationResult(T_target_source_prior, basins[0].fitness, basins[0].inlier_rmse_m,
+                                       plain.n_source, plain.n_target, 0.0, 0.0, kept_seed=True)
+        return CheckedRegistration(seed_only, None, basins, global_result, T_target_source_prior, sigma,
                                    "no registration answer is plausible under the seed's error model: the seed is kept")
     # the best-supported answer: the prior's own basin (the plain ICP answer) if it fits within fitness_margin of
     # the best plausible one, else the best plausible one
@@ -308,11 +312,12 @@ def checked_registration(prepared: PreparedClouds, sigma: SeedSigma, params: Reg
         result = plain
     else:
         b = basins[chosen]
-        T_corr = b.T_target_source @ T_prior.inverse()
+        T_target_seeded_corr = b.T_target_source @ T_target_source_prior.inverse()
         result = RegistrationResult(b.T_target_source, b.fitness, b.inlier_rmse_m, plain.n_source, plain.n_target,
-                                    T_corr.rotation_angle_rad(),
-                                    float(np.linalg.norm(T_corr.apply(centre[None])[0] - centre)), kept_seed=False)
-    return CheckedRegistration(result, chosen, basins, global_result, T_prior, sigma)
+                                    T_target_seeded_corr.rotation_angle_rad(),
+                                    float(np.linalg.norm(T_target_seeded_corr.apply(centre[None])[0] - centre)),
+                                    kept_seed=False)
+    return CheckedRegistration(result, chosen, basins, global_result, T_target_source_prior, sigma)
 
 
 @dataclass
@@ -447,8 +452,8 @@ def registration_evidence(reg: CheckedRegistration, X_source_m, project: Callabl
     g = reg.global_result
     g_basin = next((i for i, b in enumerate(basins) if any(n.startswith("global") for n in b.seeds)), None)
 
-    def px(T: RigidTransform) -> float:
-        q = np.asarray(project(T.apply(Xs)), float)[0]
+    def px(T_target_source: RigidTransform) -> float:
+        q = np.asarray(project(T_target_source.apply(Xs)), float)[0]
         return float(np.linalg.norm(q - uv)) if np.all(np.isfinite(q)) and np.all(np.isfinite(uv)) else float("inf")
 
     corr_m = float(np.linalg.norm(reg.prior.apply(Xs)[0] - X))

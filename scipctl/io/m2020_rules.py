@@ -66,9 +66,9 @@ def _rot(axis: np.ndarray, q: np.ndarray) -> np.ndarray:
     return M
 
 
-def _hom(T) -> np.ndarray:
+def _hom(T_parent_child) -> np.ndarray:
     M = np.eye(4)
-    M[:3, :3], M[:3, 3] = T.R, T.t
+    M[:3, :3], M[:3, 3] = T_parent_child.R, T_parent_child.t
     return M
 
 
@@ -76,19 +76,19 @@ def arm_fk(joints: dict, link: str, q_rad: np.ndarray) -> tuple:
     """Forward kinematics of the arm: ``(T_rover_link (N, 4, 4), joint origins (5, N, 3))`` for joint angles
     ``q_rad`` (N, 5) in the order of :data:`ARM_JOINTS` (rover frame; ``link`` hangs below ``Body_RA_Link5``)."""
     q = np.atleast_2d(np.asarray(q_rad, float))
-    T = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()
+    T_rover_link = np.broadcast_to(np.eye(4), (len(q), 4, 4)).copy()  # down the chain, one link at a time
     origins = []
     for j in chain(joints, ROVER_LINK, link):
-        T = T @ _hom(j.T_parent_origin)
+        T_rover_link = T_rover_link @ _hom(j.T_parent_origin)
         if j.kind in ("revolute", "continuous"):
             k = ARM_JOINTS.index(j.name)
-            origins.append(T[:, :3, 3].copy())
-            T = T @ _rot(j.axis, q[:, k])
-    return T, np.array(origins)
+            origins.append(T_rover_link[:, :3, 3].copy())
+            T_rover_link = T_rover_link @ _rot(j.axis, q[:, k])
+    return T_rover_link, np.array(origins)
 
 
-def _yaw(T) -> float:
-    return math.atan2(T.R[1, 0], T.R[0, 0])
+def _yaw(T_parent_child) -> float:
+    return math.atan2(T_parent_child.R[1, 0], T_parent_child.R[0, 0])
 
 
 @dataclass(frozen=True)
@@ -184,8 +184,8 @@ def ground_reach(joints: dict, limits: dict, instrument: str, n_q2: int = 20001)
     families = []
     for psi, alpha in ((0.5 * np.pi, 0.0), (-0.5 * np.pi, np.pi)):
         q5 = (alpha - yaw_i - lim[4][0]) % (2 * np.pi) + lim[4][0]
-        T, o = arm_fk(joints, instrument, np.array([[0.0, 0.0, 0.0, psi, q5]]))
-        c = T[0, :3, 3] - j4  # instrument from the wrist joint, constant for this family (link 1 frame)
+        T_rover_instrument, o = arm_fk(joints, instrument, np.array([[0.0, 0.0, 0.0, psi, q5]]))
+        c = T_rover_instrument[0, :3, 3] - j4  # instrument from the wrist joint, constant for this family (link 1 frame)
         c5 = o[4, 0] - j4  # the turret joint from the wrist joint
         runs = []
         v = (-c[2] - j2[2] - l2 * np.sin(q2)) / l3  # sin(q2 + q3) for the instrument at z = 0
@@ -234,10 +234,10 @@ def footprint_from_urdf(joints: dict) -> Footprint:
     wheels = wheels_xy_from_urdf(joints)
     z = []
     for link in ("Body_WheelLeftFront", "Body_WheelLeftMiddle", "Body_WheelLeftRear"):
-        T = RigidTransform.identity()
+        T_rover_wheel = RigidTransform.identity()
         for j in chain(joints, ROVER_LINK, link):
-            T = T @ j.T_parent_child(0.0)
-        z.append(-T.t[2])
+            T_rover_wheel = T_rover_wheel @ j.T_parent_child(0.0)
+        z.append(-T_rover_wheel.t[2])
     radius = float(np.mean(z))
     front = float(wheels[:, 0].max()) + radius
     half_width = 0.5 * PUBLISHED_WIDTH_M

@@ -143,6 +143,8 @@ def pancam_from_navcam(dl, N):
                         nav.pose.T_site_rover.inverse().apply(np.asarray(N.xyz_site_m, float)))
     X_site = nav.pose.T_site_rover.apply(X_nav)
     uv = pan.camera_model.project(pan.pose.T_site_rover.inverse().apply(X_site)[None])[0]
+    # inside the outermost pixel centres (stricter than the image's extent [-0.5, W - 0.5]): a reference needs
+    # pixels on every side to cut its template from
     if not (np.all(np.isfinite(uv)) and 0 <= uv[0] <= pan.width - 1 and 0 <= uv[1] <= pan.height - 1):
         return None
     return dataclasses.replace(N, camera="pancam", product_id=pan.product_id, tracked_uv=[float(x) for x in uv],

@@ -174,9 +174,9 @@ def target_view(case: HandoffCase, nav_uv, hparams: HandoffParams, sigma_floor_m
     registration checks), if it ran.
     """
     nav_uv = np.asarray(nav_uv, float).reshape(2)
-    T_seed = case.T_haz_nav
+    T_haz_nav_seed = case.T_haz_nav
     reg = case.whole_registration()
-    T_reg = T_seed if isinstance(reg, Exception) else reg.T_target_source
+    T_haz_nav_reg = T_haz_nav_seed if isinstance(reg, Exception) else reg.T_target_source
     regd = {}
     if registration is not None:
         check = registration.diagnostics.get("registration_check") or {}
@@ -188,18 +188,19 @@ def target_view(case: HandoffCase, nav_uv, hparams: HandoffParams, sigma_floor_m
         regd = {"fitness": float(reg.fitness), "rmse_m": float(reg.inlier_rmse_m)}
     ps = case.point_stereo(nav_uv)
     if not ps.ok:
-        return TargetView(case.label, case, nav_uv, None, T_reg, NAN, reg=regd)
+        return TargetView(case.label, case, nav_uv, None, T_haz_nav_reg, NAN, reg=regd)
     X_nav = np.asarray(ps.xyz, float)
-    X_pred = T_reg.apply(X_nav)
+    X_pred = T_haz_nav_reg.apply(X_nav)
     r_nav = float(np.linalg.norm(X_nav - case.nav.left_model.C))
     r_haz = float(np.linalg.norm(X_pred - case.haz.left_model.C))
     ds = hparams.registration_disparity_sigma_px
     sigma = math.sqrt(_range_sigma_m(r_nav, case.nav.dense.focal_baseline_px_m, ds) ** 2
                       + _range_sigma_m(r_haz, case.haz.dense.focal_baseline_px_m, ds) ** 2 + sigma_floor_m**2)
-    view = TargetView(case.label, case, nav_uv, X_pred, T_reg, sigma, reg=regd)
+    view = TargetView(case.label, case, nav_uv, X_pred, T_haz_nav_reg, sigma, reg=regd)
     n_nav = nav_plane_normal(case, hparams, nav_uv, X_nav)
     if n_nav is not None:
-        tpl, tc, A = plane_window(case, T_seed.apply(X_nav), T_seed.rotate(n_nav), hparams.template_half_px)
+        tpl, tc, A = plane_window(case, T_haz_nav_seed.apply(X_nav), T_haz_nav_seed.rotate(n_nav),
+                                  hparams.template_half_px)
         if tpl is not None and np.all(np.isfinite(A)) and abs(np.linalg.det(A)) > 1e-6:
             view.template, view.template_centre, view.A = tpl, np.asarray(tc, float), np.asarray(A, float)
     return view
