@@ -132,7 +132,8 @@ def designate(
     product: Optional[str] = typer.Option(None, "--product", help="Left-eye product id."),
     camera: Optional[str] = typer.Option(None, "--camera", help="Use this camera's left image at the latest position."),
     pixel: str = typer.Option(..., "--pixel", help="U,V (column,row; sub-pixel allowed)."),
-    target_id: Optional[str] = typer.Option(None, "--id", help="Target name (default: d<N>, the first free one)."),
+    target_id: Optional[str] = typer.Option(None, "--id", help="Target name: letters, digits, _ . - (default: d<N>, the first free one)."),
+    replace_id: bool = typer.Option(False, "--replace", help="Designate --id anew although it is already a saved designation or a marked target."),
     band_px: Optional[float] = typer.Option(None, "--band-px", help="Half-width of the epipolar search band."),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
@@ -140,7 +141,8 @@ def designate(
     """Designate a 3-D target from a pixel in a left stereo image."""
     from .commands import designate as command
 
-    command.designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=products_dir)
+    command.designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=products_dir,
+                      replace_id=replace_id)
 
 
 @app.command("simulate-handoff")

@@ -4,20 +4,24 @@ from __future__ import annotations
 
 import sys
 
-from ..errors import CommandFailed
+from ..errors import CommandFailed, InputError
 from .output import emit_json, note, stderr_console
 
 
-def designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=None):
-    """``scipctl designate``: the 3-D target at ``pixel`` of a left product, added to ``targets.json``."""
+def designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=None, replace_id=False):
+    """``scipctl designate``: the 3-D target at ``pixel`` of a left product, added to ``targets.json``. An id that
+    is already a saved designation or one of the downlink's marked targets is refused unless ``replace_id``."""
     from dataclasses import replace
 
     from ..io.provenance import provenance
     from ..io.workspace import open_source
-    from ..pipeline.designate import designate as designate_target, designations_from_doc, parse_pixel, pick_left_product
+    from ..pipeline.designate import (check_target_id, designate as designate_target, designations_from_doc,
+                                      parse_pixel, pick_left_product)
     from .params import designation_params
 
     uv = parse_pixel(pixel)
+    if target_id is not None:
+        check_target_id(target_id)
     source = open_source(src, products_root=products_root)
     source.check_writable()  # before the work: say now if the products cannot be saved anywhere
     dl = source.downlink
@@ -25,6 +29,14 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     targets = source.load_json("targets.json", default={"targets": []}) or {"targets": []}
     saved = designations_from_doc(targets, str(source.read_from.get("targets.json", "targets.json")))
     existing = {t.id for t in saved}
+    if target_id is not None and not replace_id:
+        where = str(source.read_from.get("targets.json", "targets.json"))
+        if target_id in existing:
+            raise InputError("--id", "id", f"{target_id!r} is already a designated target in {where}; choose another "
+                             "--id, or pass --replace to designate it anew")
+        if any(t.id == target_id for t in dl.targets):
+            raise InputError("--id", "id", f"{target_id!r} is a marked target of the downlink; choose another --id, "
+                             "or pass --replace to designate it anew (the designation then stands for it)")
     if target_id is None:
         n = 1
         while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
@@ -38,7 +50,7 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     rec = replace(rec, provenance=provenance({"downlink": str(src)}))
     if not rec.ok:
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec.reason}",
-                            payload=rec.to_dict())
+                            payload=dict(rec.to_dict(), saved_to=None))  # not saved
     targets["targets"] = [t.to_dict() for t in saved if t.id != target_id] + [rec.to_dict()]
     targets["provenance"] = rec.provenance
     path = source.save_json("targets.json", targets)

@@ -6,6 +6,7 @@ The designation record (:class:`Designation`) is written to ``targets.json`` by 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from typing import Optional
 
@@ -152,7 +153,22 @@ def designations_from_doc(doc, product: str = "targets.json") -> list:
     return [Designation.from_dict(r, product, i) for i, r in enumerate(doc.get("targets") or [])]
 
 
+#: what a target id may be: it names files' records, sequence headers and command options, so one word of
+#: letters, digits, '_', '.' and '-' (starting with a letter or digit), at most 64 characters
+TARGET_ID_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+
+
+def check_target_id(text: str) -> str:
+    """``text`` when it is a valid target id (:data:`TARGET_ID_RE`), else :class:`InputError` naming ``--id``."""
+    if not isinstance(text, str) or not TARGET_ID_RE.fullmatch(text):
+        raise InputError("--id", "id", "expected 1-64 letters, digits, '_', '.' or '-', starting with a letter or "
+                         f"digit, got {text!r}")
+    return text
+
+
 def pick_left_product(dl: Downlink, product_id: Optional[str], camera: Optional[str]) -> ImageProduct:
+    if product_id and camera:
+        raise InputError("designate", "--product", "give --product PRODUCT_ID or --camera NAME, not both")
     if product_id:
         p = dl.product(product_id)
     elif camera:

@@ -151,3 +151,46 @@ def test_a_vetoed_designation_exits_1_saying_why_and_is_saved(tmp_path):
     saved = json.loads((tmp_path / "faint.mcap.scipctl" / "targets.json").read_text())
     rec = next(t for t in saved["targets"] if t["id"] == "f1")
     assert rec["go"] is False and any(w.startswith("NO-GO whatever p_ok") for w in rec["warnings"])
+
+
+@pytest.mark.parametrize("bad_id", ["", " ", "t 1", "../x", "a\nb", "-x", "x" * 65])
+def test_a_bad_target_id_exits_2_and_saves_nothing(tmp_path, dl, bad_id):
+    """Ids name records, sequence headers and options: an empty id used to be saved and then broke every later
+    command on the workspace; one with a line break split the SeqN header."""
+    sol = tmp_path / SAMPLE.name
+    sol.write_bytes(SAMPLE.read_bytes())
+    r = runner.invoke(app, ["designate", str(sol), "--camera", "pancam", "--pixel", "512,380", "--id", bad_id])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.startswith("scipctl: error: --id: id: ") and r.stderr.count("\n") == 1
+    assert not (tmp_path / (SAMPLE.name + ".scipctl") / "targets.json").exists()
+
+
+def test_an_existing_or_marked_id_is_refused_unless_replace(tmp_path, dl):
+    """Reusing an id used to replace the earlier target silently, a marked one too (sequence --target t2 then
+    planned for the new pixel, not the marked rock)."""
+    sol = tmp_path / SAMPLE.name
+    sol.write_bytes(SAMPLE.read_bytes())
+    targets = tmp_path / (SAMPLE.name + ".scipctl") / "targets.json"
+    left = _first_pancam(dl)
+    t = next(t for t in dl.targets if t.kind == "point")
+    mk = t.mark_in(left.product_id)
+    base = ["designate", str(sol), "--product", left.product_id, "--pixel", f"{mk.u},{mk.v}", "--json"]
+    assert runner.invoke(app, base + ["--id", "zz"]).exit_code == 0
+    before = targets.read_bytes()
+    r = runner.invoke(app, base + ["--id", "zz"])
+    assert r.exit_code == 2 and "already a designated target" in r.stderr and "--replace" in r.stderr
+    r = runner.invoke(app, base + ["--id", t.id])
+    assert r.exit_code == 2 and "marked target" in r.stderr
+    assert targets.read_bytes() == before and r.stdout == ""
+    r = runner.invoke(app, ["designate", str(sol), "--product", left.product_id, "--pixel",
+                            f"{mk.u + 3},{mk.v}", "--id", "zz", "--replace", "--json"])
+    assert r.exit_code == 0, r.stderr
+    saved = json.loads(targets.read_text())["targets"]
+    assert [s["id"] for s in saved] == ["zz"] and saved[0]["pixel_uv"][0] == pytest.approx(mk.u + 3)
+
+
+def test_product_and_camera_together_exit_2(sol, dl):
+    left = _first_pancam(dl)
+    r = runner.invoke(app, ["designate", str(sol), "--product", left.product_id, "--camera", "pancam",
+                            "--pixel", "500,500"])
+    assert r.exit_code == 2 and "not both" in r.stderr
