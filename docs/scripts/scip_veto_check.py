@@ -10,8 +10,6 @@ the veto turns NO-GO, and the largest ``geo_best_nav_res_px`` of any candidate w
 
 from __future__ import annotations
 
-import gzip
-import json
 import sys
 from pathlib import Path
 
@@ -21,18 +19,14 @@ from scipctl.core.handoff.evidence import Evidence
 from scipctl.core.handoff.scip_params import ScipParams
 from scipctl.io.trust_model import load_packaged_trust_model
 from scipctl.pipeline import trust_fit as F
-from scipctl.pipeline.trust_data import EvidenceRow
 
 R_PX = 4.0
 
 
 def read(paths):
-    rows = []
-    for p in paths:
-        opener = gzip.open if str(p).endswith(".gz") else open
-        with opener(p, "rt") as f:
-            rows += [EvidenceRow.from_dict(json.loads(line)) for line in f if line.strip()]
-    return [r for r in rows if r.error_px is not None]
+    from scipctl.commands.trust import read_rows  # the CLI's reader (gzip or not; skips a table's header line)
+
+    return [r for r in read_rows(paths) if r.error_px is not None]
 
 
 def main(argv):

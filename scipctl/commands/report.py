@@ -83,12 +83,10 @@ def _summary(data, sequences) -> dict:
 def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None):
     """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
     (and stdout with ``--json``)."""
-    from ..io.atomic import atomic_write_text
+    from ..io.atomic import check_output_file, write_output_text
     from ..io.workspace import open_source
 
-    out = Path(out)
-    if out.exists() and out.is_dir():
-        raise InputError(str(out), "-o", "is a directory; give the HTML file to write")
+    out = check_output_file(out)  # before the work (the report takes a minute)
     from .params import report_params
     from .params import rule_set as load_rule_set
 
@@ -101,10 +99,7 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
                                     params=params, rule_set=rule_set)
-    try:
-        atomic_write_text(out, html)
-    except OSError as e:
-        raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
+    write_output_text(out, html)
     summary["report"] = str(out)
     summary["products_read"] = {k: str(v) for k, v in source.read_from.items()}
     summary["bytes"] = len(html.encode())

@@ -16,7 +16,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     """``scipctl sequence``: write the sequence (``out`` or stdout) and print the rule checks; CommandFailed
     (exit 1, no sequence) when a flight rule is broken. ``rules_path``: the rules file (None: the package
     default); ``rule_options``: ``{option: value}`` overriding it (``scipctl.pipeline.rules.OPTIONS``)."""
-    from ..io.atomic import atomic_write_text
+    from ..io.atomic import check_output_file, write_output_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, broken
     from ..pipeline.target_sequence import make_sequence
@@ -25,6 +25,8 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
+    if out is not None:
+        out = check_output_file(out)  # before the prediction: a bad path costs nothing
     # a named file or built-in is read (and refused) before the downlink; none named: chosen from the downlink
     rule_set = load_rule_set(rules_path, rule_options, sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
@@ -54,10 +56,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     summary["commands"] = len(doc["commands"])
     summary["total_duration_s"] = doc["total_duration_s"]
     if out is not None:
-        try:
-            atomic_write_text(out, text)
-        except OSError as e:
-            raise InputError(str(out), "-o", f"cannot write: {e.strerror or e}") from None
+        write_output_text(out, text)
         summary["written_to"] = str(out)
     if json_out:
         if out is None:

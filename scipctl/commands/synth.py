@@ -160,9 +160,9 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
         if bad:
             raise InputError("synth", "--runs", f"unknown run(s) {', '.join(bad)} for scenario {scenario} (known: {', '.join(known)})")
         selected = list(dict.fromkeys(selected))
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError(str(out), "-o/--out", "exists and is not a directory")
+    from ..io.atomic import check_output_dir
+
+    out = check_output_dir(out, "-o/--out")
     if error_draw < 0:
         raise InputError("synth", "--error-draw", f"{error_draw}: want an integer >= 0")
     if error_draw and no_errors:
@@ -262,14 +262,17 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
     ``regenerate`` command; ``error_draw``: :func:`~scipctl.sim.build.build_run`'s."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ..io.atomic import atomic_write_text
+    from ..io.atomic import write_output_text
     from ..io.downlink import write_downlink
     from ..io.provenance import sha256_path
     from ..sim.errors import ErrorSettings
     from ..sim.build import build_run
     from ..sim.scenarios import default_errors
 
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(str(out), "-o/--out", f"cannot make the folder: {e.strerror or e}") from None
     console = stderr_console()
     written = []
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -291,7 +294,10 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                             rover=rover, texture=texture, family=family, error_draw=error_draw)
             path = out / (f"{name}.mcap" if container == "mcap" else name)
             bar.update(task, description=f"{name}: writing {path.name}")
-            write_downlink(sim.downlink, path, container)
+            try:
+                write_downlink(sim.downlink, path, container)
+            except OSError as e:
+                raise InputError(str(path), "-o/--out", f"cannot write: {e.strerror or e}") from None
             rec = dict(sim.record)
             from .. import __version__
 
@@ -300,7 +306,7 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                                                                  image_scale, supersample, extra_args)}
             rec["no_errors"] = bool(no_errors)
             rec_path = out / f"{name}.sim.json"
-            atomic_write_text(rec_path, record_json(rec))
+            write_output_text(rec_path, record_json(rec), "-o/--out")
             bar.update(task, description=f"{name}: done")
             written.append({
                 "run": run_name, "path": str(path), "record": str(rec_path), "container": container,

@@ -32,11 +32,14 @@ def family_of_record(rec: dict) -> str:
 
 
 def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool, products_root=None) -> None:
-    """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically)."""
-    from ..io.atomic import atomic_write_text
+    """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically): first a
+    ``{"provenance": ...}`` line (tool version, command line, each input's SHA-256), then one row per line."""
+    from ..io.atomic import check_output_file, write_output_text
+    from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
 
+    out = check_output_file(out)
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
     rows = []
     con = stderr_console()
@@ -54,7 +57,11 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
             raise InputError(str(src), "sim record occluded_targets", str(e)) from None
         note(f"{Path(src).name}: {len(got)} candidate rows, family {fam}")
         rows += got
-    atomic_write_text(out, "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))
+    prov = provenance({f"downlink{i}": source.downlink.source_sha256 for i, source in enumerate(sources)})
+    for i, src in enumerate(srcs):
+        prov["inputs"][f"downlink{i}"]["path"] = str(src)
+    head = json.dumps({"provenance": prov}, sort_keys=True, allow_nan=False) + "\n"
+    write_output_text(out, head + "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))
     if json_out:
         emit_json({"out": str(out), "rows": len(rows), "targets": len({(r.group, r.target) for r in rows})})
     del con
@@ -81,7 +88,10 @@ def read_rows(paths: list) -> list:
             if not line.strip():
                 continue
             try:
-                rows.append(EvidenceRow.from_dict(json.loads(line)))
+                d = json.loads(line)
+                if isinstance(d, dict) and set(d) == {"provenance"}:
+                    continue  # the table's header (trust-evidence writes one)
+                rows.append(EvidenceRow.from_dict(d))
             except (ValueError, KeyError, TypeError) as e:
                 raise InputError(f"{p}:{i}", "evidence row", str(e)) from None
     if not rows:
@@ -92,25 +102,28 @@ def read_rows(paths: list) -> list:
 def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float, json_out: bool) -> None:
     """Fit the trust model on ``tables`` and write it to ``out``; with ``report``, the leave-one-family-out
     evaluation at ``success_px`` too."""
-    from ..io.atomic import atomic_write_text
+    from ..io.atomic import check_output_file, write_output_text
     from ..io.provenance import provenance
     from ..io.trust_model import trust_model_json
     from ..pipeline.trust_fit import evaluate, fit_trust_model
 
+    out = check_output_file(out)
+    if report is not None:
+        report = check_output_file(report, "--report")
     rows = read_rows(tables)
     prov = provenance({f"table{i}": str(t) for i, t in enumerate(tables)}, deterministic=True)
     import sklearn
 
     prov["scikit_learn"] = sklearn.__version__
     model = fit_trust_model(rows, provenance=prov)
-    atomic_write_text(out, trust_model_json(model))
+    write_output_text(out, trust_model_json(model))
     doc = {"out": str(out), "n_rows": model.provenance["n_rows"], "n_targets": model.provenance["n_targets"],
            "families": model.provenance["training_families"],
            "go_min_p": {f"{f.success_px:g}": f.go_min_p for f in model.fits}}
     if report is not None:
         rep = evaluate(rows, success_px, model)
         rep["provenance"] = provenance({f"table{i}": str(t) for i, t in enumerate(tables)})
-        atomic_write_text(report, json.dumps(rep, indent=1, sort_keys=True, default=float) + "\n")
+        write_output_text(report, json.dumps(rep, indent=1, sort_keys=True, default=float) + "\n", "--report")
         doc["report"] = str(report)
     if json_out:
         emit_json(doc)

@@ -15,6 +15,47 @@ def _umask() -> int:
     return mask
 
 
+def check_output_file(path, option: str = "-o") -> Path:
+    """``path`` as a :class:`Path` if a file can be written there (not a directory; its folder, or the nearest
+    existing ancestor that would hold it, writable), else :class:`InputError` naming ``path`` and ``option``.
+    Commands call it before their work, so a bad output path costs nothing; the write itself can still fail
+    (a full disk), and callers map that to the same error."""
+    from ..errors import InputError
+
+    path = Path(path)
+    if path.is_dir():
+        raise InputError(str(path), option, "is a directory; give the file to write")
+    if not _creatable_in(path.parent):
+        raise InputError(str(path), option, f"cannot write here: {_nearest_existing(path.parent)} is not a "
+                         "writable folder")
+    return path
+
+
+def check_output_dir(path, option: str = "-o") -> Path:
+    """``path`` as a :class:`Path` if it is (or can be made) a writable folder, else :class:`InputError`."""
+    from ..errors import InputError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError(str(path), option, "exists and is not a folder")
+    if not _creatable_in(path):
+        raise InputError(str(path), option, f"cannot write here: {_nearest_existing(path)} is not a writable folder")
+    return path
+
+
+def _nearest_existing(p: Path) -> Path:
+    while not p.exists() and p.parent != p:
+        p = p.parent
+    return p
+
+
+def _creatable_in(folder: Path) -> bool:
+    """Whether files can be created in ``folder`` (or in the folders that would be made down to it): checked with
+    ``os.access`` on the nearest existing ancestor (no trial write; a read-only mount answers no, for root too)."""
+    p = _nearest_existing(Path(folder))
+    return p.is_dir() and os.access(p, os.W_OK | os.X_OK)
+
+
 def atomic_write_bytes(path, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -32,6 +73,17 @@ def atomic_write_bytes(path, data: bytes) -> None:
 
 def atomic_write_text(path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def write_output_text(path, text: str, option: str = "-o") -> None:
+    """:func:`atomic_write_text` of a file the user named with ``option``: a failed write (read-only place, full
+    disk) is :class:`InputError` naming ``path`` and ``option`` (exit 2), and nothing is left behind."""
+    from ..errors import InputError
+
+    try:
+        atomic_write_text(path, text)
+    except OSError as e:
+        raise InputError(str(path), option, f"cannot write: {e.strerror or e}") from None
 
 
 @contextlib.contextmanager

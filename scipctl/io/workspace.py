@@ -132,9 +132,8 @@ def write_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_pa
                 doc["superseded"] = {"dir": done.superseded_dir.name, "products": done.superseded_products,
                                      "previous_source": done.previous_source}
             (tmp / PRODUCTS_DIR / MARKER).write_text(dumps(doc), encoding="utf-8")
-    except OSError as e:
-        where = getattr(e, "filename", None) or out
-        raise InputError(str(where), "output", f"cannot write the workspace: {e.strerror or e}; nothing was changed") from None
+    except OSError as e:  # named by the workspace asked for, not by the temporary folder beside it
+        raise InputError(str(out), "output", f"cannot write the workspace: {e.strerror or e}; nothing was changed") from None
     if done.superseded_dir is not None:
         done.superseded_dir = out / PRODUCTS_DIR / done.superseded_dir.name
     return done

@@ -36,7 +36,14 @@ def test_occluded_target_rows_are_flagged_and_have_no_error(hidden_t1, tmp_path)
     out = tmp_path / "ev.jsonl"
     r = runner.invoke(app, ["trust-evidence", str(hidden_t1), "-o", str(out), "--json"])
     assert r.exit_code == 0, r.stderr
-    rows = [json.loads(x) for x in out.read_text().splitlines()]
+    head, *rows = [json.loads(x) for x in out.read_text().splitlines()]
+    # the table says how it was made: version, command line, the downlink's hash; fit-trust's reader skips it
+    prov = head["provenance"]
+    assert set(head) == {"provenance"} and prov["version"] and prov["command"]  # (here: pytest's argv)
+    assert prov["inputs"]["downlink0"] == {"path": str(hidden_t1), "sha256": read_downlink(hidden_t1).source_sha256}
+    from scipctl.commands.trust import read_rows
+
+    assert len(read_rows([out])) == len(rows)
     by = {}
     for x in rows:
         by.setdefault(x["target"], []).append(x)

@@ -1,0 +1,78 @@
+"""An output path that cannot be written is bad input: exit 2, one line naming the path and the option, said
+before the work (the commands below take from seconds to minutes), and nothing written. The read-only place is
+tests/io/readonly_fs.py's (os.access says no, and every write raises EROFS, as a read-only mount does for root)."""
+
+import gzip
+import shutil
+
+import pytest
+from typer.testing import CliRunner
+
+from scipctl.cli import app
+from scipctl.io.atomic import check_output_dir, check_output_file
+from scipctl.errors import InputError
+from tests.commands.conftest import SAMPLE
+from tests.io.readonly_fs import make_read_only
+
+runner = CliRunner()
+TABLE = SAMPLE.parents[2] / "tests/data/trust/evidence-20dl-11fam.jsonl.gz"
+
+
+def _one_line_exit_2(r, path, option):
+    assert r.exit_code == 2, r.output
+    assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
+    assert r.stderr.startswith(f"scipctl: error: {path}: {option}: "), r.stderr
+
+
+@pytest.fixture
+def ro(tmp_path, monkeypatch):
+    d = tmp_path / "ro"
+    d.mkdir()
+    make_read_only(monkeypatch, d)
+    return d
+
+
+@pytest.mark.parametrize("args,option", [
+    (["synth", "--scenario", "paper", "--seed", "0", "--runs", "s1-straight", "-o", "{ro}/synth"], "-o/--out"),
+    (["trust-evidence", str(SAMPLE), "-o", "{ro}/t.jsonl"], "-o"),
+    (["report", str(SAMPLE), "-o", "{ro}/r.html"], "-o"),
+    (["sequence", str(SAMPLE), "--target", "t2", "-o", "{ro}/s.seqn"], "-o"),
+    (["fit-trust", str(TABLE), "-o", "{ro}/m.json"], "-o"),
+])
+def test_unwritable_output_exits_2_before_the_work(ro, args, option):
+    args = [a.format(ro=ro) for a in args]
+    out = args[args.index("-o") + 1]
+    r = runner.invoke(app, args)
+    _one_line_exit_2(r, out, option)
+    assert "cannot write here" in r.stderr and list(ro.iterdir()) == []
+
+
+def test_a_write_that_fails_late_is_exit_2_too(tmp_path, monkeypatch):
+    """os.access allowed it (it can: NFS, ACLs), the write itself failed: the same one line, nothing left."""
+    d = tmp_path / "lies"
+    d.mkdir()
+    make_read_only(monkeypatch, d, access_lies=True)
+    small = tmp_path / "small.jsonl.gz"
+    lines = gzip.decompress(TABLE.read_bytes()).splitlines()[:400]
+    small.write_bytes(gzip.compress(b"\n".join(lines) + b"\n"))
+    r = runner.invoke(app, ["fit-trust", str(small), "-o", str(d / "m.json")])
+    _one_line_exit_2(r, d / "m.json", "-o")
+    assert list(d.iterdir()) == []
+
+
+def test_check_output_paths(tmp_path, monkeypatch):
+    assert check_output_file(tmp_path / "new/deeper/f.txt") == tmp_path / "new/deeper/f.txt"  # folders to be made
+    assert check_output_dir(tmp_path / "a/b") == tmp_path / "a/b"
+    with pytest.raises(InputError, match="is a directory"):
+        check_output_file(tmp_path)
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(InputError, match="not a folder"):
+        check_output_dir(tmp_path / "file")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    make_read_only(monkeypatch, ro)
+    with pytest.raises(InputError, match="-o: cannot write here"):
+        check_output_file(ro / "x/f.txt")
+    with pytest.raises(InputError, match="--report: cannot write here"):
+        check_output_file(ro / "f.txt", "--report")
+    shutil.rmtree(tmp_path / "a", ignore_errors=True)
