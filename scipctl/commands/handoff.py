@@ -44,6 +44,31 @@ def _fmt_stats(s):
     return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
 
 
+def _inputs(inputs: dict, trust_model) -> dict:
+    """Provenance inputs: the downlinks, and a --trust-model file (p_success and go depend on it)."""
+    return dict(inputs, trust_model=str(trust_model)) if trust_model is not None else inputs
+
+
+def _note_replaced(source, recs) -> None:
+    """Say when this run's handoff.json replaces one that held results this run does not (other targets or
+    methods): ``sequence`` and ``report`` read the latest only."""
+    try:
+        old = source.load_json("handoff.json", default=None)
+    except InputError:
+        return  # unreadable: replaced without a word (the new one is what the other commands will read)
+    if not isinstance(old, dict) or not isinstance(old.get("results"), list):
+        return
+    key = lambda r: (r.get("target"), r.get("method"), r.get("navcam"))  # noqa: E731
+    new = {key(r.to_dict()) for r in recs}
+    lost = [r for r in old["results"] if isinstance(r, dict) and key(r) not in new]
+    if lost:
+        methods = sorted({str(r.get("method")) for r in lost})
+        targets = sorted({str(r.get("target")) for r in lost})
+        note(f"handoff.json replaced: {len(lost)} earlier results not in this run (methods "
+             f"{', '.join(methods)}; targets {', '.join(targets)}) are dropped; sequence and report read this run's "
+             "results only")
+
+
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
                      fast=False, products_root=None, trust_model=None, chain_answer=None):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
@@ -109,8 +134,9 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                                progress=progress, downlink_name=name, only=pairs)
             prog.advance(task, len(names) * len(navcams))
             records.extend(recs)
+            _note_replaced(source, recs)
             saved = source.save_json("handoff.json", {
-                "provenance": provenance({"downlink": str(src)}), "success_px": success_px,
+                "provenance": provenance(_inputs({"downlink": str(src)}, trust_model)), "success_px": success_px,
                 "results": [r.to_dict() for r in recs], "table1": table1(recs),
             })
             if source.location_note():
@@ -125,7 +151,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
             del done
     rows = table1(records)
     doc = {
-        "provenance": provenance({f"downlink{i}": str(s) for i, s in enumerate(srcs)}),
+        "provenance": provenance(_inputs({f"downlink{i}": str(s) for i, s in enumerate(srcs)}, trust_model)),
         "success_px": success_px,
         "downlinks": per_dl,
         "results": [r.to_dict() for r in records],

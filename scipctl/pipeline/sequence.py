@@ -227,8 +227,10 @@ def choose_handoff(table1_rows: Optional[list]) -> dict:
     """
     rows = [r for r in (table1_rows or []) if isinstance(r, dict) and r.get("navcam") == "near" and r.get("cases")]
     if not rows:
+        why = ("the saved handoff results hold no near-navcam method (run simulate-handoff --methods all)"
+               if table1_rows else "no handoff results for this downlink")
         return {"primary": DEFAULT_HANDOFF[0], "fallback": DEFAULT_HANDOFF[1], "navcam": "near",
-                "basis": "the paper's Table 1 (no handoff results for this downlink)", **FALLBACK_RULE}
+                "basis": f"the paper's Table 1 ({why})", **FALLBACK_RULE}
 
     def mean(r):
         s = r.get("all") or {}

@@ -104,3 +104,25 @@ def test_chain_option_reports_every_step_against_the_marks(sol):
     assert "tracking chain" in r.stderr and "trust" in r.stderr
     if steps[-1]["extra"].get("answer") == "closure":  # the final answer's origin is in its trust column
         assert "closure" in r.stderr
+
+
+def test_a_narrower_run_says_it_replaces_earlier_results_and_hashes_its_trust_model(tmp_path):
+    """handoff.json holds the latest run only (sequence chooses its handoff method from it): a run that drops
+    earlier results says so; a --trust-model file is among the hashed inputs (p_success and go depend on it)."""
+    sol = tmp_path / SAMPLE.name
+    sol.write_bytes(SAMPLE.read_bytes())
+    assert runner.invoke(app, ["simulate-handoff", str(sol), "--methods", "pure-kinematic"]).exit_code == 0
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--methods", "pure-kinematic", "--target", "t1"])
+    assert r.exit_code == 0, r.stderr
+    assert "handoff.json replaced: 4 earlier results not in this run (methods pure-kinematic; targets t2, t3)" in r.stderr
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--methods", "pure-kinematic", "--target", "t1"])
+    assert "handoff.json replaced" not in r.stderr  # the same results again: nothing dropped
+    model = ROOT / "scipctl/data/trust_model.json"
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--target", "t1", "--trust-model", str(model), "--json"])
+    assert r.exit_code in (0, 1), r.stderr
+    import hashlib
+
+    sha = hashlib.sha256(model.read_bytes()).hexdigest()
+    assert json.loads(r.stdout)["provenance"]["inputs"]["trust_model"] == {"path": str(model), "sha256": sha}
+    saved = json.loads((tmp_path / (SAMPLE.name + ".scipctl") / "handoff.json").read_text())
+    assert saved["provenance"]["inputs"]["trust_model"]["sha256"] == sha

@@ -118,6 +118,10 @@ def test_choose_handoff_from_results_and_default():
     assert ch["primary"] == "refined-geometric" and ch["fallback"] == "pure-geometric" and ch["navcam"] == "near"
     d = Q.choose_handoff(None)
     assert (d["primary"], d["fallback"]) == Q.DEFAULT_HANDOFF and "paper" in d["basis"]
+    assert "no handoff results" in d["basis"]
+    # results saved, but none of a near-navcam method (a scip-only or far-only run): said so, not "no results"
+    d = Q.choose_handoff([r for r in rows if r["navcam"] == "far"])
+    assert (d["primary"], d["fallback"]) == Q.DEFAULT_HANDOFF and "hold no near-navcam method" in d["basis"]
 
 
 # ----------------------------------------------------------------------------- commands and formats
