@@ -45,6 +45,7 @@ def build(source, progress=None, params=None, rule_set=None):
     prov = provenance({"downlink": dl.source_sha256})
     html = render_report(data, sequences, PAPER_TABLE1, prov)
     summary = _summary(data, sequences)
+    summary["provenance"] = prov  # the record the HTML embeds
     return html, summary, data
 
 

@@ -562,6 +562,10 @@ def format_text(doc: dict) -> str:
     for c in doc["commands"]:
         args = ", ".join(f"{a['name']}={_arg_text(a)}" for a in c["args"])
         out.append(f"  {c['time_tag']}  {c['stem']}({args})" + (f"  -- {c['comment']}" if c["comment"] else ""))
+    pv = doc["provenance"]
+    out += ["", f"made by {pv.get('tool', 'scipctl')} {pv.get('version', '?')}: {one_line(pv.get('command', '?'))}"]
+    out += [f"  input {k}: sha256 {v.get('sha256', '?')}" + (f" ({one_line(v['path'])})" if v.get("path") else "")
+            for k, v in sorted(pv.get("inputs", {}).items())]
     return "\n".join(out) + "\n"
 
 

@@ -72,6 +72,10 @@ def test_report_content_and_summary(report):
     # exact world, no calibration error: the mast bias is nil
     assert abs(summary["mast_bias_deg"]["tilt"]) < 0.01 and abs(summary["mast_bias_deg"]["pan"]) < 0.01
     assert f"report: {out}" in stderr.replace("\n", "")
+    # the --json summary carries the provenance the page embeds
+    pv = summary["provenance"]
+    assert pv["version"] and pv["command"] and pv["inputs"]["downlink"]["sha256"]
+    assert pv["inputs"]["downlink"]["sha256"] in html
 
 
 def test_report_reuses_saved_handoff_results(report):

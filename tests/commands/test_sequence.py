@@ -57,6 +57,18 @@ def test_json_format_and_summary_on_stdout(slab_dir):
     assert sum((a - b) ** 2 for a, b in zip(doc["target"]["xyz_site_m"], truth)) ** 0.5 < 0.05
 
 
+def test_the_plain_text_format_says_how_it_was_made(slab_dir, tmp_path):
+    out = tmp_path / "s.txt"
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--format", "text", "-o", str(out)])
+    assert r.exit_code == 0, r.stderr
+    text = out.read_text()
+    from scipctl import __version__
+
+    assert f"made by scipctl {__version__}: " in text
+    doc = json.loads(runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--format", "json"]).stdout)
+    assert f"input downlink: sha256 {doc['provenance']['inputs']['downlink']['sha256']}" in text
+
+
 def test_the_summary_and_the_document_carry_the_calibrated_and_the_simulated_probability(slab_dir):
     """P(success) is the packaged planner's-route calibration of the simulated P; both are in the --json summary and
     in the sequence's prediction block, each checked by its own rule; an out-of-range --min-p-simulated is exit 2

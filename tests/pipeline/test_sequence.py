@@ -165,6 +165,10 @@ def test_formats_are_deterministic_and_consistent(rc, flat_terrain):
     for r in d1["rules"]:
         assert r["rule"] in text
     assert Q.NOTIONAL in Q.format_seqn(d1) and Q.NOTIONAL in text and d1["notional"] == Q.NOTIONAL
+    # the plain text, too, says how it was made: version, command line, every input's hash
+    pv = d1["provenance"]
+    assert f"made by scipctl {pv['version']}: " in text
+    assert all(v["sha256"] in text for v in pv["inputs"].values())
 
 
 _ARG = r'(?:-?\d+(?:\.\d+)?|"(?:[^"\\]|\\.)*"|[A-Za-z][A-Za-z0-9_-]*)'
