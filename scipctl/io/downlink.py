@@ -65,11 +65,17 @@ def detect_container(path) -> str:
             return "dir"
         with open(p, "rb") as f:
             magic = f.read(len(MCAP_MAGIC))
+        if not magic:
+            raise InputError(str(p), "file", "empty file (0 bytes)")
         if magic != MCAP_MAGIC:
             from .pds_products import is_product_path
 
             if is_product_path(p):
                 return "products"
+            if p.suffix.lower() != ".mcap":  # an MCAP file by name is read as one, and its header said bad
+                raise InputError(str(p), "file", "not a downlink: neither an MCAP file (container A) nor a real "
+                                 "product scipctl reads (PDS3, VICAR, PDS4 label, Mars 2020 raw JSON; "
+                                 "docs/downlink-format.md)")
         return "mcap"
     if not p.exists():
         raise InputError(str(p), "path", "no such file or directory")

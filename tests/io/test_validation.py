@@ -470,14 +470,18 @@ def test_truncated_mcap(tmp_path, cut):
 
 
 @pytest.mark.parametrize(
-    "content",
-    [b"", b"hello, not an mcap\n", b"\x89PNG\r\n\x1a\n" + b"\x00" * 100],
-    ids=["empty", "text", "png"],
+    "name,content,message",
+    [("x.mcap", b"", "empty file (0 bytes)"),
+     ("x.mcap", b"hello, not an mcap\n", "not an MCAP file"),
+     ("x.mcap", b"\x89PNG\r\n\x1a\n" + b"\x00" * 100, "not an MCAP file"),
+     ("x.IMG", b"", "empty file (0 bytes)"),  # said "not an MCAP file" before
+     ("x.bin", b"hello\n", "not a downlink: neither an MCAP file")],
+    ids=["empty", "text", "png", "empty-img", "unknown"],
 )
-def test_not_an_mcap_file(tmp_path, content):
-    p = tmp_path / "x.mcap"
+def test_not_an_mcap_file(tmp_path, name, content, message):
+    p = tmp_path / name
     p.write_bytes(content)
-    expect_error(p, str(p), "file", "not an MCAP file")
+    expect_error(p, str(p), "file", message)
 
 
 def test_corrupted_chunk_fails_the_crc(tmp_path):
