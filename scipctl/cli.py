@@ -27,8 +27,10 @@ app = typer.Typer(
     name="scipctl",
     help="Single Cycle Instrument Placement ground tool: ingest downlinks, designate targets, "
     "simulate pancam->navcam->hazcam handoffs, emit uplink sequences and reports.\n\n"
-    "Exit codes: 0 ok, 1 the answer is no (failure detected), 2 bad input or usage.",
+    "Exit codes: 0 ok, 1 the answer is no (failure detected), 2 bad input or usage, 3 a bug in scipctl, "
+    "130 interrupted.",
     no_args_is_help=True,
+    context_settings={"help_option_names": ["-h", "--help"]},
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,

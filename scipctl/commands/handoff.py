@@ -14,6 +14,9 @@ def _parse_methods(methods):
     """
     from ..core.handoff import ALL_METHODS
 
+    if methods is not None and not methods.replace(",", "").strip():
+        raise InputError("--methods", "methods", "empty: name methods (comma-separated), 'all', or leave the option "
+                         "out for scip")
     if not methods or methods.strip() == "scip":  # the default: the recommended handoff alone
         return ["scip"], ["near", "far"], {("scip", n) for n in ("near", "far")}
     if methods.strip() == "all":  # scip first, then every other method

@@ -115,6 +115,7 @@ def print_summary(s: dict, title: str) -> None:
     eye = {"left": "L", "right": "R"}
     cams = ", ".join(f"{esc(n)} ({c['mount']}, {c['width']}x{c['height']}, {c['camera_model']})"
                      for n, c in s["rover_config"]["cameras"].items())
+    cams = cams or "no cameras configured (real products carry their own models)"
     con.print(f"Rover configuration {esc(s['rover_config']['name'])}: {cams}")
     t = Table(title="Rover positions (site frame)")
     for c in ("site/drive", "x m", "y m", "z m", "yaw deg"):

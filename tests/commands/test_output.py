@@ -43,3 +43,17 @@ def test_emit_json_writes_numpy_as_plain_numbers(capsys):
     emit_json({"b": np.float64(1.5), "a": np.arange(2)})
     out = capsys.readouterr().out
     assert json.loads(out) == {"a": [0, 1], "b": 1.5} and out.index('"a"') < out.index('"b"')
+
+
+def test_help_answers_to_h_and_lists_every_exit_code():
+    from typer.testing import CliRunner
+
+    from scipctl.cli import app
+
+    runner = CliRunner()
+    for args in (["-h"], ["--help"], ["designate", "-h"]):
+        r = runner.invoke(app, args)
+        assert r.exit_code == 0 and "Usage:" in r.stdout, args
+    top = runner.invoke(app, ["-h"]).stdout
+    for code in ("0 ok", "1 the answer is no", "2 bad input", "3 a bug", "130 interrupted"):
+        assert code in " ".join(top.split()), code
