@@ -14,7 +14,7 @@ def _parse_methods(methods):
     """
     from ..core.handoff import ALL_METHODS
 
-    if methods is not None and not methods.replace(",", "").strip():
+    if methods is not None and not methods.strip():
         raise InputError("--methods", "methods", "empty: name methods (comma-separated), 'all', or leave the option "
                          "out for scip")
     if not methods or methods.strip() == "scip":  # the default: the recommended handoff alone

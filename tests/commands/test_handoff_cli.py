@@ -56,7 +56,6 @@ def test_from_pixel_runs_one_source_pixel(sol):
 @pytest.mark.parametrize("args,needle", [
     (["--methods", "telepathy"], "telepathy"),
     (["--methods", ""], "empty"),  # was accepted, running scip
-    (["--methods", " , "], "empty"),
     (["--success-px", "0"], "success_px"),
     (["--success-px", "inf", "--methods", "pure-kinematic"], "success_px"),  # was exit 3 (JSON could not hold inf)
     (["--from", "s1-straight-pan10-pancam-L", "--pixel", "10,10"], "navcam"),
