@@ -22,6 +22,25 @@ def json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+def strict_json(o):
+    """``o`` with every non-finite float (NaN, +-inf) replaced by ``None``, recursively through dicts, lists and
+    tuples (numpy arrays and scalars via :func:`json_default`): what ``json.dumps(..., allow_nan=False)`` accepts, so
+    a document is RFC 8259 JSON that any parser reads (Python's default writes ``NaN``/``Infinity``, which strict
+    parsers and JavaScript's ``JSON.parse`` reject)."""
+    if isinstance(o, float):
+        return o if math.isfinite(o) else None
+    if isinstance(o, dict):
+        return {k: strict_json(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [strict_json(v) for v in o]
+    if o is None or isinstance(o, (str, int, bool)):
+        return o
+    try:
+        return strict_json(json_default(o))
+    except TypeError:
+        return o  # json.dumps says what it cannot serialise
+
+
 def finite_or_none(x) -> Optional[float]:
     """``float(x)`` if it is a finite number, else ``None`` (for JSON records)."""
     try:

@@ -202,8 +202,13 @@ def known_families() -> tuple:
     return (DEFAULT_FAMILY,) + tuple(k for k in FAMILIES if k != DEFAULT_FAMILY)
 
 
+#: the most seeds (or error draws) one campaign may name: a campaign of this many downlinks is ~a core-year
+MAX_SEEDS = 100_000
+
+
 def parse_seeds(text: str, option: str = "--seeds") -> list:
-    """``"A-B"`` (inclusive) or ``"A"`` or ``"A,B,C-D"`` -> seeds (or error draws: ``option``) in order, each once."""
+    """``"A-B"`` (inclusive) or ``"A"`` or ``"A,B,C-D"`` -> seeds (or error draws: ``option``) in order, each once;
+    at most :data:`MAX_SEEDS` of them (a typo such as ``0-999999999999`` is bad input, not a list built in memory)."""
     seeds = []
     try:
         for part in str(text).split(","):
@@ -214,6 +219,8 @@ def parse_seeds(text: str, option: str = "--seeds") -> list:
             lo, hi = int(a), int(b) if sep else int(a)
             if lo < 0 or hi < lo:
                 raise ValueError
+            if len(seeds) + (hi - lo + 1) > MAX_SEEDS:
+                raise InputError("campaign", option, f"{text!r}: more than {MAX_SEEDS} values")
             seeds.extend(range(lo, hi + 1))
     except ValueError:
         raise InputError("campaign", option, f"{text!r}: want A-B (0 <= A <= B), A, or a comma-separated list") from None

@@ -217,10 +217,10 @@ def write_summary(store: CampaignStore, summary: dict) -> tuple:
 
     from ..io.atomic import atomic_write_text
     from ..io.campaign_html import render_campaign_html
-    from ..jsonutil import json_default
+    from ..jsonutil import strict_json
     from ..pipeline.paper_table1 import PAPER_TABLE1
 
     js, page = store.out / "summary.json", store.out / "summary.html"
-    atomic_write_text(js, json.dumps(summary, indent=1, sort_keys=True, default=json_default) + "\n")
+    atomic_write_text(js, json.dumps(strict_json(summary), indent=1, sort_keys=True, allow_nan=False) + "\n")
     atomic_write_text(page, render_campaign_html(summary, PAPER_TABLE1))
     return js, page

@@ -19,7 +19,7 @@ import sys
 import typer
 
 from ..errors import CommandFailed, InputError
-from ..jsonutil import json_default
+from ..jsonutil import strict_json
 
 EXIT_OK, EXIT_NO, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
 
@@ -46,8 +46,9 @@ def stderr_console():
 
 
 def emit_json(doc) -> None:
-    """``doc`` as one JSON document on stdout (sorted keys, numpy values as plain numbers)."""
-    sys.stdout.write(json.dumps(doc, indent=2, sort_keys=True, default=json_default) + "\n")
+    """``doc`` as one JSON document on stdout (sorted keys, numpy values as plain numbers; a non-finite number is
+    ``null``: strict JSON, readable by any parser)."""
+    sys.stdout.write(json.dumps(strict_json(doc), indent=2, sort_keys=True, allow_nan=False) + "\n")
 
 
 def guarded(fn):

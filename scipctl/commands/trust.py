@@ -105,6 +105,7 @@ def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float
     from ..io.atomic import check_output_file, write_output_text
     from ..io.provenance import provenance
     from ..io.trust_model import trust_model_json
+    from ..jsonutil import strict_json
     from ..pipeline.trust_fit import evaluate, fit_trust_model
 
     out = check_output_file(out)
@@ -123,7 +124,8 @@ def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float
     if report is not None:
         rep = evaluate(rows, success_px, model)
         rep["provenance"] = provenance({f"table{i}": str(t) for i, t in enumerate(tables)})
-        write_output_text(report, json.dumps(rep, indent=1, sort_keys=True, default=float) + "\n", "--report")
+        write_output_text(report, json.dumps(strict_json(rep), indent=1, sort_keys=True, allow_nan=False, default=float)
+                          + "\n", "--report")
         doc["report"] = str(report)
     if json_out:
         emit_json(doc)

@@ -27,6 +27,8 @@ def builtin_label(name: str) -> str:
     """How the built-in rules file ``name`` is named in messages and in the sequence's ``rules_used``."""
     return f"{name} (scipctl/data/{BUILTIN_RULES[name].name})"
 KINDS = ("number", "number?", "int", "numbers", "camera_numbers", "camera_ints")
+#: the cameras a per-camera mapping may name (the chain's: its steps look up these and no others)
+RULE_CAMERAS = ("pancam", "navcam", "hazcam")
 
 
 @dataclass(frozen=True)
@@ -102,6 +104,9 @@ def _typed(name: str, key: str, kind: str, v):
         return tuple(v)
     if kind in ("camera_numbers", "camera_ints") and isinstance(v, dict):
         ok = _is_number if kind == "camera_numbers" else _is_int
+        unknown = [k for k in v if k not in RULE_CAMERAS]
+        if unknown:  # a typo or another camera would be carried in the rules record and never used
+            return _bad(name, f"{key}.{unknown[0]}", f"unknown camera (want one of: {', '.join(RULE_CAMERAS)})")
         if all(isinstance(k, str) and ok(x) for k, x in v.items()):
             return dict(v)
     want = {"number": "a finite number", "number?": "a finite number or null", "int": "an integer",

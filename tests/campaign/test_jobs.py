@@ -60,7 +60,7 @@ def test_parse_seeds(text, seeds):
     assert parse_seeds(text) == seeds
 
 
-@pytest.mark.parametrize("text", ["3-1", "-1", "a", "", "1-b"])
+@pytest.mark.parametrize("text", ["3-1", "-1", "a", "", "1-b", "0-999999999999", "0-99999,100000"])
 def test_bad_seeds(text):
     with pytest.raises(InputError, match="--seeds"):
         parse_seeds(text)

@@ -2,6 +2,7 @@
 reliability from records that carry ``p_success`` / ``go`` (the trust work adds them), and a clean skip when
 records carry neither; the HTML page shows what there is."""
 
+import json
 import math
 
 import numpy as np
@@ -93,6 +94,12 @@ def test_go_and_reliability_from_records_that_carry_them(tmp_path):
     js, page = write_summary(store, s)
     html = page.read_text()
     assert "GO / NO-GO" in html and "Reliability" in html and html.count("<img") >= 3 * 4
+    # strict JSON (a parser that refuses NaN/Infinity reads it): the histograms' open last edge is null
+    def refuse(c):
+        raise ValueError(c)
+
+    doc = json.loads(js.read_text(), parse_constant=refuse)
+    assert doc["overall"]["go"]["chain_final"]["error_edges_px"][-1] is None
 
 
 def test_no_trust_fields_means_no_go_tables_and_no_handoff_reliability(tmp_path):

@@ -194,3 +194,18 @@ def test_product_and_camera_together_exit_2(sol, dl):
     r = runner.invoke(app, ["designate", str(sol), "--product", left.product_id, "--camera", "pancam",
                             "--pixel", "500,500"])
     assert r.exit_code == 2 and "not both" in r.stderr
+
+
+def test_a_failed_match_prints_strict_json(tmp_path):
+    """Exit 1 at a corner pixel (the window mostly outside the image): the record on stdout is strict JSON, its
+    right-eye pixel null (it printed [NaN, NaN])."""
+    sol = tmp_path / SAMPLE.name
+    sol.write_bytes(SAMPLE.read_bytes())
+    r = runner.invoke(app, ["designate", str(sol), "--camera", "pancam", "--pixel", "1,1", "--json"])
+    assert r.exit_code == 1, r.output
+
+    def refuse(c):
+        raise ValueError(c)
+
+    rec = json.loads(r.stdout, parse_constant=refuse)
+    assert rec["ok"] is False and rec["saved_to"] is None and rec["uv_right"] in (None, [None, None])

@@ -45,6 +45,19 @@ def test_emit_json_writes_numpy_as_plain_numbers(capsys):
     assert json.loads(out) == {"a": [0, 1], "b": 1.5} and out.index('"a"') < out.index('"b"')
 
 
+def test_emit_json_is_strict_json(capsys):
+    """A non-finite number is null, at any depth and in numpy arrays: --json output is RFC 8259 JSON (designate's
+    failed match used to print "uv_right": [NaN, NaN], a campaign's summary Infinity)."""
+    emit_json({"x": float("nan"), "l": [1.0, float("inf"), (2, -float("inf"))], "a": np.array([np.nan, 1.0]),
+               "n": {"m": np.float64("inf")}, "ok": True, "s": "NaN"})
+
+    def refuse(c):
+        raise ValueError(c)
+
+    doc = json.loads(capsys.readouterr().out, parse_constant=refuse)
+    assert doc == {"x": None, "l": [1.0, None, [2, None]], "a": [None, 1.0], "n": {"m": None}, "ok": True, "s": "NaN"}
+
+
 def test_help_answers_to_h_and_lists_every_exit_code():
     from typer.testing import CliRunner
 

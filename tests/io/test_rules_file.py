@@ -33,6 +33,7 @@ def test_values_come_back_typed_with_the_file_hash(tmp_path):
     ("limits:\n  n: 2.5\n", "limits.n", "integer"),
     ("limits:\n  xs: 3\n", "limits.xs", "list"),
     ("limits:\n  h: {navcam: 1.5}\n", "limits.h", "camera -> integer"),
+    ("limits:\n  h: {navcam: 2, mastcam: 5}\n", "limits.h.mastcam", "unknown camera"),  # was carried silently
     ("limits:\n  nope: 1\n", "limits.nope", "unknown key"),
     ("other:\n  a_m: 1\n", "other", "unknown section"),
     ("version: 2\n", "version", "version"),
