@@ -98,7 +98,8 @@ def read_dir(root: Path) -> Downlink:
     ypath = root / YAML_NAME
     label = str(ypath)
     if not ypath.is_file():
-        raise InputError(str(root), YAML_NAME, "missing: not a downlink directory (and not a workspace)")
+        raise InputError(str(root), YAML_NAME, "missing: not a downlink directory, not a workspace, and no real "
+                         "product scipctl reads in it (PDS3, VICAR, PDS4 label, Mars 2020 raw JSON)")
     doc = load_yaml(ypath, label)
     top = P.Fields(doc, label, "")
     fmt_version = P.check_format_version(top.req("format_version"), label)

@@ -162,7 +162,8 @@ def _raw_records(name: str, data: bytes):
     except InputError:
         raise
     except Exception as e:  # mcap raises many kinds (EndOfFile, struct.error, CRC, ...) on damaged files
-        raise InputError(name, "file", f"truncated or corrupt MCAP ({type(e).__name__}: {str(e)[:120]})") from None
+        detail = f"{type(e).__name__}: {str(e)[:120]}" if str(e).strip() else type(e).__name__
+        raise InputError(name, "file", f"truncated or corrupt MCAP ({detail})") from None
     return messages, metadata
 
 
