@@ -61,7 +61,9 @@ def _note_replaced(source, recs) -> None:
         return  # unreadable: replaced without a word (the new one is what the other commands will read)
     if not isinstance(old, dict) or not isinstance(old.get("results"), list):
         return
-    key = lambda r: (r.get("target"), r.get("method"), r.get("navcam"))  # noqa: E731
+    def key(r: dict) -> tuple:
+        return r.get("target"), r.get("method"), r.get("navcam")
+
     new = {key(r.to_dict()) for r in recs}
     lost = [r for r in old["results"] if isinstance(r, dict) and key(r) not in new]
     if lost:
