@@ -117,6 +117,7 @@ class Downlink:
     format_version: str = FORMAT_VERSION
     source: str = ""  # where it was read from (path), for provenance
     source_sha256: str = ""
+    unread_files: list = field(default_factory=list)  # a folder of real products: files in it that were not read
 
     # ------------------------------------------------------------ look-ups
     def product(self, product_id: str) -> ImageProduct:

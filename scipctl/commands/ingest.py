@@ -97,6 +97,7 @@ def summarize(dl: Downlink) -> dict:
         "images": images,
         "targets": targets,
         "truth": {"present": dl.has_truth, "images": len(dl.truth_images), "targets": len(dl.truth_targets)},
+        "unread_files": list(dl.unread_files),  # a folder of real products: what is in it but was not read
     }
 
 
@@ -117,6 +118,9 @@ def print_summary(s: dict, title: str) -> None:
                      for n, c in s["rover_config"]["cameras"].items())
     cams = cams or "no cameras configured (real products carry their own models)"
     con.print(f"Rover configuration {esc(s['rover_config']['name'])}: {cams}")
+    if s.get("unread_files"):
+        con.print(f"Not read (not a product scipctl reads, or a picture with no label or model): "
+                  f"{esc(', '.join(s['unread_files']))}")
     t = Table(title="Rover positions (site frame)")
     for c in ("site/drive", "x m", "y m", "z m", "yaw deg"):
         t.add_column(c, no_wrap=True)

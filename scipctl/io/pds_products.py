@@ -374,7 +374,8 @@ def read_products(path) -> Downlink:
         if kinds[0][1] is None:
             raise InputError(str(p), "path", "not a PDS3/VICAR/PDS4 product, a detached label or a Mars 2020 raw-image JSON")
     else:
-        kinds = [(f, sniff(f)) for f in sorted(p.iterdir()) if f.is_file() and not f.name.startswith(".")]
+        listed = [f for f in sorted(p.iterdir()) if f.is_file() and not f.name.startswith(".")]
+        kinds = [(f, sniff(f)) for f in listed]
         kinds = [(f, k) for f, k in kinds if k is not None]
         if not kinds:
             raise InputError(str(p), "path", "no PDS3/VICAR/PDS4 product, detached label or Mars 2020 raw-image JSON here")
@@ -400,8 +401,9 @@ def read_products(path) -> Downlink:
     for f in files:
         h.update(f.name.encode() + b"\0" + sha256_file(f).encode() + b"\n")
     mission = missions[0]
+    unread = [] if p.is_file() else [f.name for f in listed if f.resolve() not in used]
     return Downlink(
         mission=mission, sol=min(sols) if sols else 0,
         rover_config=placeholder_rover_config(f"{mission} (from product labels; no camera calibration)"),
-        images=images, source=str(p), source_sha256=h.hexdigest(),
+        images=images, source=str(p), source_sha256=h.hexdigest(), unread_files=unread,
     )

@@ -448,3 +448,19 @@ def test_read_products_rejects_what_is_not_a_product(tmp_path):
     with pytest.raises(InputError) as e:
         read_products(tmp_path / "notes.txt")
     assert e.value.field == "path"
+
+
+def test_a_folder_says_which_files_it_did_not_read(tmp_path):
+    """A picture with no label or model (real folders hold them: an MSL web JPEG beside Mars 2020 raw JSONs) and
+    notes are listed as unread, by info too, instead of being dropped without a word; the files a product uses
+    (a detached label's data file) are not."""
+    pds3_product(tmp_path, "P1", PIX16, MODELS["CAHVOR"], detached=True)
+    (tmp_path / "stray.jpg").write_bytes(b"\xff\xd8\xff\xe0not a product")
+    (tmp_path / "NOTES.md").write_text("x")
+    (tmp_path / ".hidden").write_text("x")
+    dl = read_products(tmp_path)
+    assert len(dl.images) == 1 and dl.unread_files == ["NOTES.md", "stray.jpg"]
+    r = CliRunner().invoke(app, ["info", str(tmp_path), "--json"])
+    assert r.exit_code == 0, r.stderr
+    assert json.loads(r.stdout)["unread_files"] == ["NOTES.md", "stray.jpg"]
+    assert read_products(next(tmp_path.glob("*.LBL"))).unread_files == []  # one file named: nothing else looked at
