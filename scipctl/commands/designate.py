@@ -26,22 +26,33 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     source.check_writable()  # before the work: say now if the products cannot be saved anywhere
     dl = source.downlink
     left = pick_left_product(dl, product, camera)
-    targets = source.load_json("targets.json", default={"targets": []}) or {"targets": []}
-    saved = designations_from_doc(targets, str(source.read_from.get("targets.json", "targets.json")))
-    existing = {t.id for t in saved}
-    if target_id is not None and not replace_id:
+    explicit_id = target_id is not None
+
+    def saved_ids(doc) -> set:
         where = str(source.read_from.get("targets.json", "targets.json"))
-        if target_id in existing:
-            raise InputError("--id", "id", f"{target_id!r} is already a designated target in {where}; choose another "
-                             "--id, or pass --replace to designate it anew")
-        if any(t.id == target_id for t in dl.targets):
-            raise InputError("--id", "id", f"{target_id!r} is a marked target of the downlink; choose another --id, "
-                             "or pass --replace to designate it anew (the designation then stands for it)")
-    if target_id is None:
-        n = 1
-        while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
-            n += 1
-        target_id = f"d{n}"
+        return {t.id for t in designations_from_doc(doc or {"targets": []}, where)}
+
+    def free_id(doc, wanted):
+        """``wanted`` if it may be (re)designated now, else InputError; without --id the first free d<N>."""
+        existing = saved_ids(doc)
+        if not explicit_id:
+            n = 1
+            while f"d{n}" in existing or any(t.id == f"d{n}" for t in dl.targets):
+                n += 1
+            return f"d{n}"
+        if not replace_id:
+            where = str(source.read_from.get("targets.json", "targets.json"))
+            if wanted in existing:
+                raise InputError("--id", "id", f"{wanted!r} is already a designated target in {where}; choose "
+                                 "another --id, or pass --replace to designate it anew")
+            if any(t.id == wanted for t in dl.targets):
+                raise InputError("--id", "id", f"{wanted!r} is a marked target of the downlink; choose another --id, "
+                                 "or pass --replace to designate it anew (the designation then stands for it)")
+        return wanted
+
+    # checked now (before the stereo work) and again when saving, under the products' lock: another command may
+    # have saved a target meanwhile
+    target_id = free_id(source.load_json("targets.json", default={"targets": []}), target_id)
     params = designation_params(band_px)
     from ..io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
 
@@ -51,9 +62,17 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     if not rec.ok:
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec.reason}",
                             payload=dict(rec.to_dict(), saved_to=None))  # not saved
-    targets["targets"] = [t.to_dict() for t in saved if t.id != target_id] + [rec.to_dict()]
-    targets["provenance"] = rec.provenance
-    path = source.save_json("targets.json", targets)
+    def add(doc):
+        nonlocal rec
+        doc = doc or {"targets": []}
+        where = str(source.read_from.get("targets.json", "targets.json"))
+        saved = designations_from_doc(doc, where)
+        rec = replace(rec, id=free_id(doc, rec.id))  # without --id: the next free one if d<N> was taken meanwhile
+        doc["targets"] = [t.to_dict() for t in saved if t.id != rec.id] + [rec.to_dict()]
+        doc["provenance"] = rec.provenance
+        return doc
+
+    path, _ = source.update_json("targets.json", add, default={"targets": []})
     if source.location_note():
         note(source.location_note())
     if json_out:

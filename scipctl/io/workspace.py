@@ -27,10 +27,11 @@ API::
 from __future__ import annotations
 
 import json
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from ..model import Downlink, InputError
 from ..jsonutil import json_default
@@ -321,6 +322,33 @@ class Source:
         if why is not None:
             self._note = f"products of {self.path} go to {target}/ ({why})"
         return f
+
+    def update_json(self, name: str, update: Callable[[Any], Any], default: Any = None) -> tuple:
+        """Read the JSON product ``name`` (``default`` when there is none), pass it to ``update`` and save what
+        that returns, holding an exclusive lock (``fcntl.flock`` on the folder products go to: no lock file is
+        left behind) from the read to the write, so that two commands updating one product (two ``designate``
+        runs on a workspace) see each other's changes instead of one losing the other's. Returns ``(path, the
+        saved document)``. Without a folder to lock the update runs unlocked and the save says why."""
+        import fcntl
+
+        name = self._name(name)
+        lock_fd = None
+        try:
+            folder, _ = self.places.write_target()
+            folder.mkdir(parents=True, exist_ok=True)
+            lock_fd = os.open(folder, os.O_RDONLY)
+            fcntl.flock(lock_fd, fcntl.LOCK_EX)
+        except (OSError, InputError):
+            if lock_fd is not None:
+                os.close(lock_fd)
+            lock_fd = None
+        try:
+            doc = update(self.load_json(name, default=default))
+            return self.save_json(name, doc), doc
+        finally:
+            if lock_fd is not None:
+                fcntl.flock(lock_fd, fcntl.LOCK_UN)
+                os.close(lock_fd)
 
     def location_note(self) -> Optional[str]:
         """One line saying where products went when that is not their home (None when they went home)."""

@@ -209,3 +209,19 @@ def test_a_failed_match_prints_strict_json(tmp_path):
 
     rec = json.loads(r.stdout, parse_constant=refuse)
     assert rec["ok"] is False and rec["saved_to"] is None and rec["uv_right"] in (None, [None, None])
+
+
+def test_two_designates_at_once_keep_both_targets(tmp_path, dl):
+    """Two processes designating on one workspace at the same time: both targets are saved (before the products'
+    lock one was lost in every trial, both runs saying they saved theirs)."""
+    ws = tmp_path / "ws"
+    assert runner.invoke(app, ["ingest", str(SAMPLE), "-o", str(ws)]).exit_code == 0
+    left = _first_pancam(dl)
+    mk = next(t for t in dl.targets if t.kind == "point").mark_in(left.product_id)
+    cmd = [sys.executable, "-m", "scipctl.cli", "designate", str(ws), "--product", left.product_id]
+    procs = [subprocess.Popen(cmd + ["--pixel", f"{mk.u + du},{mk.v}", "--id", i], stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE) for du, i in ((0, "a"), (4, "b"))]
+    out = [p.communicate(timeout=300) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], out
+    saved = json.loads((ws / "scipctl" / "targets.json").read_text())["targets"]
+    assert sorted(t["id"] for t in saved) == ["a", "b"]

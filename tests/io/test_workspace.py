@@ -181,3 +181,35 @@ def test_unwritable_output_folder_is_an_input_error(tmp_path, mcap_src, monkeypa
         create_workspace(read_downlink(mcap_src), tmp_path / "ro" / "ws")
     assert ei.value.field == "output" and str(tmp_path / "ro") in ei.value.product
     assert list((tmp_path / "ro").iterdir()) == []
+
+
+def test_update_json_holds_the_products_lock_from_read_to_write(tmp_path, mcap_src):
+    """Two commands updating one product (two designate runs on a workspace) each see the other's change: the
+    second waits for the first's write (it used to read, work for seconds, and overwrite the first's target)."""
+    import threading
+    import time
+
+    ws = tmp_path / "ws"
+    create_workspace(read_downlink(mcap_src), ws, source_path=mcap_src)
+    b_read = threading.Event()
+
+    def add(tag, wait=None):
+        def f(doc):
+            doc = doc or {"ids": []}
+            if wait is not None:
+                b = threading.Thread(target=lambda: open_source(ws).update_json("c.json", add("b", None)))
+                b.start()
+                time.sleep(0.3)  # B runs meanwhile, up to its lock
+                assert not b_read.is_set()  # it has not read the document yet
+                wait.append(b)
+            else:
+                b_read.set()
+            return {"ids": doc["ids"] + [tag]}
+        return f
+
+    threads = []
+    path, doc = open_source(ws).update_json("c.json", add("a", threads))
+    threads[0].join(10)
+    assert b_read.is_set() and json.loads(path.read_text()) == {"ids": ["a", "b"]}
+    assert sorted(p.name for p in path.parent.iterdir()) == ["c.json", "workspace.json"]  # no lock file left
+
