@@ -59,7 +59,7 @@ def _creatable_in(folder: Path) -> bool:
 def atomic_write_bytes(path, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)  # a valid name
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data)
@@ -97,7 +97,7 @@ def atomic_directory(path, overwrite: bool = True):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
@@ -108,7 +108,7 @@ def atomic_directory(path, overwrite: bool = True):
         if not overwrite:
             shutil.rmtree(tmp, ignore_errors=True)
             raise FileExistsError(str(path))
-        old = path.with_name(f".{path.name}.old")
+        old = path.with_name(f".{path.name[:200]}.old")
         shutil.rmtree(old, ignore_errors=True)
         os.replace(path, old)
         os.replace(tmp, path)

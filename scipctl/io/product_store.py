@@ -43,11 +43,24 @@ ENV_PRODUCTS_DIR = "SCIPCTL_PRODUCTS_DIR"
 HOW_TO_REDIRECT = f"give --products-dir DIR (or set {ENV_PRODUCTS_DIR}) to write products elsewhere"
 
 
+#: the longest file name most file systems take (bytes)
+NAME_MAX_BYTES = 255
+#: a key keeps at most this much of the source's name (bytes), so that the key itself is a valid file name
+KEY_NAME_MAX_BYTES = 200
+
+
 def source_key(src) -> str:
-    """``<name>-<12 hex digits of sha256(resolved path)>``: the folder name of a source's products outside its home."""
+    """``<name>-<12 hex digits of sha256(resolved path)>``: the folder name of a source's products outside its home
+    (a name longer than :data:`KEY_NAME_MAX_BYTES` bytes is cut there; the digest keeps keys apart)."""
     resolved = Path(src).resolve()
     digest = hashlib.sha256(str(resolved).encode("utf-8", "surrogateescape")).hexdigest()[:12]
-    return f"{resolved.name or 'root'}-{digest}"
+    name = (resolved.name or "root").encode("utf-8", "surrogateescape")[:KEY_NAME_MAX_BYTES]
+    return f"{name.decode('utf-8', 'ignore')}-{digest}"
+
+
+def name_too_long(path: Path) -> bool:
+    """Whether ``path``'s last component is longer than a file name may be (:data:`NAME_MAX_BYTES`)."""
+    return len(Path(path).name.encode("utf-8", "surrogateescape")) > NAME_MAX_BYTES
 
 
 def user_fallback_root() -> Optional[Path]:
@@ -67,11 +80,14 @@ def is_writable_dir(path: Path) -> bool:
     """Whether files can be created in directory ``path``: if it does not exist yet, whether its nearest
     existing ancestor is a directory that lets us create it. Checked with ``os.access`` (no trial write)."""
     p = Path(path)
-    while not p.exists():
-        if p.parent == p:
-            return False
-        p = p.parent
-    return p.is_dir() and os.access(p, os.W_OK | os.X_OK)
+    try:
+        while not p.exists():
+            if p.parent == p:
+                return False
+            p = p.parent
+        return p.is_dir() and os.access(p, os.W_OK | os.X_OK)
+    except OSError:  # e.g. ENAMETOOLONG: a name the file system cannot hold is no place to write
+        return False
 
 
 def is_unwritable_error(e: OSError) -> bool:
@@ -145,10 +161,15 @@ class ProductPlaces:
             return self.explicit, "--products-dir / " + ENV_PRODUCTS_DIR
         if is_writable_dir(self.home):
             return self.home, None
+        if name_too_long(self.home):
+            return self.fallback_target(why=f"{self.home.name[:40]}... is longer than a file name may be")
         return self.fallback_target()
 
-    def fallback_target(self, detail: str = "") -> tuple[Path, str]:
-        """The per-user fallback (raw downlinks), or InputError naming the home when there is none."""
+    def fallback_target(self, detail: str = "", why: Optional[str] = None) -> tuple[Path, str]:
+        """The per-user fallback (raw downlinks), or InputError naming the home when there is none. ``why``: the
+        reason the home cannot be used, when it is not that its folder is unwritable."""
+        if why is not None:
+            detail = f" ({why})"
         if self.is_workspace:
             raise InputError(str(self.home), "products", f"workspace products folder is not writable{detail}; "
                              f"make it writable, or {HOW_TO_REDIRECT}")
@@ -158,4 +179,4 @@ class ProductPlaces:
         if not is_writable_dir(self.fallback):
             raise InputError(str(self.fallback), "products",
                              f"neither {self.home} nor the per-user fallback is writable; {HOW_TO_REDIRECT}")
-        return self.fallback, f"{self.home.parent} is not writable{detail}"
+        return self.fallback, why or f"{self.home.parent} is not writable{detail}"

@@ -149,3 +149,24 @@ def test_real_chmod_read_only_folder(tmp_path, archive):
         assert sorted(p.name for p in archive.parent.iterdir()) == ["sol42.mcap"]
     finally:
         os.chmod(archive.parent, 0o755)
+
+
+def test_a_name_too_long_for_a_sidecar_goes_to_the_per_user_folder(tmp_path, monkeypatch):
+    """A 250-byte downlink file name: its sidecar, NAME.scipctl, cannot exist (ENAMETOOLONG), which was exit 3 in
+    designate and simulate-handoff; now its products go to the per-user folder under a key cut to a valid name,
+    with a note saying why."""
+    from scipctl.io.downlink import write_downlink
+    from scipctl.io.product_store import KEY_NAME_MAX_BYTES, source_key
+    from scipctl.io.workspace import open_source
+    from tests.io.builders import make_small_downlink
+
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "data"))
+    src = write_downlink(make_small_downlink(), tmp_path / ("L" * 245 + ".mcap"))
+    assert len(src.name) == 250
+    key = source_key(src)
+    assert len(key.encode()) == KEY_NAME_MAX_BYTES + 13 and key.startswith("L" * 50)
+    source = open_source(src)
+    path = source.save_json("targets.json", {"targets": []})
+    assert path == tmp_path / "data" / "scipctl" / "sidecars" / key / "targets.json"
+    assert "longer than a file name may be" in source.location_note()
+    assert open_source(src).load_json("targets.json") == {"targets": []}  # read back from there
