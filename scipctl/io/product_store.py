@@ -45,8 +45,9 @@ HOW_TO_REDIRECT = f"give --products-dir DIR (or set {ENV_PRODUCTS_DIR}) to write
 
 #: the longest file name most file systems take (bytes)
 NAME_MAX_BYTES = 255
-#: a key keeps at most this much of the source's name (bytes), so that the key itself is a valid file name
-KEY_NAME_MAX_BYTES = 200
+#: a key keeps at most this much of the source's name (bytes), so that the key itself is a valid file name (the
+#: 13 bytes of "-<digest>" after it); every key that was a valid name before the cut is unchanged
+KEY_NAME_MAX_BYTES = NAME_MAX_BYTES - 13
 
 
 def source_key(src) -> str:
