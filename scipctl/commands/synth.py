@@ -23,6 +23,7 @@ texture folder; default ``shared/real``).
 from __future__ import annotations
 
 import json
+import shlex
 import sys
 from pathlib import Path
 from typing import Optional
@@ -183,9 +184,9 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
             _check_scale(image_scale, rv)
         extra = [f"--family {family}"] + ([f"--error-draw {error_draw}"] if error_draw else [])
         if rover_dir is not None:
-            extra.append(f"--rover-dir {rover_dir}")
+            extra.append(f"--rover-dir {shlex.quote(str(rover_dir))}")
         if texture_from is not None:
-            extra.append(f"--texture-from {texture_from}")
+            extra.append(f"--texture-from {shlex.quote(str(texture_from))}")
         written = synthesize(scenario, seed, out, container, selected, no_errors, image_scale=image_scale,
                              supersample=supersample, rover=sim_rover, texture=texture, extra_args=" ".join(extra),
                              family=fam, error_draw=error_draw)
@@ -198,10 +199,12 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
         texture = None
         extra = []
         if sim_rover is not None:
-            extra.append(f"--rover {rover}" + (f" --rover-dir {rover_dir}" if rover_dir is not None else ""))
+            extra.append(f"--rover {rover}" + (f" --rover-dir {shlex.quote(str(rover_dir))}" if rover_dir is not None
+                                               else ""))
         if texture_from is not None:
             texture = read_texture_sources(texture_from, crop, texture_pixel_mm * 1e-3)
-            extra.append(f"--texture-from {texture_from}" + (f" --texture-crop {texture_crop}" if texture_crop else "")
+            extra.append(f"--texture-from {shlex.quote(str(texture_from))}"
+                         + (f" --texture-crop {shlex.quote(texture_crop)}" if texture_crop else "")
                          + (f" --texture-pixel-mm {texture_pixel_mm:g}" if texture_pixel_mm != 2.5 else ""))
         elif texture_crop is not None or texture_pixel_mm != 2.5:
             raise InputError("synth", "--texture-crop" if texture_crop is not None else "--texture-pixel-mm", "only with --texture-from")

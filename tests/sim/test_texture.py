@@ -130,7 +130,11 @@ def test_flat_ground_renders_a_known_crop_of_the_source(sources, atlas):
 
 
 def test_synth_with_texture_validates_records_the_sources_and_repeats_bytes(tmp_path, monkeypatch):
-    folder = real("05_")
+    import shlex
+    import shutil
+
+    folder = tmp_path / "real pics é"  # a path a shell would split: the record's command quotes it
+    shutil.copytree(real("05_"), folder)
     outs = []
     for name in ("a", "b"):
         monkeypatch.setattr(sim_build, "_SCENES", {})  # rebuild the scene and its atlas from scratch each time
@@ -146,7 +150,8 @@ def test_synth_with_texture_validates_records_the_sources_and_repeats_bytes(tmp_
 
     assert {f["file"]: f["sha256"] for f in rec["texture"]["files"]} == {
         p.name: sha256_file(p) for p in sorted(folder.glob("*.IMG"))}
-    assert f"--texture-from {folder}" in rec["written_by"]["regenerate"]
+    argv = shlex.split(rec["written_by"]["regenerate"])
+    assert argv[argv.index("--texture-from") + 1] == str(folder)
     # the texture changes the pixels, not the geometry: same poses and marks as without it
     monkeypatch.setattr(sim_build, "_SCENES", {})
     r = runner.invoke(app, ["synth", "--seed", "1", "--runs", "s1-straight", "-o", str(tmp_path / "plain")], env=SMALL_ENV)
