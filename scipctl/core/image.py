@@ -9,7 +9,23 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["as_float_image", "as_uv"]
+__all__ = ["as_float_image", "as_uv", "full_scale"]
+
+#: the largest value of 12-bit data (MER/MSL/Mars 2020 cameras, stored in 16-bit words)
+FULL_SCALE_12BIT = 4095
+
+
+def full_scale(px: np.ndarray) -> tuple[float, int]:
+    """``(full-scale value, bits)`` of an image's data: 8-bit for uint8; for 16-bit words, 12-bit data when no value
+    exceeds 4095 (the rover cameras' 12-bit samples in 16-bit words: a real label's ``SAMPLE_BIT_MASK`` of 12 ones),
+    else 16-bit. A 16-bit image whose data really span 16 bits but stay below 4096 reads as 12-bit: its flags then
+    judge it brighter, never darker, than it is."""
+    a = np.asarray(px)
+    if a.dtype == np.uint8:
+        return 255.0, 8
+    if int(a.max(initial=0)) <= FULL_SCALE_12BIT:
+        return float(FULL_SCALE_12BIT), 12
+    return 65535.0, 16
 
 
 def as_float_image(img, name: str = "image") -> np.ndarray:

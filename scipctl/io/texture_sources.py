@@ -22,9 +22,9 @@ PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
 def _full_scale(px: np.ndarray) -> float:
-    if px.dtype == np.uint8:
-        return 255.0
-    return 4095.0 if int(px.max(initial=0)) <= 4095 else 65535.0
+    from ..core.image import full_scale
+
+    return full_scale(px)[0]
 
 
 def _read_one(path: Path, label: str):

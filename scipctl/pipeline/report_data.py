@@ -18,6 +18,7 @@ from typing import Optional
 
 import numpy as np
 
+from ..core.image import full_scale
 from ..core.point_stereo import PointStereoParams
 from ..model import Downlink, InputError
 from .designate import Designation
@@ -93,13 +94,13 @@ def image_stats(dl: Downlink) -> list:
     means = {}
     for im in sorted(dl.images, key=lambda i: i.time_s):
         px = im.pixels
-        top = 65535 if px.dtype == np.uint16 else 255
+        top, bits = full_scale(px)  # 12-bit data in 16-bit words judged against 4095, not 65535
         f = px.astype(np.float64) / top
         sat = float(np.mean(px >= top))
         dark = float(np.mean(f <= 0.02))
         p1, p50, p99 = (float(x) for x in np.percentile(f, [1, 50, 99]))
         rec = {"product_id": im.product_id, "camera": im.camera, "eye": im.eye, "position": list(im.position),
-               "exposure_ms": im.exposure_ms, "gain": im.gain, "bits": 16 if top == 65535 else 8,
+               "exposure_ms": im.exposure_ms, "gain": im.gain, "bits": bits,
                "mean": float(f.mean()), "p1": p1, "p50": p50, "p99": p99, "saturated_fraction": sat,
                "dark_fraction": dark, "flags": []}
         if sat > SAT_WARN:
