@@ -96,6 +96,8 @@ def run_campaign(jobs: list, options: CampaignOptions, store: CampaignStore, clu
             # connect before anything is written: a cluster that cannot be reached leaves no output behind
             client = stack.enter_context(open_client(cluster))
             stats.cluster["workers"] = len(_check_workers(client, worker_wait_s))
+        else:  # every downlink done before: no cluster is started, and the summary says so
+            stats.cluster = {"started": False, "why": "every downlink was done before"}
         stack.enter_context(store.locked())
         manifest = store.load_manifest() or {"format": FORMAT, "downlinks": {}}
         manifest.update({"options": options.to_dict(), "options_key": okey, "provenance": provenance(None)})
@@ -120,6 +122,8 @@ def run_campaign(jobs: list, options: CampaignOptions, store: CampaignStore, clu
 
             if client is None:  # records removed since the first look
                 client = stack.enter_context(open_client(cluster))
+                stats.cluster = cluster.describe()
+                stats.cluster["workers"] = len(_check_workers(client, worker_wait_s))
 
             futures = {}
             for i, j in enumerate(todo):

@@ -130,6 +130,7 @@ def test_a_second_run_into_the_same_folder_does_no_work(first_run, sols, dask_cl
     assert r.exit_code == 0, r.output
     run = json.loads(r.stdout)["run"]
     assert (run["planned"], run["skipped"], run["ran"]) == (2, 2, 0)
+    assert run["cluster"] == {"started": False, "why": "every downlink was done before"}  # none was contacted
     after = {p.name: (p.stat().st_mtime_ns, p.read_bytes()) for p in sorted((out / "records").glob("*.jsonl"))}
     assert after == before  # no records file rewritten
     # other options: a new key, so the downlinks run again (only the one asked for here)
