@@ -156,3 +156,18 @@ def test_foxglove_annotations_mcap_matches_the_marks(report):
             hits = [c for c, x in zip(d["circles"], d["texts"]) if x["text"] == f"{tm.id}: true (mark)"]
             assert len(hits) == 1
             assert hits[0]["position"] == {"x": pytest.approx(mk.u + 0.5), "y": pytest.approx(mk.v + 0.5)}
+
+
+def test_a_downlink_without_targets_says_so(tmp_path):
+    """Real products carry no marks: the summary said nothing under its headings."""
+    from scipctl.io.downlink import write_downlink
+    from tests.io.builders import make_small_downlink
+
+    dl = make_small_downlink()
+    dl.targets, dl.truth_targets = [], []
+    src = write_downlink(dl, tmp_path / "none.mcap")
+    r = runner.invoke(app, ["report", str(src), "-o", str(tmp_path / "r.html"), "--json"])
+    assert r.exit_code == 0, r.stderr
+    html = (tmp_path / "r.html").read_text()
+    assert "No targets: the downlink marks none and none has been designated" in html
+    assert json.loads(r.stdout)["targets"] == []
