@@ -28,7 +28,7 @@ app = typer.Typer(
     help="Single Cycle Instrument Placement ground tool: ingest downlinks, designate targets, "
     "simulate pancam->navcam->hazcam handoffs, emit uplink sequences and reports.\n\n"
     "Exit codes: 0 ok, 1 the answer is no (failure detected), 2 bad input or usage, 3 a bug in scipctl, "
-    "130 interrupted.",
+    "130 interrupted, 143 terminated.",
     no_args_is_help=True,
     context_settings={"help_option_names": ["-h", "--help"]},
     add_completion=False,
@@ -152,7 +152,7 @@ def designate(
 def simulate_handoff(
     srcs: List[Path] = typer.Argument(..., help="Downlinks or workspaces."),
     target: Optional[str] = typer.Option(None, "--target", help="Only this target id."),
-    from_product: Optional[str] = typer.Option(None, "--from", help="Source navcam/pancam product id (with --pixel)."),
+    from_product: Optional[str] = typer.Option(None, "--from", help="Source left navcam product id, near or far (with --pixel): hand off that pixel, unscored."),
     pixel: Optional[str] = typer.Option(None, "--pixel", help="U,V in the --from product."),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated method names, NAME-near/NAME-far, or 'all' (default: scip, the recommended handoff)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels (scip's p_success is for it)."),

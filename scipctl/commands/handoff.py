@@ -91,6 +91,9 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     params = handoff_params(fast, success_px, trust_model)
     if (from_product is None) != (pixel is None):
         raise InputError("--from/--pixel", "pixel", "give both --from PRODUCT_ID and --pixel U,V, or neither")
+    if from_product is not None and target is not None:  # the pixel's record would replace the target's scored one
+        raise InputError("--target", "target", "selects marked targets; with --from/--pixel the answer is for that "
+                         "pixel alone (leave --target out)")
     names, navcams, pairs = _parse_methods(methods)
     from ..pipeline.chain import CHAIN_ANSWERS
 
@@ -125,7 +128,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                 uv = parse_pixel(pixel)
                 if not (-0.5 <= uv[0] <= p.width - 0.5 and -0.5 <= uv[1] <= p.height - 0.5):
                     raise InputError(from_product, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the image")
-                tlist = [(target or "pixel", {nc: uv.tolist()}, None)]
+                tlist = [("pixel", {nc: uv.tolist()}, None)]
                 use_navcams = [nc]
             else:
                 tlist = marked_targets(dl, setup, only=target)
@@ -170,6 +173,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     if json_out and not nogo and not nogo_chains:
         emit_json(doc)
     _print_table(con, rows, records)
+    _print_answers(con, records)
     if chain:
         _print_chains(con, chains)
     if nogo or nogo_chains:
@@ -199,6 +203,26 @@ def _print_table(con, rows, records):
             split = f"{_fmt_stats(r['successes'])} / {_fmt_stats(r['failures'])}"
         tab.add_row(r["method"], r["navcam"], f"{100 * r['success_rate']:.0f}%", f"{r['answered']}/{r['cases']}",
                     _fmt_stats(r["all"]), split, PAPER_TABLE1.get((r["method"], r["navcam"]), "(not in paper)"))
+    con.print(tab)
+
+
+def _print_answers(con, records):
+    """Each target's answer from scip, and any answer with no mark to score it (--from/--pixel): the pixel, its
+    error when scored, p_success and GO (Table 1 above only aggregates the scored ones)."""
+    from rich.table import Table
+
+    shown = [r for r in records if r.method == "scip" or r.error_px is None]
+    if not shown:
+        return
+    tab = Table(title="Answers (scip, and unscored pixels)")
+    for c in ("downlink", "target", "method", "navcam", "hazcam pixel (u, v)", "error px", "p_success", "GO"):
+        tab.add_column(c)
+    for r in shown:
+        uv = "-" if r.predicted_uv is None else f"{r.predicted_uv[0]:.2f}, {r.predicted_uv[1]:.2f}"
+        tab.add_row(r.downlink, r.target, r.method, str(r.navcam), uv,
+                    "unscored" if r.error_px is None else f"{r.error_px:.2f}",
+                    "-" if r.p_success is None else f"{r.p_success:.2f}",
+                    "-" if r.go is None else ("GO" if r.go else "NO-GO"))
     con.print(tab)
 
 

@@ -6,7 +6,9 @@
 
 Exit codes: :data:`EXIT_OK` 0 ok; :data:`EXIT_NO` 1 the answer is "no" (:class:`~scipctl.errors.CommandFailed`:
 failure detected, rule broken, no reliable match); :data:`EXIT_BAD_INPUT` 2 bad input or usage
-(:class:`~scipctl.errors.InputError`, a missing/unreadable file); 3 a bug (:data:`EXIT_BUG`); 130 interrupted.
+(:class:`~scipctl.errors.InputError`, a missing/unreadable file); 3 a bug (:data:`EXIT_BUG`); 130 interrupted
+(SIGINT); 143 terminated (SIGTERM, as a batch system or ``timeout`` sends it). Both signals unwind the command, so
+temporary outputs are removed and nothing half-written is left.
 Import-light (the CLI loads this at start-up): rich is imported when a console is made.
 """
 
@@ -14,14 +16,25 @@ from __future__ import annotations
 
 import functools
 import json
+import signal
 import sys
+import threading
 
 import typer
 
 from ..errors import CommandFailed, InputError
 from ..jsonutil import strict_json
 
-EXIT_OK, EXIT_NO, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_OK, EXIT_NO, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: raised in the main thread so that every ``finally`` and context manager runs (temporary
+    files and folders are removed, a local Dask cluster is shut down), like KeyboardInterrupt for SIGINT."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated()
 
 
 def error(msg: str) -> None:
@@ -59,6 +72,8 @@ def guarded(fn):
 
     @functools.wraps(fn)
     def wrapper(*a, **kw):
+        main = threading.current_thread() is threading.main_thread()  # signal handlers live in the main thread
+        previous = signal.signal(signal.SIGTERM, _raise_terminated) if main else None
         try:
             return fn(*a, **kw)
         except typer.Exit:
@@ -77,8 +92,14 @@ def guarded(fn):
         except KeyboardInterrupt:
             error("interrupted")
             raise typer.Exit(EXIT_INTERRUPTED)
+        except Terminated:
+            error("terminated")
+            raise typer.Exit(EXIT_TERMINATED)
         except Exception as e:  # a bug: still one line, but say it is ours
             error(f"internal error ({type(e).__name__}): {e}. Please report it with the command line.")
             raise typer.Exit(EXIT_BUG)
+        finally:
+            if main:
+                signal.signal(signal.SIGTERM, previous)
 
     return wrapper

@@ -48,9 +48,13 @@ def _view(dl: Downlink, left: ImageProduct, min_range_m: float, max_range_m: flo
 
 def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str] = None,
                   far: Optional[str] = None) -> tuple:
-    """(hazcam left, near navcam left or None, far navcam left or None) products."""
+    """(hazcam left, near navcam left or None, far navcam left or None) products. A product named by the caller
+    must be a left image of the right camera, the near navcam at the hazcam's stop and the far one at another
+    (else :class:`InputError` naming the product: a pancam or the hazcam itself given as a navcam was answered)."""
     def left_of(pid, camera):
         p = dl.product(pid)
+        if p.camera != camera:
+            raise InputError(pid, "camera", f"expected a left {camera} product, got a {p.camera} image")
         if p.eye != "left":
             raise InputError(pid, "eye", f"expected a left-eye {camera} product, got {p.eye}")
         return p
@@ -65,11 +69,17 @@ def find_products(dl: Downlink, hazcam: Optional[str] = None, near: Optional[str
     navs = sorted((im for im in dl.images if im.camera == "navcam" and im.eye == "left"), key=lambda i: i.time_s)
     if near:
         nr = left_of(near, "navcam")
+        if nr.position != haz.position:
+            raise InputError(near, "position", f"the near navcam must be at the hazcam's stop {haz.position}, "
+                             f"this one is at {nr.position} (a navcam at another stop is a far one)")
     else:
         same = [n for n in navs if n.position == haz.position]
         nr = min(same, key=lambda n: abs(n.time_s - haz.time_s)) if same else None
     if far:
         fr = left_of(far, "navcam")
+        if fr.position == haz.position:
+            raise InputError(far, "position", f"the far navcam must be at another stop than the hazcam's "
+                             f"{haz.position} (a navcam at that stop is the near one)")
     else:
         earlier = [n for n in navs if n.position != haz.position and n.time_s < haz.time_s]
         fr = earlier[-1] if earlier else None

@@ -51,6 +51,13 @@ def test_from_pixel_runs_one_source_pixel(sol):
     recs = json.loads(r.stdout)["results"]
     assert len(recs) == 1 and recs[0]["navcam"] == "near" and recs[0]["truth_uv"] is None
     assert recs[0]["predicted_uv"] is not None
+    # without --json the answer is on stderr too (it showed only an empty Table 1 before)
+    r = runner.invoke(app, ["simulate-handoff", str(sol), "--from", near.product_id, "--pixel", f"{mk.u},{mk.v}",
+                            "--methods", "pure-kinematic"], env={"COLUMNS": "200"})
+    assert r.exit_code == 0, r.stderr
+    u, v = recs[0]["predicted_uv"]
+    text = " ".join(r.stderr.split())
+    assert "Answers (scip, and unscored pixels)" in text and "unscored" in text and f"{u:.2f}, {v:.2f}" in text
 
 
 @pytest.mark.parametrize("args,needle", [
@@ -60,6 +67,14 @@ def test_from_pixel_runs_one_source_pixel(sol):
     (["--success-px", "inf", "--methods", "pure-kinematic"], "success_px"),  # was exit 3 (JSON could not hold inf)
     (["--from", "s1-straight-pan10-pancam-L", "--pixel", "10,10"], "navcam"),
     (["--pixel", "10,10"], "--from"),
+    (["--from", "s1-straight-far-navcam-L", "--pixel", "10,10", "--target", "t2"], "for that pixel alone"),
+    # products of the wrong camera or stop were answered (a pancam as the near navcam, the hazcam handed off to itself)
+    (["--near", "s1-straight-mid-pancam-L"], "s1-straight-mid-pancam-L: camera: expected a left navcam product"),
+    (["--far", "s1-straight-near-hazcam-L"], "s1-straight-near-hazcam-L: camera: expected a left navcam product"),
+    (["--hazcam", "s1-straight-near-navcam-L"], "s1-straight-near-navcam-L: camera: expected a left hazcam"),
+    (["--near", "s1-straight-far-navcam-L"], "s1-straight-far-navcam-L: position: the near navcam must be at"),
+    (["--far", "s1-straight-near-navcam-L"], "s1-straight-near-navcam-L: position: the far navcam must be at"),
+    (["--near", "s1-straight-near-navcam-R"], "eye: expected a left-eye navcam product, got right"),
     (["--target", "nope"], "nope"),
 ])
 def test_bad_input_exits_2_with_one_line(sol, args, needle):

@@ -68,5 +68,32 @@ def test_help_answers_to_h_and_lists_every_exit_code():
         r = runner.invoke(app, args)
         assert r.exit_code == 0 and "Usage:" in r.stdout, args
     top = runner.invoke(app, ["-h"]).stdout
-    for code in ("0 ok", "1 the answer is no", "2 bad input", "3 a bug", "130 interrupted"):
+    for code in ("0 ok", "1 the answer is no", "2 bad input", "3 a bug", "130 interrupted", "143 terminated"):
         assert code in " ".join(top.split()), code
+
+
+def test_sigterm_unwinds_the_command_removes_temporaries_and_exits_143(capsys, tmp_path):
+    """SIGTERM (a batch system, `timeout`) killed the process where it stood: exit 143 with no message, and an
+    ingest left its half-written temporary workspace behind. Now it unwinds like SIGINT."""
+    import os
+    import signal
+
+    from scipctl.commands.output import EXIT_TERMINATED
+    from scipctl.io.atomic import atomic_directory
+
+    previous = signal.getsignal(signal.SIGTERM)
+
+    @guarded
+    def cmd(json_out=False):
+        with atomic_directory(tmp_path / "ws") as tmp:
+            (tmp / "half.png").write_bytes(b"x")
+            os.kill(os.getpid(), signal.SIGTERM)  # delivered here, in the main thread
+            (tmp / "never.png").write_bytes(b"x")
+
+    with pytest.raises(typer.Exit) as e:
+        cmd()
+    out, err = capsys.readouterr()
+    assert e.value.exit_code == EXIT_TERMINATED == 143
+    assert out == "" and err == "scipctl: error: terminated\n"
+    assert list(tmp_path.iterdir()) == []  # neither the workspace nor its temporary folder
+    assert signal.getsignal(signal.SIGTERM) is previous  # the handler lives only while a command runs
