@@ -62,6 +62,7 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     if not rec.ok:
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec.reason}",
                             payload=dict(rec.to_dict(), saved_to=None))  # not saved
+
     def add(doc):
         nonlocal rec
         doc = doc or {"targets": []}
