@@ -61,6 +61,7 @@ def _note_replaced(source, recs) -> None:
         return  # unreadable: replaced without a word (the new one is what the other commands will read)
     if not isinstance(old, dict) or not isinstance(old.get("results"), list):
         return
+
     def key(r: dict) -> tuple:
         return r.get("target"), r.get("method"), r.get("navcam")
 

@@ -21,12 +21,13 @@ def check_output_file(path, option: str = "-o") -> Path:
     Commands call it before their work, so a bad output path costs nothing; the write itself can still fail
     (a full disk), and callers map that to the same error."""
     from ..errors import InputError
+    from .product_store import is_writable_dir, nearest_existing
 
     path = Path(path)
     if path.is_dir():
         raise InputError(str(path), option, "is a directory; give the file to write")
-    if not _creatable_in(path.parent):
-        raise InputError(str(path), option, f"cannot write here: {_nearest_existing(path.parent)} is not a "
+    if not is_writable_dir(path.parent):
+        raise InputError(str(path), option, f"cannot write here: {nearest_existing(path.parent)} is not a "
                          "writable folder")
     return path
 
@@ -34,26 +35,14 @@ def check_output_file(path, option: str = "-o") -> Path:
 def check_output_dir(path, option: str = "-o") -> Path:
     """``path`` as a :class:`Path` if it is (or can be made) a writable folder, else :class:`InputError`."""
     from ..errors import InputError
+    from .product_store import is_writable_dir, nearest_existing
 
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(str(path), option, "exists and is not a folder")
-    if not _creatable_in(path):
-        raise InputError(str(path), option, f"cannot write here: {_nearest_existing(path)} is not a writable folder")
+    if not is_writable_dir(path):
+        raise InputError(str(path), option, f"cannot write here: {nearest_existing(path)} is not a writable folder")
     return path
-
-
-def _nearest_existing(p: Path) -> Path:
-    while not p.exists() and p.parent != p:
-        p = p.parent
-    return p
-
-
-def _creatable_in(folder: Path) -> bool:
-    """Whether files can be created in ``folder`` (or in the folders that would be made down to it): checked with
-    ``os.access`` on the nearest existing ancestor (no trial write; a read-only mount answers no, for root too)."""
-    p = _nearest_existing(Path(folder))
-    return p.is_dir() and os.access(p, os.W_OK | os.X_OK)
 
 
 def atomic_write_bytes(path, data: bytes) -> None:

@@ -80,15 +80,19 @@ def user_fallback_root() -> Optional[Path]:
 def is_writable_dir(path: Path) -> bool:
     """Whether files can be created in directory ``path``: if it does not exist yet, whether its nearest
     existing ancestor is a directory that lets us create it. Checked with ``os.access`` (no trial write)."""
-    p = Path(path)
     try:
-        while not p.exists():
-            if p.parent == p:
-                return False
-            p = p.parent
-        return p.is_dir() and os.access(p, os.W_OK | os.X_OK)
+        p = nearest_existing(path)
+        return p.exists() and p.is_dir() and os.access(p, os.W_OK | os.X_OK)
     except OSError:  # e.g. ENAMETOOLONG: a name the file system cannot hold is no place to write
         return False
+
+
+def nearest_existing(path) -> Path:
+    """``path`` itself if it exists, else its nearest existing ancestor (the root when none exists)."""
+    p = Path(path)
+    while not p.exists() and p.parent != p:
+        p = p.parent
+    return p
 
 
 def is_unwritable_error(e: OSError) -> bool:

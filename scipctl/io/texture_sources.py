@@ -16,15 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.image import full_scale
 from ..model import InputError
 
 PICTURE_SUFFIXES = (".png", ".jpg", ".jpeg")
-
-
-def _full_scale(px: np.ndarray) -> float:
-    from ..core.image import full_scale
-
-    return full_scale(px)[0]
 
 
 def _read_one(path: Path, label: str):
@@ -75,5 +70,5 @@ def iter_texture_pictures(folder):
             yield rel, None, "same pixels as a file already used"
             continue
         seen.add(key)
-        gray = (px.astype(np.float32) / np.float32(_full_scale(px))).astype(np.float32)
+        gray = (px.astype(np.float32) / np.float32(full_scale(px)[0])).astype(np.float32)
         yield rel, sha256_file(p), gray
