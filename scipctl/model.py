@@ -27,11 +27,11 @@ class MastAngles:
     tilt_rad: float
 
 
-def unit_float(px: np.ndarray) -> np.ndarray:
-    """Pixels ``px`` (any shape) as float32 in [0, 1]: 16-bit values scaled by 65535, others by 255 (what
-    :meth:`ImageProduct.pixels_float` gives for a whole image; a window of it converted alone gives the same values)."""
-    scale = 65535.0 if px.dtype == np.uint16 else 255.0
-    return px.astype(np.float32) / scale
+def unit_float(px: np.ndarray, full_scale: float) -> np.ndarray:
+    """Pixels ``px`` (any shape) as float32 in [0, 1]: divided by ``full_scale``, the whole image's
+    (:attr:`ImageProduct.full_scale`), so that a window of an image converted alone gets the values
+    :meth:`ImageProduct.pixels_float` gives it."""
+    return px.astype(np.float32) / float(full_scale)
 
 
 @dataclass
@@ -65,9 +65,23 @@ class ImageProduct:
             self._pixels = decode_png(self.png, self.product_id)
         return self._pixels
 
+    @property
+    def full_scale(self) -> float:
+        """The value that is 1.0 in :meth:`pixels_float`: for 16-bit words 4095 when no sample exceeds it (12-bit
+        data, as real MER/MSL EDRs store it), else 65535 (16-bit data, or 12-bit data bit-replicated to 16 bits as
+        the simulator writes it), :func:`scipctl.core.image.full_scale`; 255 for 8-bit images and for the float
+        pixels of :func:`~scipctl.pipeline.feature_track.texture_view` (NCC and SIFT's stretch see no scale).
+        Not cached: a copy made with other pixels (``dataclasses.replace``) must not keep the original's."""
+        px = self.pixels
+        if px.dtype != np.uint16:
+            return 255.0
+        from .core.image import full_scale
+
+        return full_scale(px)[0]
+
     def pixels_float(self) -> np.ndarray:
-        """Image as float32 in [0, 1] (16-bit images scaled by 65535)."""
-        return unit_float(self.pixels)
+        """Image as float32 in [0, 1]: the pixels over :attr:`full_scale`."""
+        return unit_float(self.pixels, self.full_scale)
 
 
 @dataclass(frozen=True)

@@ -24,13 +24,16 @@ def _deg(x):
 
 
 def image_stats(im) -> dict:
-    """Mean (fraction of full scale) and saturated fraction (pixels at the dtype's maximum) of one product."""
+    """Data bits, mean (fraction of full scale) and saturated fraction (pixels at full scale) of one product: 12-bit
+    data in 16-bit words judged against 4095, as :meth:`~scipctl.model.ImageProduct.pixels_float` does."""
+    from ..core.image import full_scale
+
     px = im.pixels
-    top = np.iinfo(px.dtype).max
+    top, bits = full_scale(px)
     return {
-        "bit_depth": int(px.dtype.itemsize * 8),
+        "bit_depth": int(bits),
         "mean": float(px.mean(dtype=np.float64) / top),
-        "saturated_fraction": float(np.count_nonzero(px == top) / px.size),
+        "saturated_fraction": float(np.count_nonzero(px >= top) / px.size),
     }
 
 
@@ -129,7 +132,9 @@ def print_summary(s: dict, title: str) -> None:
     for p in s["positions"]:
         q = p["pose"]
         cams = ", ".join(f"{esc(c)} {'+'.join(eye.get(e, e) for e in es)}" for c, es in p["cameras"].items())
-        t.add_row(f"{p['site']}/{p['drive']}", _fmt(q["x_m"]), _fmt(q["y_m"]), _fmt(q["z_m"]), _fmt(q["yaw_deg"], ".2f"),
+        unknown_yaw = q.get("sigma_yaw_deg") is not None and q["sigma_yaw_deg"] >= 180.0  # position-only pose
+        yaw = "unknown" if unknown_yaw else _fmt(q["yaw_deg"], ".2f")
+        t.add_row(f"{p['site']}/{p['drive']}", _fmt(q["x_m"]), _fmt(q["y_m"]), _fmt(q["z_m"]), yaw,
                   esc(q["source"]), cams)
     con.print(t)
     t = Table(title="Images")

@@ -163,6 +163,10 @@ def _read_pds3(path: Path) -> ProductRead:
         target = path.parent / ptr[0]
     elif isinstance(ptr, str):
         target = path.parent / ptr
+    if (ptr is not None or "IMAGE" in data.keys()) and (geom.width is None or geom.height is None):
+        # pdr would fail inside its own code ('NoneType' object has no attribute 'get'): say what is missing
+        raise InputError(geom.product_id, "IMAGE", f"{path.name}: the label has no IMAGE object with LINES and "
+                                                   "LINE_SAMPLES (is the label cut short?)")
     arr = _pdr_array(data, "IMAGE", geom.product_id, "IMAGE", _expect(geom)) if "IMAGE" in data.keys() else None
     if arr is not None:
         px = _to_single_channel(arr, geom.product_id, "IMAGE", path.name)
@@ -189,14 +193,15 @@ def _read_vicar(path: Path) -> ProductRead:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            label = vicar.VicarLabel.from_file(str(path))
+            image = vicar.VicarImage(str(path))  # parses the label once (pyparsing: ~1.5 s per label); pixels lazily
+            label = image.label
     except Exception as e:
         raise InputError(path.name, "label", f"unreadable VICAR label ({type(e).__name__}: {e})"[:300]) from None
     geom = geometry_from_tree(tree_from_vicar_items(label.items()), path.name, "VICAR")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            arr = vicar.VicarImage(str(path)).array
+            arr = image.array
     except Exception as e:
         raise InputError(geom.product_id, "image", f"cannot read the pixels the label describes ({_expect(geom)}): "
                                                    f"{type(e).__name__}: {e}"[:300]) from None
@@ -302,6 +307,10 @@ def product_from_read(pr: ProductRead) -> ImageProduct:
 
     g = pr.geometry
     pid = g.product_id
+    if not pid or not pid.strip():  # the downlink's records refuse a blank id: a workspace holding one would not re-read
+        raise InputError(pr.files[0].name if pr.files else "product", "PRODUCT_ID", "missing or blank")
+    if g.exposure_ms is not None and not g.exposure_ms >= 0:
+        raise InputError(pid, "EXPOSURE_DURATION", f"must be >= 0, got {g.exposure_ms!r}")
     camera, eye = camera_and_eye(g)
     model = model_in_rover_frame(g)
     rover = g.rover_frame

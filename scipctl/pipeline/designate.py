@@ -6,6 +6,7 @@ The designation record (:class:`Designation`) is written to ``targets.json`` by 
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field, replace
 from typing import Optional
@@ -18,6 +19,8 @@ from ..model import Downlink, ImageProduct, InputError, unit_float
 from .designation_trust import LOW_TEXTURE_WARNING, SATURATED_WARNING, VETO_WARNING_PREFIX, assess
 
 EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warned about
+# a pose with no heading (Mars 2020 raw JSON: position only, sigma_yaw pi) puts the site point on a placeholder heading
+UNKNOWN_HEADING_WARNING = "the rover's heading is unknown (a position-only pose): xyz_site_m assumes a placeholder heading"
 
 #: the keys of a designation record in targets.json (Designation.to_dict writes them in this order; the
 #: optional ones only when present: the stereo result when the match is good, the surface normal when computed)
@@ -219,7 +222,7 @@ def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, ban
     k = window_px // 2 + 1
     # the window's pixels as pixels_float() has them, without converting the whole image again
     rows, cols = slice(max(0, int(uv[1]) - k), int(uv[1]) + k + 1), slice(max(0, int(uv[0]) - k), int(uv[0]) + k + 1)
-    patch = unit_float(left.pixels[rows, cols])
+    patch = unit_float(left.pixels[rows, cols], left.full_scale)
     if patch.size and float((patch >= 0.999).mean()) > 0.05:
         warnings.append(SATURATED_WARNING)
     if patch.size and float(patch.std()) < 0.01:
@@ -269,6 +272,9 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
     if not ps.ok:
         return rec
     warnings = list(rec.warnings)
+    sigma_yaw = left.pose.sigma_yaw_rad
+    if sigma_yaw is not None and sigma_yaw >= math.pi:
+        warnings.append(UNKNOWN_HEADING_WARNING)
     X_rover = np.asarray(ps.xyz, float)
     if with_normal:
         from ..core.dense_stereo import dense_stereo

@@ -218,3 +218,24 @@ def test_reingest_of_a_different_downlink_needs_force(tmp_path, ws_with_products
     assert downlink_differences(read_downlink(other), read_downlink(ws)) == []
     info = json.loads(runner.invoke(app, ["info", str(ws), "--json"]).stdout)
     assert info["workspace"]["products"] == [] and info["products"] == {}
+
+
+@pytest.mark.parametrize("replicate", [False, True])
+def test_image_stats_judge_12_bit_data_against_its_own_full_scale(replicate):
+    # A real EDR's 12-bit samples in 16-bit words: a fifth of the rows at 4095 is a fifth saturated, and the mean
+    # is a fraction of 4095 (against 65535 it read 0 % saturated and 16 times darker than the report said). The
+    # same samples bit-replicated to 16 bits (the simulator's encoding) give the same figures.
+    from scipctl.commands.ingest import image_stats
+    from scipctl.io.images import encode_png
+    from scipctl.model import ImageProduct
+
+    v12 = np.full((100, 50), 1024, np.uint16)
+    v12[:20] = 4095
+    px = (v12 << 4) | (v12 >> 8) if replicate else v12
+    im = ImageProduct(product_id="p", camera="navcam", eye="left", time_s=0.0, site=1, drive=0, pose=None,
+                      camera_model=None, width=50, height=100, png=encode_png(px), _pixels=px)
+    s = image_stats(im)
+    assert s["bit_depth"] == (16 if replicate else 12)
+    assert s["saturated_fraction"] == 0.2
+    want = (0.2 * 4095 + 0.8 * 1024) / 4095
+    assert abs(s["mean"] - want) < 1.0 / 4095  # bit replication is within one 12-bit step of v * 65535 / 4095

@@ -123,7 +123,10 @@ def test_real_edr_pixels_are_the_16_bit_words_at_the_labels_pointer():
         assert im.pixels.dtype == np.uint16
         assert np.array_equal(im.pixels, raw.astype(np.uint16))
         assert int(im.pixels.max()) <= 4095  # 12-bit data
-        assert im.pixels_float().max() <= 4095 / 65535 + 1e-12
+        # ... whose full scale is 4095, not the 16-bit word's 65535 (every texture, saturation and brightness
+        # threshold reads pixels_float; against 65535 a real EDR looked 16 times darker and textureless)
+        assert im.full_scale == 4095.0
+        assert np.array_equal(im.pixels_float(), raw.astype(np.float32) / np.float32(4095))
 
 
 def test_attached_and_detached_labels_of_one_real_product_agree():
@@ -288,6 +291,18 @@ def test_info_json_lists_full_models_poses_and_positions_for_real_and_mcap(tmp_p
     assert not list(real("05_").glob("*.scipctl"))  # info writes nothing
 
 
+def test_info_says_a_position_only_pose_has_an_unknown_heading():
+    # the Mars 2020 raw JSON gives position only (identity orientation, sigma_yaw pi): its yaw is not 0.00
+    src = sorted(real("07_").glob("*-metadata.json"))[0]
+    r = runner.invoke(app, ["info", str(src)])
+    assert r.exit_code == 0, r.stderr
+    row = next(line for line in (r.stdout + r.stderr).splitlines() if "position only" in line)
+    assert "unknown" in row and "0.00" not in row
+    r = runner.invoke(app, ["info", str(src), "--json"])
+    pose = json.loads(r.stdout)["positions"][0]["pose"]
+    assert pose["sigma_yaw_deg"] >= 180.0
+
+
 # --------------------------------------------------------------------------- label flavours built in tmp_path
 PIX16 = np.random.default_rng(0).integers(0, 4096, (48, 64)).astype(np.uint16)
 PIX8 = np.random.default_rng(1).integers(0, 256, (48, 64)).astype(np.uint8)
@@ -397,6 +412,18 @@ def test_truncated_products_are_exit_2(tmp_path):
     _bad(tmp_path, p, "PTRUNC2", "IMAGE")
 
 
+def test_a_real_label_cut_short_is_exit_2_saying_so(tmp_path):
+    # a real EDR cut inside its 20 kB label: before, pdr failed in its own code ("'NoneType' object has no
+    # attribute 'get'") and the message showed it
+    f = sorted(real("01_").glob("*.IMG"))[0]
+    for n in (3000, 20000):
+        (tmp_path / f"c{n}").mkdir()
+        p = tmp_path / f"c{n}" / f.name
+        p.write_bytes(f.read_bytes()[:n])
+        err = _bad(tmp_path, p, "IMAGE", "no IMAGE object", "cut short")
+        assert "NoneType" not in err
+
+
 def test_label_without_camera_model_is_exit_2(tmp_path):
     p = pds3_product(tmp_path, "PNOMODEL", PIX16, None)
     _bad(tmp_path, p, "PNOMODEL", "GEOMETRIC_CAMERA_MODEL", "no camera model")
@@ -441,6 +468,20 @@ def test_filler_in_a_required_value_is_exit_2(tmp_path):
     old = text[i:j]
     p.write_bytes(text[:i] + new.ljust(len(old), b" ") + text[j:])
     _bad(tmp_path, p, "PFILL", "GEOMETRIC_CAMERA_MODEL.MODEL_COMPONENT_1", "1e+30")
+
+
+def test_a_blank_product_id_or_a_negative_exposure_is_exit_2(tmp_path):
+    # ingest used to accept both and write a workspace that every later command then refused (the downlink's
+    # records require a product id and an exposure >= 0)
+    (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
+    p = pds3_product(tmp_path / "a", "PNEGEXP", PIX16, MODELS["CAHVOR"], exposure="-5 <ms>")
+    _bad(tmp_path, p, "PNEGEXP", "EXPOSURE_DURATION", "-5")
+    p = pds3_product(tmp_path / "b", "PBLANKID", PIX16, MODELS["CAHVOR"])
+    text = p.read_bytes()
+    old = b'PRODUCT_ID = "PBLANKID"'
+    assert text.count(old) == 1
+    p.write_bytes(text.replace(old, b'PRODUCT_ID = ""'.ljust(len(old), b" ")))
+    _bad(tmp_path, p, "PRODUCT_ID", "blank")
 
 
 def test_read_products_rejects_what_is_not_a_product(tmp_path):

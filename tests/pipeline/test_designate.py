@@ -247,3 +247,55 @@ def test_a_malformed_document_is_an_input_error(doc):
     with pytest.raises(InputError, match=r"^targets.json: targets"):
         designations_from_doc(doc)
     assert designations_from_doc(None) == [] and designations_from_doc({"provenance": {}}) == []
+
+
+def _as_12_bit_words(dl, replicate: bool):
+    """``dl`` with every 8-bit image re-quantised to 12 bits (``round(v * 4095 / 255)``) in 16-bit words: as real
+    MER/MSL EDRs store them (``replicate`` False: 0..4095) or bit-replicated to full 16-bit scale as the simulator
+    writes them (``v << 4 | v >> 8``)."""
+    from scipctl.io.images import encode_png
+
+    out = []
+    for im in dl.images:
+        v12 = np.rint(im.pixels.astype(np.float64) * 4095.0 / 255.0).astype(np.uint16)
+        px = (v12 << 4) | (v12 >> 8) if replicate else v12
+        out.append(replace(im, png=encode_png(px), _pixels=px))
+    return replace(dl, images=out)
+
+
+@pytest.mark.parametrize("camera, target_id", [("pancam", "t_slab"), ("navcam", "t_flat")])
+def test_12_bit_data_in_16_bit_words_designates_as_its_bit_replicated_copy(far, camera, target_id):
+    # Real EDRs keep 12-bit samples in 16-bit words. Judged against 65535 every window looked 16 times flatter and
+    # every real designation was vetoed "no texture"; judged against the data's own full scale (4095) the two
+    # encodings of the same samples are the same image to within one 12-bit step, and designate alike.
+    _, dl = far
+    raw, rep = _as_12_bit_words(dl, replicate=False), _as_12_bit_words(dl, replicate=True)
+    pid = f"{camera}_left_1_0"
+    assert raw.product(pid).full_scale == 4095.0 and rep.product(pid).full_scale == 65535.0
+    # bit replication is v * 65535 / 4095 to within 1/4096 of v: the floats differ by less than one 12-bit step
+    assert np.max(np.abs(raw.product(pid).pixels_float() - rep.product(pid).pixels_float())) < 1.0 / 4095
+    a, _, X_true = _designate_mark(raw, camera, target_id)
+    b, _, _ = _designate_mark(rep, camera, target_id)
+    assert a.ok and b.ok
+    assert a.warnings == b.warnings
+    assert not any("texture" in w or "saturated" in w for w in a.warnings)
+    # the same match: the two points agree within the stereo error model's 0.5 px of disparity (2 range sigmas)
+    assert np.linalg.norm(np.subtract(a.xyz_site_m, b.xyz_site_m)) <= 2.0 * max(a.range_sigma_m, b.range_sigma_m)
+
+
+def test_a_position_only_pose_warns_that_the_site_point_has_no_heading(far):
+    # Mars 2020 raw JSON products carry position only: identity orientation with sigma_yaw pi. The rover-frame
+    # point is still measured; the site-frame one rests on a heading nobody knows, and the record says so.
+    from scipctl.core.kinematics import RoverPose
+    from scipctl.pipeline.designate import UNKNOWN_HEADING_WARNING
+
+    _, dl = far
+    rec, left, _ = _designate_mark(dl, "pancam", "t_slab")
+    assert rec.ok and UNKNOWN_HEADING_WARNING not in rec.warnings
+    p = left.pose
+    no_heading = RoverPose(p.T_site_rover, "m2020-raw-json (position only)", p.sigma_position_m, float(np.pi))
+    dl2 = replace(dl, images=[replace(im, pose=no_heading) if im.position == left.position else im
+                              for im in dl.images])
+    rec2, _, _ = _designate_mark(dl2, "pancam", "t_slab")
+    assert rec2.ok and UNKNOWN_HEADING_WARNING in rec2.warnings
+    assert rec2.xyz_rover_m == rec.xyz_rover_m  # the measurement itself does not change
