@@ -28,7 +28,7 @@ app = typer.Typer(
     help="Single Cycle Instrument Placement ground tool: ingest downlinks, designate targets, "
     "simulate pancam->navcam->hazcam handoffs, emit uplink sequences and reports.\n\n"
     "Exit codes: 0 ok, 1 the answer is no (failure detected), 2 bad input or usage, 3 a bug in scipctl, "
-    "130 interrupted, 143 terminated.",
+    "130 interrupted, 143 terminated, 141 stdout closed by its reader.",
     no_args_is_help=True,
     context_settings={"help_option_names": ["-h", "--help"]},
     add_completion=False,

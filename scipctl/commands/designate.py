@@ -60,8 +60,12 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
                            trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
     rec = replace(rec, provenance=provenance({"downlink": str(src)}))
     if not rec.ok:
+        # not saved; the same keys as a designation's document (null where there is no value; go false), so that
+        # a script reading doc["go"] or doc["range_m"] gets an answer, not a KeyError
+        payload = dict({k: None for k in _RESULT_KEYS}, **rec.to_dict(), saved_to=None)
+        payload["go"] = False
         raise CommandFailed(f"{left.product_id}: no reliable stereo match at ({uv[0]:g}, {uv[1]:g}): {rec.reason}",
-                            payload=dict(rec.to_dict(), saved_to=None))  # not saved
+                            payload=payload)
 
     def add(doc):
         nonlocal rec
@@ -88,6 +92,10 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
                             f"P(within {rec.ok_tolerance_pct:g} % of the range of ideal stereo) {p}")
                             + "; saved, but re-designate (another pixel or image) before planning on it",
                             payload=None)  # the JSON record was already emitted above
+
+
+_RESULT_KEYS = ("xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose", "surface_normal_rover",
+                "normal_points", "incidence_deg", "p_ok", "ok_tolerance_pct", "go")
 
 
 def _print(rec, saved_to):

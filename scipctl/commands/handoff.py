@@ -104,7 +104,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     if chain_answer is not None and not chain:
         raise InputError("simulate-handoff", "--chain-answer", "is the chain's answer: give --chain too")
     con = stderr_console()
-    records, chains, per_dl = [], [], []
+    records, chains, per_dl, pending = [], [], [], []
     sources = [open_source(s, products_root=products_root) for s in srcs]  # validate every input before any work
     for source in sources:
         source.check_writable()  # and say now if a handoff.json could not be saved
@@ -143,21 +143,25 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                                progress=progress, downlink_name=name, only=pairs)
             prog.advance(task, len(names) * len(navcams))
             records.extend(recs)
-            _note_replaced(source, recs)
-            saved = source.save_json("handoff.json", {
+            # saved after every source has run: a bad --near/--far/--hazcam/--target found at a later source
+            # (exit 2) must not leave the earlier sources' handoff.json replaced
+            pending.append((source, recs, {
                 "provenance": provenance(_inputs({"downlink": str(src)}, trust_model)), "success_px": success_px,
                 "results": [r.to_dict() for r in recs], "table1": table1(recs),
-            })
-            if source.location_note():
-                note(source.location_note())
+            }))
             per_dl.append({"downlink": name, "hazcam": setup.hazcam.product_id,
                            "near": setup.near.product_id if setup.near else None,
                            "far": setup.far.product_id if setup.far else None,
                            "dense_stereo_s": {k: round(c.nav.dense_seconds, 3) for k, c in setup.cases.items()},
-                           "input_sha256": dl.source_sha256, "saved_to": str(saved)})
+                           "input_sha256": dl.source_sha256, "saved_to": None})
             if chain:
                 chains.extend(run_marked_chains(dl, name, target, answer=chain_answer))
             del done
+    for (source, recs, saved_doc), entry in zip(pending, per_dl):
+        _note_replaced(source, recs)
+        entry["saved_to"] = str(source.save_json("handoff.json", saved_doc))
+        if source.location_note():
+            note(source.location_note())
     rows = table1(records)
     doc = {
         "provenance": provenance(_inputs({f"downlink{i}": str(s) for i, s in enumerate(srcs)}, trust_model)),

@@ -187,7 +187,10 @@ def ingest(src: Path, out: Path, json_out: bool, force: bool = False) -> None:
         note(f"{out} was made from a different downlink; its products {', '.join(done.superseded_products)} "
              f"are no longer used: set aside in {done.superseded_dir}/ (--force)")
     if json_out:
+        from ..io.provenance import provenance
+
         emit_json({"workspace": str(out), "summary": summary, "kept_products": done.kept_products,
+                   "provenance": provenance({"downlink": dl.source_sha256}),
                    "superseded_products": done.superseded_products,
                    "superseded_dir": None if done.superseded_dir is None else str(done.superseded_dir)})
     else:
@@ -210,6 +213,8 @@ def info(src: Path, json_out: bool, products_root=None) -> None:
             "products": names,
         }
     if json_out:
-        emit_json(summary)
+        from ..io.provenance import provenance
+
+        emit_json(dict(summary, provenance=provenance({"downlink": source.downlink.source_sha256})))
     else:
         print_summary(summary, f"{'Workspace' if ws is not None else 'Downlink'} {src}")

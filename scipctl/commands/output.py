@@ -26,6 +26,7 @@ from ..errors import CommandFailed, InputError
 from ..jsonutil import strict_json
 
 EXIT_OK, EXIT_NO, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout went away (`scipctl ... --json | head -1`)
 
 
 class Terminated(BaseException):
@@ -89,6 +90,17 @@ def guarded(fn):
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as e:
             error(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}")
             raise typer.Exit(EXIT_BAD_INPUT)
+        except BrokenPipeError:
+            # not a bug in scipctl: stdout's reader closed the pipe. Point stdout at /dev/null so that the
+            # interpreter's final flush does not fail again, and exit as a shell reports SIGPIPE.
+            import os
+
+            try:
+                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            except OSError:
+                pass
+            error("stdout closed by its reader (broken pipe)")
+            raise typer.Exit(EXIT_BROKEN_PIPE)
         except KeyboardInterrupt:
             error("interrupted")
             raise typer.Exit(EXIT_INTERRUPTED)

@@ -15,7 +15,7 @@ def build(source, progress=None, params=None, rule_set=None):
     from ..io.provenance import provenance
     from ..io.report_html import render_report
     from ..pipeline.designate import designations_from_doc
-    from ..pipeline.handoff import handoff_records_from_doc
+    from ..pipeline.handoff import handoff_records_from_doc, table1_rows_from_doc
     from ..pipeline.report_data import ReportParams, collect
     from ..pipeline.paper_table1 import PAPER_TABLE1
     from ..pipeline.sequence import format_seqn
@@ -27,8 +27,8 @@ def build(source, progress=None, params=None, rule_set=None):
     handoff_doc = source.load_json("handoff.json")
     saved_handoff = None
     if isinstance(handoff_doc, dict):
-        saved_handoff = (handoff_records_from_doc(handoff_doc, str(source.read_from.get("handoff.json", "handoff.json"))),
-                         handoff_doc.get("table1"))
+        where = str(source.read_from.get("handoff.json", "handoff.json"))
+        saved_handoff = (handoff_records_from_doc(handoff_doc, where), table1_rows_from_doc(handoff_doc, where))
     data = collect(dl, designations, saved_handoff, params or ReportParams(), progress)
     rows = data["handoff"]["table1"]
     sequences = {}
@@ -42,7 +42,11 @@ def build(source, progress=None, params=None, rule_set=None):
             sequences[t["id"]] = {"checks": [c.to_dict() for c in checks], "text": format_seqn(doc) if doc else None}
         except (InputError, ValueError) as e:
             sequences[t["id"]] = {"checks": [], "text": None, "error": str(e)}
-    prov = provenance({"downlink": dl.source_sha256})
+    # the report depends on the saved products it read and on the rules file, not only on the downlink
+    inputs = dict({"downlink": dl.source_sha256}, **{name: path for name, path in source.read_from.items()})
+    if rule_set is not None:
+        inputs["rules_file"] = rule_set.sha256
+    prov = provenance(inputs)
     html = render_report(data, sequences, PAPER_TABLE1, prov)
     summary = _summary(data, sequences)
     summary["provenance"] = prov  # the record the HTML embeds
@@ -84,10 +88,12 @@ def _summary(data, sequences) -> dict:
 def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None):
     """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
     (and stdout with ``--json``)."""
-    from ..io.atomic import check_output_file, write_output_text
+    from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.workspace import open_source
 
     out = check_output_file(out)  # before the work (the report takes a minute)
+    check_not_input(out, src)  # -o SRC would replace the downlink with the HTML
+    check_not_input(out.with_suffix(".annotations.mcap"), src)  # and so would the annotations written beside it
     from .params import report_params
     from .params import rule_set as load_rule_set
 

@@ -16,7 +16,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     """``scipctl sequence``: write the sequence (``out`` or stdout) and print the rule checks; CommandFailed
     (exit 1, no sequence) when a flight rule is broken. ``rules_path``: the rules file (None: the package
     default); ``rule_options``: ``{option: value}`` overriding it (``scipctl.pipeline.rules.OPTIONS``)."""
-    from ..io.atomic import check_output_file, write_output_text
+    from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, broken
     from ..pipeline.target_sequence import make_sequence
@@ -27,6 +27,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
     if out is not None:
         out = check_output_file(out)  # before the prediction: a bad path costs nothing
+        check_not_input(out, src)  # -o SRC would replace the downlink with the sequence
     # a named file or built-in is read (and refused) before the downlink; none named: chosen from the downlink
     rule_set = load_rule_set(rules_path, rule_options, sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)
@@ -43,6 +44,11 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
         "products_read": {k: str(v) for k, v in source.read_from.items()},
         "rules_file": rule_set.summary(),
     }
+    from ..io.provenance import provenance
+
+    # every --json document carries how it was made, the NO-GO one (exit 1, no sequence) included
+    summary["provenance"] = provenance(dict({"downlink": source.downlink.source_sha256, "rules_file": rule_set.sha256},
+                                            **{name: path for name, path in source.read_from.items()}))
     bad = broken(checks)
     stderr_console().print(f"rules: {rule_set.source}" + (f" ({rule_set.chosen_by})" if rule_set.chosen_by else ""),
                            highlight=False, markup=False)

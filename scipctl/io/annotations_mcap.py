@@ -97,6 +97,11 @@ def annotations_bytes(dl, data) -> bytes:
         w.add_message(ca, ns, json.dumps(ann, sort_keys=True).encode(), ns)
     w.add_metadata("scipctl.report", {"mission": str(data["mission"]), "sol": str(data["sol"]),
                                       "source_sha256": str(data["sha256"])})
+    from .provenance import provenance
+
+    # as every written artifact: tool version, command line, input hashes (MCAP metadata values are strings)
+    w.add_metadata("scipctl.provenance", {"json": json.dumps(provenance({"downlink": str(data["sha256"])}),
+                                                             sort_keys=True)})
     w.finish()
     return buf.getvalue()
 

@@ -32,6 +32,21 @@ def check_output_file(path, option: str = "-o") -> Path:
     return path
 
 
+def check_not_input(out, src, option: str = "-o") -> None:
+    """:class:`InputError` when the output file ``out`` is the input ``src`` itself, a file of a directory input
+    (its ``downlink.yaml``, anything under its ``images/`` or ``scipctl/``) or of a raw downlink's sidecar
+    ``<SRC>.scipctl/``: writing there would replace the downlink (or its products) with the command's output. Other
+    files in a workspace (e.g. ``WS/report.html``, written again by the next run) are allowed."""
+    from ..errors import InputError
+
+    o, s = Path(out).resolve(), Path(src).resolve()
+    rel = o.relative_to(s).parts if s.is_dir() and o.is_relative_to(s) and o != s else None
+    sidecar = Path(str(s) + ".scipctl")
+    if o == s or o.is_relative_to(sidecar) or (rel and (rel[0] in ("images", "scipctl") or rel == ("downlink.yaml",))):
+        raise InputError(str(out), option, f"would overwrite the input {src} (or one of its files or products); "
+                         "give a file outside the downlink")
+
+
 def check_output_dir(path, option: str = "-o") -> Path:
     """``path`` as a :class:`Path` if it is (or can be made) a writable folder, else :class:`InputError`."""
     from ..errors import InputError

@@ -205,6 +205,33 @@ def handoff_records_from_doc(doc, product: str = "handoff.json") -> list:
     return [HandoffRecord.from_dict(r, product, i) for i, r in enumerate(results)]
 
 
+def table1_rows_from_doc(doc, product: str = "handoff.json") -> Optional[list]:
+    """The ``table1`` rows of a ``handoff.json`` document, checked (None when it has none): each row a JSON object
+    with a known method name, a navcam, whole ``cases``/``answered`` and a ``success_rate`` and ``all.mean`` that
+    are numbers (or null). :class:`InputError` naming the product and the field otherwise: these rows choose the
+    handoff method that the uplink sequence commands, so nothing unchecked may reach it."""
+    from ..jsonutil import RecordReader
+
+    if not isinstance(doc, dict) or doc.get("table1") is None:
+        return None
+    rows = doc["table1"]
+    if not isinstance(rows, list):
+        raise InputError(product, "table1", f"expected a list of rows, got {type(rows).__name__}")
+    for i, row in enumerate(rows):
+        r = RecordReader(row, product, f"table1[{i}].", "table1 row")
+        method = r.text("method", required=True, nullable=False)
+        if method not in ALL_METHODS:
+            r.bad("method", f"unknown method {method!r}")
+        r.text("navcam", required=True, nullable=False)
+        r.integer("cases", required=True, nullable=False)
+        r.integer("answered")
+        r.number("success_rate")
+        stats = r.mapping("all")
+        if stats is not None:
+            RecordReader(stats, product, f"table1[{i}].all.", "statistics").number("mean")
+    return rows
+
+
 def run_targets(
     dl: Downlink,
     setup: HandoffSetup,

@@ -17,8 +17,10 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
     if pred is None or record is None:
         targets_doc = source.load_json("targets.json")
         designations = designations_from_doc(targets_doc, str(source.read_from.get("targets.json", "targets.json")))
+    from .handoff import table1_rows_from_doc
+
     handoff_doc = source.load_json("handoff.json")
-    rows = handoff_doc.get("table1") if isinstance(handoff_doc, dict) else None
+    rows = table1_rows_from_doc(handoff_doc, str(source.read_from.get("handoff.json", "handoff.json")))
     return sequence_for(source.downlink, target, designations, rows, params=params, rules=rules, pred=pred,
                         record=record, rules_used=rules_used, render_views=render_views)
 
@@ -64,6 +66,15 @@ def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=No
                            sequence_document, _exposures)
 
     checks = check_rules(pred, dl.rover_config, rules)
+    if getattr(record, "go", None) is False:
+        # `designate` called this designation NO-GO ("saved, but re-designate before planning on it"): no uplink
+        from .sequence import RuleCheck
+
+        p = getattr(record, "p_ok", None)
+        checks.insert(0, RuleCheck(
+            "designation-go", False, p, None, "",
+            "the designation is NO-GO" + ("" if p is None else f" (P(within {record.ok_tolerance_pct:g} % of the range) "
+                                                                f"{p:.2f})") + ": re-designate (another pixel or image)"))
     if broken(checks):
         return None, checks
     handoff = choose_handoff(table1_rows)

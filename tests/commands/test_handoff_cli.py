@@ -142,3 +142,21 @@ def test_a_narrower_run_says_it_replaces_earlier_results_and_hashes_its_trust_mo
     assert json.loads(r.stdout)["provenance"]["inputs"]["trust_model"] == {"path": str(model), "sha256": sha}
     saved = json.loads((tmp_path / (SAMPLE.name + ".scipctl") / "handoff.json").read_text())
     assert saved["provenance"]["inputs"]["trust_model"]["sha256"] == sha
+
+
+def test_a_bad_option_for_a_later_source_leaves_every_source_as_it_was(tmp_path):
+    # --near names a product of the first downlink only: the second stops with exit 2. The first's handoff.json
+    # used to be replaced before that (README: exit 2 leaves nothing half-written)
+    a, b = tmp_path / "a" / SAMPLE.name, tmp_path / "b" / "paper-s1-arc.mcap"
+    a.parent.mkdir(), b.parent.mkdir()
+    a.write_bytes(SAMPLE.read_bytes())
+    b.write_bytes((SAMPLE.parent / "paper-s1-arc.mcap").read_bytes())
+    side = Path(str(a) + ".scipctl")
+    side.mkdir()
+    (side / "handoff.json").write_text('{"earlier": true}')
+    r = runner.invoke(app, ["simulate-handoff", str(a), str(b), "--methods", "pure-kinematic",
+                            "--near", "s1-straight-near-navcam-L"])
+    assert r.exit_code == 2, r.stderr
+    assert r.stderr.strip().splitlines()[-1].startswith("scipctl: error: ") and "s1-straight-near-navcam-L" in r.stderr
+    assert (side / "handoff.json").read_text() == '{"earlier": true}'
+    assert not Path(str(b) + ".scipctl", "handoff.json").exists()

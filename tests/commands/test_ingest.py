@@ -33,6 +33,10 @@ def test_ingest_json_summary_and_workspace(tmp_path, small):
     assert r.exit_code == 0, r.stderr
     doc = json.loads(r.stdout)  # exactly one JSON document on stdout
     assert doc["workspace"] == str(ws)
+    sha = read_downlink(src).source_sha256
+    assert doc["provenance"]["tool"] == "scipctl" and doc["provenance"]["inputs"]["downlink"]["sha256"] == sha
+    info = json.loads(runner.invoke(app, ["info", str(src), "--json"]).stdout)
+    assert info["provenance"]["inputs"]["downlink"]["sha256"] == sha
     s = doc["summary"]
     assert (s["mission"], s["sol"], s["format_version"]) == ("test", 42, "1")
     assert s["counts"] == {"images": len(dl.images), "positions": 2, "targets": len(dl.targets)}

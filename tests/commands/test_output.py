@@ -8,6 +8,7 @@ import typer
 
 from scipctl.commands.output import EXIT_BAD_INPUT, EXIT_BUG, EXIT_NO, emit_json, guarded
 from scipctl.errors import CommandFailed, InputError
+from tests.commands.conftest import SAMPLE
 
 
 def _raising(exc):
@@ -97,3 +98,28 @@ def test_sigterm_unwinds_the_command_removes_temporaries_and_exits_143(capsys, t
     assert out == "" and err == "scipctl: error: terminated\n"
     assert list(tmp_path.iterdir()) == []  # neither the workspace nor its temporary folder
     assert signal.getsignal(signal.SIGTERM) is previous  # the handler lives only while a command runs
+
+
+def test_a_closed_stdout_is_exit_141_not_a_bug(capsys):
+    # `scipctl ... --json | head -1`: the reader went away. Reported as "internal error ... please report it"
+    # (exit 3) before, which broke pipefail scripts
+    from scipctl.commands.output import EXIT_BROKEN_PIPE
+
+    with pytest.raises(typer.Exit) as e:
+        _raising(BrokenPipeError(32, "Broken pipe"))()
+    _, err = capsys.readouterr()
+    assert e.value.exit_code == EXIT_BROKEN_PIPE == 141
+    assert err.startswith("scipctl: error: ") and err.count("\n") == 1 and "broken pipe" in err
+
+
+def test_a_real_closed_pipe_exits_141_with_one_line(tmp_path):
+    import subprocess
+    import sys
+
+    # the reader closes its end before scipctl writes: the write fails with EPIPE
+    p = subprocess.Popen([sys.executable, "-m", "scipctl.cli", "info", str(SAMPLE), "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=300) == 141, err
+    assert err.count("\n") == 1 and "Traceback" not in err

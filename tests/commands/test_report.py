@@ -171,3 +171,45 @@ def test_a_downlink_without_targets_says_so(tmp_path):
     html = (tmp_path / "r.html").read_text()
     assert "No targets: the downlink marks none and none has been designated" in html
     assert json.loads(r.stdout)["targets"] == []
+
+
+def test_the_report_and_its_annotations_say_how_they_were_made_and_from_what(report):
+    from mcap.reader import make_reader
+
+    from scipctl.io.downlink import read_downlink
+
+    src, out, summary, _, _ = report
+    sha = read_downlink(src).source_sha256
+    prov = summary["provenance"]
+    assert prov["tool"] == "scipctl" and prov["inputs"]["downlink"]["sha256"] == sha
+    assert "rules_file" in prov["inputs"]  # the rules the page's sequences were checked against
+    with open(out.with_suffix(".annotations.mcap"), "rb") as f:
+        meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    ann_prov = json.loads(meta["scipctl.provenance"]["json"])
+    assert ann_prov["tool"] == "scipctl" and ann_prov["inputs"]["downlink"]["sha256"] == sha
+    assert ann_prov["command"]
+
+
+def test_the_report_hashes_the_saved_products_it_read(tmp_path, report):
+    src0, *_ = report
+    src = tmp_path / "sol7"
+    shutil.copytree(src0, src)
+    side = tmp_path / "sol7.scipctl"
+    side.mkdir()
+    (side / "handoff.json").write_text(json.dumps({"results": [], "table1": []}))
+    out = tmp_path / "r.html"
+    r = runner.invoke(app, ["report", str(src), "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.stderr
+    inputs = json.loads(r.stdout)["provenance"]["inputs"]
+    assert inputs["handoff.json"]["path"] == str(side / "handoff.json") and len(inputs["handoff.json"]["sha256"]) == 64
+
+
+def test_the_report_may_not_overwrite_its_input(tmp_path, report):
+    src0, *_ = report
+    src = tmp_path / "sol7"
+    shutil.copytree(src0, src)
+    before = (src / "downlink.yaml").read_bytes()
+    # -o naming the downlink's own file replaced it with the HTML page (exit 0)
+    r = runner.invoke(app, ["report", str(src), "-o", str(src / "downlink.yaml")])
+    assert r.exit_code == 2 and "would overwrite the input" in r.stderr and r.stderr.count("\n") == 1
+    assert (src / "downlink.yaml").read_bytes() == before

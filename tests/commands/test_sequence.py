@@ -208,3 +208,70 @@ def test_rules_not_given_are_chosen_from_the_downlinks_rover_and_a_builtin_by_na
                     "overrides": {}}
     arm = next(c for c in json.loads(r.stdout)["rules"] if c["rule"] == "arm-workspace")
     assert "1.80-2.78 m" in arm["message"]
+
+
+def _with_targets_and_handoff(tmp_path, slab_dir, name, records=None, handoff=None):
+    """A copy of the slab sol whose sidecar holds ``records`` (Designation list) and/or a ``handoff.json``."""
+    src = tmp_path / name
+    shutil.copytree(slab_dir, src)
+    side = src.parent / f"{name}.scipctl"
+    side.mkdir()
+    if records is not None:
+        (side / "targets.json").write_text(json.dumps({"targets": [r.to_dict() for r in records]}))
+    if handoff is not None:
+        (side / "handoff.json").write_text(json.dumps(handoff))
+    return src, side
+
+
+def test_a_designation_called_no_go_gets_no_sequence_and_exit_1(tmp_path, slab_dir):
+    # designate said "saved, but re-designate before planning on it"; sequence used to uplink it anyway (exit 0)
+    dl = read_downlink(slab_dir)
+    rec = replace(S.designation_record(dl, "t_slab"), id="t_ng", p_ok=0.65, ok_tolerance_pct=1.0, go=False)
+    src, _ = _with_targets_and_handoff(tmp_path, slab_dir, "sol9", records=[rec])
+    out = tmp_path / "ng.seqn"
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_ng", "-o", str(out), "--json"])
+    assert r.exit_code == 1, r.stderr
+    assert not out.exists()
+    summary = json.loads(r.stdout)
+    bad = {c["rule"]: c for c in summary["rules"] if not c["ok"]}
+    assert "designation-go" in bad and "re-designate" in bad["designation-go"]["message"]
+    assert summary["provenance"]["inputs"]["downlink"]["sha256"] == dl.source_sha256  # the NO-GO answer too
+    # the same designation called GO plans as before
+    src2, _ = _with_targets_and_handoff(tmp_path, slab_dir, "sol10", records=[replace(rec, id="t_go", p_ok=0.97, go=True)])
+    r = runner.invoke(app, ["sequence", str(src2), "--target", "t_go", "--json"])
+    summary = json.loads(r.stdout)
+    assert "designation-go" not in {c["rule"] for c in summary["rules"]}
+    assert summary["provenance"]["tool"] == "scipctl"
+
+
+@pytest.mark.parametrize("table1, field", [
+    (5, "table1"),
+    ([{"method": "rm -rf", "navcam": "near", "cases": 3}], "table1[0].method"),
+    ([{"method": "scip", "navcam": "any", "cases": 3, "success_rate": "high"}], "table1[0].success_rate"),
+])
+def test_a_malformed_table1_in_handoff_json_is_exit_2_naming_the_field(tmp_path, slab_dir, table1, field):
+    # the saved Table 1 chooses the method the uplink commands: a TypeError (exit 3), or an unchecked method name
+    # written into the sequence ("TRK_HANDOFF_NAVCAM_HAZCAM RM _RF"), before
+    src, side = _with_targets_and_handoff(tmp_path, slab_dir, "sol11", handoff={"results": [], "table1": table1})
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "--json"])
+    assert r.exit_code == 2, r.stderr
+    assert r.stdout == "" and r.stderr.count("\n") == 1
+    assert str(side / "handoff.json") in r.stderr and f"{field}:" in r.stderr, r.stderr
+
+
+def test_the_output_may_not_be_the_input_or_one_of_its_files(tmp_path, slab_dir, sol):
+    # `-o` naming the downlink replaced it with the sequence text (exit 0)
+    before = sol.read_bytes()
+    r = runner.invoke(app, ["sequence", str(sol), "--target", "t2", "-o", str(sol)])
+    assert r.exit_code == 2 and "would overwrite the input" in r.stderr and r.stderr.count("\n") == 1
+    assert sol.read_bytes() == before
+    src = tmp_path / "sol12"
+    shutil.copytree(slab_dir, src)
+    yaml_before = (src / "downlink.yaml").read_bytes()
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "-o", str(src / "downlink.yaml")])
+    assert r.exit_code == 2 and (src / "downlink.yaml").read_bytes() == yaml_before
+    side = src.parent / "sol12.scipctl"
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "-o", str(side / "targets.json")])
+    assert r.exit_code == 2 and not (side / "targets.json").exists()
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "-o", str(src / "t_slab.seqn")])
+    assert r.exit_code == 0, r.stderr  # another file beside the downlink's is fine
