@@ -230,6 +230,10 @@ def sequence(
         None, "--max-drive-m", help="Flight rule max-drive-distance, metres (overrides the rules file)."),
     standoff_m: Optional[float] = typer.Option(
         None, "--standoff-m", help="Final rover-origin-to-target distance, metres (overrides the rules file; default: arm workspace centre)."),
+    handoff: str = typer.Option(
+        "scip", "--handoff", help="The navcam->hazcam handoff the sequence commands: scip (the recommended handoff, "
+        "near and far navcams, NO-GO halts before the arm) | best-single (one paper method, chosen by the saved "
+        "near-navcam results of simulate-handoff, else the paper's Table 1)."),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
@@ -237,7 +241,7 @@ def sequence(
     from .commands import sequence as command
 
     command.sequence(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
-        products_root=products_dir, rules_path=rules,
+        products_root=products_dir, rules_path=rules, handoff_choice=handoff,
         rule_options={"--min-p-success": min_p_success, "--min-p-simulated": min_p_simulated,
                       "--rock-keep-out-m": rock_keep_out_m,
                       "--target-keep-out-m": target_keep_out_m, "--max-drive-m": max_drive_m,

@@ -12,19 +12,22 @@ FORMATS = ("seqn", "seqjson", "json", "text")
 
 
 def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None,
-             rules_path=None, rule_options=None):
+             rules_path=None, rule_options=None, handoff_choice: str = "scip"):
     """``scipctl sequence``: write the sequence (``out`` or stdout) and print the rule checks; CommandFailed
     (exit 1, no sequence) when a flight rule is broken. ``rules_path``: the rules file (None: the package
     default); ``rule_options``: ``{option: value}`` overriding it (``scipctl.pipeline.rules.OPTIONS``)."""
     from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.workspace import open_source
-    from ..pipeline.sequence import FORMATTERS, broken
+    from ..pipeline.sequence import FORMATTERS, HANDOFF_CHOICES, broken
     from ..pipeline.target_sequence import make_sequence
     from .params import rule_set as load_rule_set
 
     fmt = (fmt or "seqn").lower()
     if fmt not in FORMATS:
         raise InputError("--format", "format", f"unknown format {fmt!r} (want one of: {', '.join(FORMATS)})")
+    if handoff_choice not in HANDOFF_CHOICES:
+        raise InputError("--handoff", "handoff", f"unknown choice {handoff_choice!r} (want one of: "
+                                                  f"{', '.join(HANDOFF_CHOICES)})")
     if out is not None:
         out = check_output_file(out)  # before the prediction: a bad path costs nothing
         check_not_input(out, src)  # -o SRC would replace the downlink with the sequence
@@ -34,7 +37,8 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     if rules_path is None:
         rule_set = load_rule_set(None, rule_options, sigma_position_m, sigma_yaw_deg, dl=source.downlink)
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
-                                              rules_used=rule_set.to_dict(), render_views=False)
+                                              rules_used=rule_set.to_dict(), render_views=False,
+                                              handoff_choice=handoff_choice)
     summary = {
         "target": target, "designated_now": record.designated_from == "mark",
         "confidence": pred.confidence, "p_simulated": pred.p_simulated, "calibration": pred.calibration,

@@ -37,9 +37,12 @@ FORMAT = "scipctl-sequence/1"
 NOTIONAL = "NOTIONAL command stems (scipctl planning vocabulary, not a flight command dictionary)"
 
 # paper's Table 1 (near navcams): refined kinematic has the best success rate of the refined methods,
-# pure geometric the smallest error of the methods that always answer
+# pure geometric the smallest error of the methods that always answer (the `best-single` choice without results)
 DEFAULT_HANDOFF = ("refined-kinematic", "pure-geometric")
 FALLBACK_RULE = {"min_ncc": 0.7, "max_disagreement_px": 8.0}
+# how the navcam->hazcam handoff is chosen: `scip` (the default: the recommended handoff, issue #14, the one the
+# prediction's chain runs) or `best-single` (one paper method by the saved near-navcam results, as before scip)
+HANDOFF_CHOICES = ("scip", "best-single")
 
 
 @dataclass(frozen=True)
@@ -218,13 +221,32 @@ def _fin(x):
 
 
 # ============================================================================ handoff choice
-def choose_handoff(table1_rows: Optional[list]) -> dict:
-    """(primary, fallback) navcam->hazcam methods from near-navcam results (``handoff.json`` table1 rows).
+def choose_handoff(table1_rows: Optional[list], choice: str = "scip", success_px: float = 4.0,
+                   min_p_success: Optional[float] = None) -> dict:
+    """The navcam->hazcam handoff the sequence commands (see :data:`HANDOFF_CHOICES`).
 
+    ``scip``: ``scip``'s answer from the near and far navcams with its calibrated ``p_success`` for ``success_px``
+    and GO at ``min_p_success`` (the trust model's threshold; None: unknown, never GO); a NO-GO handoff halts the
+    sequence before the arm. The saved ``scip`` results, when there are any, are quoted in ``basis``.
+
+    ``best-single``: (primary, fallback) paper methods from near-navcam results (``handoff.json`` table1 rows).
     Primary: the highest success rate (ties: smaller mean error); fallback:
     among the others that always answered, the smallest mean error. Without
     results: the paper's choice (:data:`DEFAULT_HANDOFF`).
     """
+    if choice not in HANDOFF_CHOICES:
+        raise ValueError(f"handoff choice: {choice!r} is not one of {', '.join(HANDOFF_CHOICES)}")
+    if choice == "scip":
+        rows = [r for r in (table1_rows or []) if isinstance(r, dict) and r.get("method") == "scip" and r.get("cases")]
+        seen = ""
+        if rows:
+            r = rows[0]
+            seen = (f"; saved results: {100 * float(r.get('success_rate') or 0.0):.0f}% of {r['cases']} within "
+                    f"{success_px:g} px")
+        return {"primary": "scip", "fallback": None, "navcam": "both", "success_px": float(success_px),
+                "min_p_success": None if min_p_success is None else float(min_p_success),
+                "basis": "the recommended handoff: one answer from the near and far navcams with a calibrated "
+                         "p_success; NO-GO halts before the arm" + seen}
     rows = [r for r in (table1_rows or []) if isinstance(r, dict) and r.get("navcam") == "near" and r.get("cases")]
     if not rows:
         why = ("the saved handoff results hold no near-navcam method (run simulate-handoff --methods all)"
@@ -319,6 +341,11 @@ def build_commands(pred: Prediction, record: Designation, handoff: dict, exposur
                                                            ("template_half_px", sh.template_half_px),
                                                            ("search_radius_px", sh.search_radius_px), ("min_ncc", 0.3)],
                                     tm.handoff_scaled_s, "pancam window shrunk by the IFOV ratio, NCC-tracked", st.index))
+            elif st.kind == "navcam-hazcam-handoff" and cam == "hazcam" and handoff["primary"] == "scip":
+                p_go = handoff["min_p_success"]
+                cmds.append(Command("TRK_HANDOFF_SCIP", [("navcam", ("enum", "BOTH")), ("success_px", handoff["success_px"]),
+                                                         ("min_p_success", float("nan") if p_go is None else p_go)],
+                                    tm.handoff_hazcam_s, handoff["basis"], st.index))
             elif st.kind == "navcam-hazcam-handoff" and cam == "hazcam":
                 cmds.append(Command("TRK_HANDOFF_NAVCAM_HAZCAM", [("method", ("enum", _enum(handoff["primary"]))),
                                                                   ("fallback", ("enum", _enum(handoff["fallback"]))),
@@ -541,7 +568,9 @@ def format_text(doc: dict) -> str:
            f"path {doc['plan']['path_length_m']:.2f} m, approach bearing {math.degrees(doc['plan']['bearing_rad']):.1f} deg "
            f"(detour {math.degrees(doc['plan']['detour_rad']):+.0f} deg), {len(doc['plan']['stops']) - 1} stops, "
            f"~{doc['total_duration_s'] / 60:.0f} min",
-           f"handoff navcam->hazcam: {doc['handoff']['primary']} (fallback {doc['handoff']['fallback']}); {doc['handoff']['basis']}",
+           f"handoff navcam->hazcam: {doc['handoff']['primary']}"
+           + (f" (fallback {doc['handoff']['fallback']})" if doc['handoff'].get('fallback') else "")
+           + f"; {doc['handoff']['basis']}",
            f"predicted P(success) {doc['prediction']['confidence']:.2f}"]
     ru = doc.get("rules_used")
     if ru:

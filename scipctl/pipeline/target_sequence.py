@@ -7,7 +7,7 @@ from ..errors import CommandFailed
 
 
 def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None,
-                  render_views: bool = True):
+                  render_views: bool = True, handoff_choice: str = "scip"):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
     :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
     :func:`sequence_for` on its downlink."""
@@ -22,18 +22,19 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
     handoff_doc = source.load_json("handoff.json")
     rows = table1_rows_from_doc(handoff_doc, str(source.read_from.get("handoff.json", "handoff.json")))
     return sequence_for(source.downlink, target, designations, rows, params=params, rules=rules, pred=pred,
-                        record=record, rules_used=rules_used, render_views=render_views)
+                        record=record, rules_used=rules_used, render_views=render_views, handoff_choice=handoff_choice)
 
 
 def sequence_for(dl, target: str, designations=None, table1_rows=None, params=None, rules=None, pred=None,
-                 record=None, rules_used=None, render_views: bool = True):
+                 record=None, rules_used=None, render_views: bool = True, handoff_choice: str = "scip"):
     """The prediction and sequence for ``target`` of the downlink ``dl``: returns
     ``(doc or None, checks, prediction, record)`` (``record``: the target's
     :class:`~scipctl.pipeline.designate.Designation`).
 
     The target is the one designated in ``designations`` (the :class:`Designation` records of ``targets.json``),
     else designated now from its mark in the first left pancam image (:func:`~.predict.resolve_target`).
-    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method.
+    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``); ``handoff_choice``: how the
+    handoff method is chosen (:data:`~.sequence.HANDOFF_CHOICES`: ``scip``, the default, or ``best-single``).
     ``rules_used``: :meth:`scipctl.pipeline.rules.RuleSet.to_dict` of the rule set, recorded in the document.
     ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
     ``render_views``: render the prediction's reduced-size expected views (only the report shows them; the
@@ -50,14 +51,18 @@ def sequence_for(dl, target: str, designations=None, table1_rows=None, params=No
                                 payload={"target": target, "designation": record.to_dict()})
         pred = predict_target(dl, record, params, designated_now=now, render_views=render_views)
     doc, checks = document_for(dl, record, pred, table1_rows, rules,
-                               chain_params=None if params is None else params.chain, rules_used=rules_used)
+                               chain_params=None if params is None else params.chain, rules_used=rules_used,
+                               handoff_choice=handoff_choice)
     return doc, checks, pred, record
 
 
-def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=None, rules_used=None):
+def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=None, rules_used=None,
+                 handoff_choice: str = "scip"):
     """(sequence document or None when a blocking rule is broken, rule checks) for a prediction.
 
-    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``) that choose the handoff method;
+    ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``); ``handoff_choice``: ``scip`` (the
+    recommended handoff, with the packaged trust model's GO threshold at ``ScipParams().success_px``, as the
+    prediction's chain runs it) or ``best-single`` (a paper method chosen by those rows);
     ``chain_params``: the windows and bands the uplinked chain commands carry (default ``ChainParams()``; the
     prediction's ``PredictParams.chain``).
     """
@@ -77,7 +82,7 @@ def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=No
                                                                 f"{p:.2f})") + ": re-designate (another pixel or image)"))
     if broken(checks):
         return None, checks
-    handoff = choose_handoff(table1_rows)
+    handoff = choose_handoff(table1_rows, handoff_choice, *_scip_success_and_go() if handoff_choice == "scip" else ())
     inputs = {"downlink": dl.source_sha256, "target_record": canonical_hash(record.to_dict())}
     if table1_rows:
         inputs["handoff_results"] = canonical_hash(table1_rows)
@@ -88,3 +93,15 @@ def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=No
                           chain_params=chain_params)
     return sequence_document(pred, record, checks, cmds, handoff, prov, mission=dl.mission, sol=dl.sol,
                              rules_used=rules_used), checks
+
+
+def _scip_success_and_go() -> tuple:
+    """``(success_px, GO threshold)`` of the chain's ``scip`` (``ScipParams``' defaults and the packaged trust model's
+    threshold for that radius; None when the package has no model: never GO)."""
+    from ..core.handoff.scip_params import ScipParams
+    from ..io.trust_model import load_packaged_trust_model
+
+    sp = ScipParams()
+    model = load_packaged_trust_model()
+    go = sp.go_min_p if sp.go_min_p is not None else (None if model is None else model.go_threshold(sp.success_px))
+    return sp.success_px, go

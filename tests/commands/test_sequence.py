@@ -41,7 +41,22 @@ def test_seqn_sequence_is_written_and_byte_identical_on_a_rerun(tmp_path, slab_d
     assert meta["provenance"]["tool"] == "scipctl" and "time_utc" not in meta["provenance"]
     assert all(r["ok"] for r in meta["rules"])
     stems = [ln.split()[1] for ln in lines if ln.startswith("R")]
-    assert stems[-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"] and "TRK_HANDOFF_NAVCAM_HAZCAM" in stems
+    assert stems[-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"] and "TRK_HANDOFF_SCIP" in stems
+    scip = next(ln.split() for ln in lines if " TRK_HANDOFF_SCIP " in ln)
+    from scipctl.io.trust_model import load_packaged_trust_model
+
+    # navcam BOTH, success_px 4, GO at the packaged trust model's threshold for 4 px (what the chain's scip uses)
+    assert scip[2:5] == ["BOTH", "4.0", f"{load_packaged_trust_model().go_threshold(4.0):g}"]
+    assert meta["handoff"]["primary"] == "scip"
+
+
+def test_handoff_best_single_commands_a_paper_method_and_a_bad_choice_is_exit_2(slab_dir):
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--handoff", "best-single"])
+    assert r.exit_code == 0, r.stderr
+    assert " TRK_HANDOFF_NAVCAM_HAZCAM REFINED_KINEMATIC PURE_GEOMETRIC NEAR " in r.stdout  # the paper's Table 1
+    assert "TRK_HANDOFF_SCIP" not in r.stdout
+    r = runner.invoke(app, ["sequence", str(slab_dir), "--target", "t_slab", "--handoff", "consensus"])
+    assert r.exit_code == 2 and "--handoff" in r.stderr and r.stderr.count("\n") == 1
 
 
 def test_json_format_and_summary_on_stdout(slab_dir):

@@ -114,14 +114,29 @@ def test_choose_handoff_from_results_and_default():
         {"method": "refined-geometric", "navcam": "near", "cases": 6, "answered": 5, "success_rate": 0.8, "all": {"mean": 30.0}},
         {"method": "refined-kinematic", "navcam": "far", "cases": 6, "answered": 6, "success_rate": 1.0, "all": {"mean": 1.0}},
     ]
-    ch = Q.choose_handoff(rows)
+    ch = Q.choose_handoff(rows, "best-single")
     assert ch["primary"] == "refined-geometric" and ch["fallback"] == "pure-geometric" and ch["navcam"] == "near"
-    d = Q.choose_handoff(None)
+    d = Q.choose_handoff(None, "best-single")
     assert (d["primary"], d["fallback"]) == Q.DEFAULT_HANDOFF and "paper" in d["basis"]
     assert "no handoff results" in d["basis"]
     # results saved, but none of a near-navcam method (a scip-only or far-only run): said so, not "no results"
-    d = Q.choose_handoff([r for r in rows if r["navcam"] == "far"])
+    d = Q.choose_handoff([r for r in rows if r["navcam"] == "far"], "best-single")
     assert (d["primary"], d["fallback"]) == Q.DEFAULT_HANDOFF and "hold no near-navcam method" in d["basis"]
+
+
+def test_the_default_handoff_is_scip_with_its_go_threshold_and_saved_results_quoted():
+    # issue #14: scip, the recommended handoff, is the sequence's default (it uplinked a paper method before,
+    # because scip's Table 1 row has navcam "any" and the choice kept near-navcam rows only)
+    rows = [{"method": "scip", "navcam": "any", "cases": 3, "answered": 3, "success_rate": 2 / 3, "all": {"mean": 2.0}},
+            {"method": "pure-geometric", "navcam": "near", "cases": 3, "answered": 3, "success_rate": 1.0}]
+    for r in (rows, None):
+        d = Q.choose_handoff(r, success_px=4.0, min_p_success=0.9)
+        assert (d["primary"], d["fallback"], d["navcam"]) == ("scip", None, "both")
+        assert (d["success_px"], d["min_p_success"]) == (4.0, 0.9) and "NO-GO halts before the arm" in d["basis"]
+    assert "saved results: 67% of 3 within 4 px" in Q.choose_handoff(rows, success_px=4.0)["basis"]
+    assert Q.choose_handoff(rows)["min_p_success"] is None  # no threshold known: never GO
+    with pytest.raises(ValueError, match="not one of"):
+        Q.choose_handoff(rows, "consensus")
 
 
 # ----------------------------------------------------------------------------- commands and formats
@@ -134,7 +149,9 @@ def test_commands_cover_every_stop_and_end_with_the_arm(rc, flat_terrain):
     for st in pred.plan.stops[1:]:
         imgs = [c for c in doc["commands"] if c["stop"] == st.index and c["stem"] == "IMG_STEREO"]
         assert [a["args"][0]["value"] for a in imgs] == [sh.camera.upper() for sh in st.cameras]
-    assert stems.count("TRK_HANDOFF_SCALED") == 1 and stems.count("TRK_HANDOFF_NAVCAM_HAZCAM") == 1
+    assert stems.count("TRK_HANDOFF_SCALED") == 1 and stems.count("TRK_HANDOFF_SCIP") == 1
+    assert "TRK_HANDOFF_NAVCAM_HAZCAM" not in stems  # scip, not a paper method, by default
+    assert stems.index("TRK_HANDOFF_SCIP") < stems.index("ARM_PLACE_AT_TARGET")
     assert stems.count("DRV_TURN_TO_TARGET") == 1
     # the waypoints are the planned stops before the turn; after it the rover closes in on the tracked target
     wps = [c for c in doc["commands"] if c["stem"] == "DRV_GOTO_WAYPOINT"]
