@@ -151,7 +151,7 @@ def designate(
 @guarded
 def simulate_handoff(
     srcs: List[Path] = typer.Argument(..., help="Downlinks or workspaces."),
-    target: Optional[str] = typer.Option(None, "--target", help="Only this target id."),
+    target: Optional[str] = typer.Option(None, "--target", help="Only this marked target id (a target with marks in the downlink; designated-only ids have no truth to score against)."),
     from_product: Optional[str] = typer.Option(None, "--from", help="Source left navcam product id, near or far (with --pixel): hand off that pixel, unscored."),
     pixel: Optional[str] = typer.Option(None, "--pixel", help="U,V in the --from product."),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated method names, NAME-near/NAME-far, or 'all' (default: scip, the recommended handoff)."),
