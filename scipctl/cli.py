@@ -286,7 +286,7 @@ def campaign(
     closure: bool = typer.Option(False, "--closure", help="Record each chain's closure check with --chain-answer handoff too (with the default answer it always runs; docs/stereo-and-tracking.md, 'Closure')."),
     chain_answer: Optional[str] = typer.Option(None, "--chain-answer", help="The chain's final hazcam answer: closure (the default: the closure's pixel when it is confirmed, skipping the navcam tracks, else the handoff's) or handoff (scip's handoff of the chain's navcam pixel); docs/stereo-and-tracking.md, 'Closure as the answer'."),
     predict_route: str = typer.Option("plan", "--predict-route", help="The approach predicted: plan (the planner's, as sequence uplinks it) or downlink (the downlink's own later stops, which its chain ran over: for scoring the prediction against the chain)."),
-    methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: all)."),
+    methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: scip only, as simulate-handoff; 'all' for every method of the paper and ours)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo for the handoff (as simulate-handoff --fast)."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="ADDRESS of an existing Dask scheduler (default: a local cluster)."),

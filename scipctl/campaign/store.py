@@ -58,7 +58,10 @@ class CampaignStore:
         import fcntl
 
         self.make()
-        f = open(self.out / ".lock", "a+")
+        try:
+            f = open(self.out / ".lock", "a+")
+        except OSError as e:  # an existing folder that cannot be written (read-only mount, permissions)
+            raise InputError(str(self.out), "-o/--out", f"cannot write here: {e.strerror or e}") from None
         try:
             try:
                 fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)

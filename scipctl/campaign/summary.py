@@ -190,8 +190,14 @@ def summarize(store: CampaignStore, run: Optional[dict] = None) -> dict:
     timed = [r for r in results if r.cpu_s is not None and r.status == "ok"]
     cpu = sum(r.cpu_s for r in timed)
     slow = sorted((r for r in results if r.seconds.get("total") is not None), key=lambda r: -r.seconds["total"])
+    prov = provenance(None)
+    # the inputs the aggregate covers, by job id: every downlink it counts (also those run by earlier invocations)
+    covered = {r.job.job_id for r in results} | {x["job_id"] for x in pending}
+    prov["inputs"] = {job_id: {**({"path": e["job"]["path"]} if (e.get("job") or {}).get("path") else {}),
+                               "sha256": e.get("input_sha256")}
+                      for job_id, e in sorted(manifest["downlinks"].items()) if job_id in covered}
     return {
-        "format": FORMAT, "provenance": provenance(None), "out": str(store.out), "options": options.to_dict(),
+        "format": FORMAT, "provenance": prov, "out": str(store.out), "options": options.to_dict(),
         "run": run,
         "counts": {"downlinks": len(results) + len(pending), "ok": len(results) - len(failed), "failed": len(failed),
                    "pending": len(pending), "handoff_records": sum(len(r.handoff) for r in results),
@@ -220,7 +226,12 @@ def write_summary(store: CampaignStore, summary: dict) -> tuple:
     from ..jsonutil import strict_json
     from ..pipeline.paper_table1 import PAPER_TABLE1
 
+    from ..errors import InputError
+
     js, page = store.out / "summary.json", store.out / "summary.html"
-    atomic_write_text(js, json.dumps(strict_json(summary), indent=1, sort_keys=True, allow_nan=False) + "\n")
-    atomic_write_text(page, render_campaign_html(summary, PAPER_TABLE1))
+    try:
+        atomic_write_text(js, json.dumps(strict_json(summary), indent=1, sort_keys=True, allow_nan=False) + "\n")
+        atomic_write_text(page, render_campaign_html(summary, PAPER_TABLE1))
+    except OSError as e:
+        raise InputError(str(store.out), "summary", f"cannot write the summary: {e.strerror or e}") from None
     return js, page

@@ -49,10 +49,17 @@ def _jobs(srcs, synth, seeds, runs, families, no_errors, error_draws=None):
     from .synth import _env_quality
 
     image_scale, supersample = _env_quality()
-    split = lambda t: None if t is None else [x.strip() for x in t.split(",") if x.strip()]  # noqa: E731
+    def split(flag, t):
+        if t is None:
+            return None
+        names = [x.strip() for x in t.split(",") if x.strip()]
+        if not names:  # an empty list would mean "all" (every run: 6 full renders per seed)
+            raise InputError("campaign", flag, f"{t!r} names nothing")
+        return names
+
     draws = None if error_draws is None else parse_seeds(error_draws, "--error-draws")
-    return synth_jobs(synth, parse_seeds(seeds), split(runs), split(families), no_errors, image_scale, supersample,
-                      draws)
+    return synth_jobs(synth, parse_seeds(seeds), split("--runs", runs), split("--families", families), no_errors,
+                      image_scale, supersample, draws)
 
 
 class _Progress:

@@ -94,6 +94,7 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     out = check_output_file(out)  # before the work (the report takes a minute)
     check_not_input(out, src)  # -o SRC would replace the downlink with the HTML
     check_not_input(out.with_suffix(".annotations.mcap"), src)  # and so would the annotations written beside it
+    check_output_file(out.with_suffix(".annotations.mcap"), "-o (its annotations MCAP beside it)")
     from .params import report_params
     from .params import rule_set as load_rule_set
 
@@ -117,8 +118,10 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     try:
         write_annotations(source.downlink, data, mc)
         summary["annotations_mcap"] = str(mc)
-    except OSError as e:
-        summary["notes"].append(f"annotations MCAP not written: {e}")
+    except OSError as e:  # the path was checked before the work: a full disk, a folder made meanwhile
+        from ..errors import InputError
+
+        raise InputError(str(mc), "-o", f"annotations MCAP not written ({e.strerror or e}); the HTML is at {out}") from None
     if json_out:
         emit_json(summary)
     _print(con, summary)

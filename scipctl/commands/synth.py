@@ -157,6 +157,8 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
         selected = known
     else:
         selected = [r.strip() for r in runs.split(",") if r.strip()]
+        if not selected:
+            raise InputError("synth", "--runs", f"{runs!r} names no run (known: {', '.join(known)})")
         bad = [r for r in selected if r not in known]
         if bad:
             raise InputError("synth", "--runs", f"unknown run(s) {', '.join(bad)} for scenario {scenario} (known: {', '.join(known)})")

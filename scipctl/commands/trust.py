@@ -4,6 +4,7 @@ downlinks with marks, and the model fitted on such tables (docs/handoff.md, "Tru
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Optional
 
@@ -68,6 +69,8 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
 
 
 def read_rows(paths: list) -> list:
+    from ..core.handoff.evidence import Evidence
+    from ..core.handoff.trust_model import FEATURES, feature_matrix
     from ..pipeline.trust_data import EvidenceRow
 
     rows = []
@@ -91,7 +94,11 @@ def read_rows(paths: list) -> list:
                 d = json.loads(line)
                 if isinstance(d, dict) and set(d) == {"provenance"}:
                     continue  # the table's header (trust-evidence writes one)
-                rows.append(EvidenceRow.from_dict(d))
+                row = EvidenceRow.from_dict(d)
+                feature_matrix([Evidence.from_dict(row.evidence)], FEATURES)  # the method named, every feature a number
+                if row.error_px is not None and not (math.isfinite(row.error_px) and row.error_px >= 0):
+                    raise ValueError(f"error_px: {row.error_px}: want a finite number >= 0 or null")
+                rows.append(row)
             except (ValueError, KeyError, TypeError) as e:
                 raise InputError(f"{p}:{i}", "evidence row", str(e)) from None
     if not rows:
@@ -116,6 +123,22 @@ def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float
     import sklearn
 
     prov["scikit_learn"] = sklearn.__version__
+    import numpy as np
+
+    from ..pipeline.trust_fit import RADII_PX, fit_rows
+
+    # a logistic fit needs both outcomes at every radius: with one class it returns a constant p, a model that is
+    # GO always (or never) whatever the evidence, written with exit 0 before
+
+    used = fit_rows(rows)
+    err = np.array([math.inf if (r.error_px is None or r.occluded) else r.error_px for r in used], float)
+    label = ", ".join(str(t) for t in tables)
+    if not len(err):
+        raise InputError(label, "evidence table", "no row with a true error (error_px) or an occluded target to fit on")
+    for r in RADII_PX:  # a logistic fit needs both outcomes: one class gives a constant p (GO always or never)
+        if (err <= r).all() or not (err <= r).any():
+            raise InputError(label, "evidence table", f"every candidate is a {'success' if (err <= r).all() else 'failure'}"
+                             f" within {r:g} px ({len(used)} rows): a trust model needs both")
     model = fit_trust_model(rows, provenance=prov)
     write_output_text(out, trust_model_json(model))
     doc = {"out": str(out), "n_rows": model.provenance["n_rows"], "n_targets": model.provenance["n_targets"],

@@ -127,7 +127,8 @@ def image_stats(dl: Downlink) -> list:
 
 # ============================================================================ calibration health
 def _epipolar_offset(left_model, right_model, uv_left, uv_right) -> Optional[float]:
-    """Signed distance (px) of ``uv_right`` from the epipolar curve of ``uv_left`` (+: below/right of its direction)."""
+    """Signed distance (px) of ``uv_right`` from the epipolar curve of ``uv_left``, with point stereo's sign
+    (``PointStereoResult.epipolar_offset_px``: the tangent oriented towards increasing u, + below the curve)."""
     from ..core.epipolar import epipolar_curve, polyline_foot
 
     try:
@@ -140,6 +141,8 @@ def _epipolar_offset(left_model, right_model, uv_left, uv_right) -> Optional[flo
     foot, _, k, _ = polyline_foot(c, p)
     seg = c[k + 1] - c[k]  # the tangent of the foot's own segment
     tan = seg / max(math.sqrt(float(seg @ seg)), 1e-12)
+    if tan[0] < 0 or (tan[0] == 0 and tan[1] < 0):  # the curve runs far -> near (decreasing u): orient as point_stereo
+        tan = -tan
     d = p - foot
     return float(tan[0] * d[1] - tan[1] * d[0])
 

@@ -125,3 +125,27 @@ def test_chain_go_is_the_chains_verdict_when_recorded():
                   {"downlink": "d", "target": "t2", "steps": [dict(haz, error_px=1.0)], "go": True}]
     go = _section([res], 4.0)["go"]["chain_final"]
     assert (go["nogo_miss"], go["go_success"], go["go_miss"], go["nogo_success"]) == (1, 1, 0, 0)
+
+
+def test_the_summary_names_every_downlink_it_counts(tmp_path):
+    # its provenance listed no inputs: a summary over a folder that two campaigns wrote could not say what it held
+    store, _ = _make_store(tmp_path, with_trust=False, n_per_family=2)
+    s = summarize(store)
+    inputs = s["provenance"]["inputs"]
+    assert len(inputs) == s["counts"]["downlinks"] == 4
+    assert sorted(v["sha256"] for v in inputs.values()) == sorted(f"{i:02d}{f}".ljust(64, "0")
+                                                                 for f in ("flat", "rocky") for i in range(2))
+
+
+def test_an_unwritable_campaign_folder_is_exit_2_not_a_bug(tmp_path):
+    from scipctl.errors import InputError
+
+    store, _ = _make_store(tmp_path, with_trust=False, n_per_family=1)
+    (store.out / "summary.json").mkdir()  # cannot be replaced by the summary
+    with pytest.raises(InputError, match="cannot write the summary"):
+        write_summary(store, summarize(store))
+    (store.out / ".lock").unlink(missing_ok=True)
+    (store.out / ".lock").mkdir()  # the lock cannot be opened: as on a read-only mount (root ignores chmod)
+    with pytest.raises(InputError, match="cannot write here"):
+        with store.locked():
+            pass

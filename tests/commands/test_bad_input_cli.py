@@ -224,6 +224,14 @@ BAD_ARGS = [
     # report
     (["report", S, "-o", "SRCDIR"], ": -o: is a directory"),
     (["report", S, "--sigma-yaw-deg", "-1", "-o", "r.html"], "--sigma-yaw-deg: sigma_yaw_deg: must be"),
+    # the annotations MCAP beside the page cannot be written (a folder of that name): said before the work (the
+    # page was written and the annotations only noted, exit 0)
+    (["report", S, "-o", "ANNDIR/r.html"], "r.annotations.mcap: -o (its annotations MCAP beside it): is a directory"),
+    # an empty list named nothing: synth exited 0 having made nothing, campaign --synth rendered every run
+    (["synth", "--scenario", "paper", "--runs", ",", "-o", "out"], "synth: --runs: ',' names no run"),
+    (["campaign", "--synth", "paper", "--seeds", "1", "--runs", ",", "-o", "out"], "campaign: --runs: ',' names nothing"),
+    (["campaign", "--synth", "paper", "--seeds", "1", "--families", " , ", "-o", "out"],
+     "campaign: --families: ' , ' names nothing"),
 ]
 
 
@@ -238,7 +246,11 @@ def args_src(tmp_path_factory, base):
 def test_bad_arguments(args_src, capfd, monkeypatch, args, fragment):
     monkeypatch.chdir(args_src)  # relative outputs (r.html) land here, where the listing below would show them
     before = sorted(p.name for p in args_src.iterdir())
-    args = [str(args_src / "sol.mcap") if a == S else str(args_src) if a == "SRCDIR" else a for a in args]
+    if "ANNDIR/r.html" in args:  # a folder where the report's annotations MCAP would go, made for this case
+        (args_src / "ann" / "r.annotations.mcap").mkdir(parents=True, exist_ok=True)
+        before = sorted(p.name for p in args_src.iterdir())
+    args = [str(args_src / "sol.mcap") if a == S else str(args_src) if a == "SRCDIR"
+            else str(args_src / "ann" / "r.html") if a == "ANNDIR/r.html" else a for a in args]
     r, problems = invoke(args, capfd)
     assert problems + bad_input_problems(r, fragment) == []
     assert sorted(p.name for p in args_src.iterdir()) == before  # no sidecar products, no report, no temp files

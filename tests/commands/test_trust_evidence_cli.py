@@ -69,3 +69,41 @@ def test_a_record_naming_a_seen_target_occluded_is_refused(hidden_t1, tmp_path):
     src.with_name("seen.sim.json").write_text(json.dumps(rec))
     r = runner.invoke(app, ["trust-evidence", str(src), "-o", str(out)])
     assert r.exit_code == 2 and "nope" in r.stderr and not out.exists()
+
+
+def _table_rows(n: int) -> list:
+    """The first ``n`` rows of the bundled training table (tests/data/trust/, see its README)."""
+    import gzip
+
+    path = SAMPLE.parents[2] / "tests/data/trust/evidence-20dl-11fam.jsonl.gz"
+    with gzip.open(path, "rt") as f:
+        return [json.loads(next(f)) for _ in range(n)]
+
+
+@pytest.mark.parametrize("case", ["all-successes", "all-failures", "no-error", "nan-error", "text-evidence",
+                                  "no-method"])
+def test_fit_trust_refuses_a_table_it_cannot_fit_in_one_line(tmp_path, case):
+    # 3 rows all within 1 px gave a constant model (every coefficient 0, p 0.999: GO whatever the evidence) with
+    # exit 0; null errors or a text value in the evidence were exit 3
+    rows = [r for r in _table_rows(400) if r["error_px"] is not None][:3]
+    if case == "all-successes":
+        rows = [dict(r, error_px=0.5) for r in rows]
+    elif case == "all-failures":
+        rows = [dict(r, error_px=50.0) for r in rows]
+    elif case == "no-error":
+        rows = [dict(r, error_px=None) for r in rows]
+    elif case == "nan-error":
+        rows = [dict(r, error_px=0.5) for r in rows] + [dict(rows[0], error_px=float("nan"))]
+    elif case == "text-evidence":
+        rows = [dict(rows[0], evidence=dict(rows[0]["evidence"], app_near_peak="high"))] + rows[1:]
+    elif case == "no-method":
+        ev = dict(rows[0]["evidence"])
+        ev.pop("method")
+        rows = [dict(rows[0], evidence=ev)] + rows[1:]
+    table = tmp_path / "t.jsonl"
+    table.write_text("".join(json.dumps(r, allow_nan=True) + "\n" for r in rows))
+    out = tmp_path / "model.json"
+    r = runner.invoke(app, ["fit-trust", str(table), "-o", str(out)])
+    assert r.exit_code == 2, (r.exit_code, r.stderr)
+    assert r.stderr.count("\n") == 1 and r.stderr.startswith("scipctl: error: ")
+    assert not out.exists()

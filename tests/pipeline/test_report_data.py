@@ -1,6 +1,7 @@
 """pipeline/report_data.py: the gain and saturation table judges 12-bit data against 12 bits."""
 
 import numpy as np
+import pytest
 
 from scipctl.io.images import encode_png
 from scipctl.pipeline.report_data import image_stats
@@ -23,3 +24,30 @@ def test_twelve_bit_data_is_not_called_dark():
     rest = [stats[im.product_id] for im in dl.images[1:]]
     assert all(s["bits"] == 12 and s["p99"] > 0.7 and not any("dark" in f or "contrast" in f for f in s["flags"])
                for s in rest)
+
+
+def test_the_calibration_health_epipolar_offset_has_point_stereos_sign():
+    """The report's offsets "from marks" and point stereo's (designate's) must be one quantity: on the same pair
+    the report gave +0.28 px where point stereo gave -0.32 px (its curve runs far -> near, decreasing u, and the
+    report did not orient it). Point stereo's own match, fed to the report's function, gives its offset back."""
+    from scipctl.core.point_stereo import point_stereo
+    from scipctl.pipeline.report_data import _epipolar_offset
+    from tests.pipeline import scene as S
+
+    _, dl = S.cached("slab")
+    n = 0
+    for cam in ("pancam", "navcam"):
+        left, right = dl.product(f"{cam}_left_1_0"), dl.product(f"{cam}_right_1_0")
+        for t in dl.targets:
+            mk = t.mark_in(left.product_id)
+            if mk is None:
+                continue
+            # the right image one row low, as a vertically misaligned pair: the match sits ~1 px off its curve
+            R = np.roll(right.pixels_float(), 1, axis=0)
+            ps = point_stereo(left.pixels_float(), R, left.camera_model, right.camera_model, [mk.u, mk.v])
+            assert ps.ok and abs(ps.epipolar_offset_px) > 0.5
+            got = _epipolar_offset(left.camera_model, right.camera_model, [mk.u, mk.v], ps.uv_right)
+            # the same point and the same curve: equal but for the polylines' sampling (both use epipolar_curve)
+            assert got == pytest.approx(ps.epipolar_offset_px, abs=0.02), (cam, t.id)
+            n += 1
+    assert n >= 3
