@@ -405,6 +405,8 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
 
     # ---- images
     add("<h2 id=\"images\">Gain and saturation</h2>")
+    add("<p class=\"small\">mean, p1 and p99 (the 1st and 99th percentiles) are fractions of the image's full scale "
+        "(2^bits - 1).</p>")
     add(_table(["product", "camera", "eye", "position", "exposure ms", "gain", "bits", "mean", "p1", "p99", "saturated",
                 "dark", "L/R ratio", "flags"],
                [[_e(s["product_id"]), _e(s["camera"]), _e(s["eye"]), f"{s['position'][0]}/{s['position'][1]}",

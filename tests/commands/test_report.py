@@ -57,6 +57,7 @@ def test_report_content_and_summary(report):
                     "Pre-uplink prediction", "Uplink sequence and flight rules", "Expected views rendered",
                     "Systematic mast bias estimate", "Tracking chain"):
         assert section in html, section
+    assert "fractions of the image's full scale" in html  # the gain table's mean/p1/p99 say their unit
     # per target: a chip for every left image where the target is marked
     for t in dl.targets:
         marked_left = [m.product_id for m in t.marks if dl.product(m.product_id).eye == "left"]
