@@ -155,7 +155,7 @@ def simulate_handoff(
     from_product: Optional[str] = typer.Option(None, "--from", help="Source left navcam product id, near or far (with --pixel): hand off that pixel, unscored."),
     pixel: Optional[str] = typer.Option(None, "--pixel", help="U,V in the --from product."),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated method names, NAME-near/NAME-far, or 'all' (default: scip, the recommended handoff)."),
-    success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels (scip's p_success is for it)."),
+    success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels (scip's p_success is for it; the trust model is fitted for 1-8 px, and outside that range scip has no probability: every scip answer is NO-GO)."),
     near: Optional[str] = typer.Option(None, "--near", help="Left near-navcam product id."),
     far: Optional[str] = typer.Option(None, "--far", help="Left far-navcam product id."),
     hazcam: Optional[str] = typer.Option(None, "--hazcam", help="Left hazcam product id."),
