@@ -221,12 +221,11 @@ def write_summary(store: CampaignStore, summary: dict) -> tuple:
     """``OUT/summary.json`` and ``OUT/summary.html`` (self-contained), each written atomically; their paths."""
     import json
 
+    from ..errors import InputError
     from ..io.atomic import atomic_write_text
     from ..io.campaign_html import render_campaign_html
     from ..jsonutil import strict_json
     from ..pipeline.paper_table1 import PAPER_TABLE1
-
-    from ..errors import InputError
 
     js, page = store.out / "summary.json", store.out / "summary.html"
     try:

@@ -123,23 +123,10 @@ def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float
     import sklearn
 
     prov["scikit_learn"] = sklearn.__version__
-    import numpy as np
-
-    from ..pipeline.trust_fit import RADII_PX, fit_rows
-
-    # a logistic fit needs both outcomes at every radius: with one class it returns a constant p, a model that is
-    # GO always (or never) whatever the evidence, written with exit 0 before
-
-    used = fit_rows(rows)
-    err = np.array([math.inf if (r.error_px is None or r.occluded) else r.error_px for r in used], float)
-    label = ", ".join(str(t) for t in tables)
-    if not len(err):
-        raise InputError(label, "evidence table", "no row with a true error (error_px) or an occluded target to fit on")
-    for r in RADII_PX:  # a logistic fit needs both outcomes: one class gives a constant p (GO always or never)
-        if (err <= r).all() or not (err <= r).any():
-            raise InputError(label, "evidence table", f"every candidate is a {'success' if (err <= r).all() else 'failure'}"
-                             f" within {r:g} px ({len(used)} rows): a trust model needs both")
-    model = fit_trust_model(rows, provenance=prov)
+    try:
+        model = fit_trust_model(rows, provenance=prov)
+    except ValueError as e:  # no row to fit on, or one outcome only (a constant model)
+        raise InputError(", ".join(str(t) for t in tables), "evidence table", str(e)) from None
     write_output_text(out, trust_model_json(model))
     doc = {"out": str(out), "n_rows": model.provenance["n_rows"], "n_targets": model.provenance["n_targets"],
            "families": model.provenance["training_families"],

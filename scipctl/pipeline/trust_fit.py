@@ -39,11 +39,14 @@ def round_sig(x: float) -> float:
     return float(f"{x:.{SIG}g}")
 
 
+def _errors(rows: list[EvidenceRow]) -> np.ndarray:
+    """``(N,)`` the rows' true errors (px): an occluded target's, or an unknown one, is infinite (never right)."""
+    return np.array([math.inf if (r.error_px is None or r.occluded) else r.error_px for r in rows], float)
+
+
 def _prep(rows: list[EvidenceRow], spec: dict):
     ev = [Evidence.from_dict(r.evidence) for r in rows]
-    X = feature_matrix(ev, spec)
-    err = np.array([math.inf if (r.error_px is None or r.occluded) else r.error_px for r in rows], float)
-    return X, err
+    return feature_matrix(ev, spec), _errors(rows)
 
 
 def fit_rows(rows: list[EvidenceRow]) -> list[EvidenceRow]:
@@ -152,6 +155,11 @@ def fit_trust_model(rows: list[EvidenceRow], radii=RADII_PX, provenance: Optiona
     rows = fit_rows(rows)
     if not rows:
         raise ValueError("no evidence row with a true error to fit on")
+    err = _errors(rows)
+    for r in radii:  # fit_logistic makes a constant model of one class: GO always (or never) whatever the evidence
+        if (err <= r).all() or not (err <= r).any():
+            raise ValueError(f"every candidate is a {'success' if (err <= r).all() else 'failure'} within {r:g} px "
+                             f"({len(rows)} rows): a trust model needs both")
     model = fit_raw_model(rows, radii)
     fams = families_of(rows)
     oof = defaultdict(list)
