@@ -92,8 +92,8 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     from ..io.workspace import open_source
 
     out = check_output_file(out)  # before the work (the report takes a minute)
-    check_not_input(out, src)  # -o SRC would replace the downlink with the HTML
-    check_not_input(out.with_suffix(".annotations.mcap"), src)  # and so would the annotations written beside it
+    check_not_input(out, src, products_root=products_root)  # -o SRC would replace the downlink with the HTML
+    check_not_input(out.with_suffix(".annotations.mcap"), src, products_root=products_root)  # and so would the annotations written beside it
     check_output_file(out.with_suffix(".annotations.mcap"), "-o (its annotations MCAP beside it)")
     from .params import report_params
     from .params import rule_set as load_rule_set

@@ -30,7 +30,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
                                                   f"{', '.join(HANDOFF_CHOICES)})")
     if out is not None:
         out = check_output_file(out)  # before the prediction: a bad path costs nothing
-        check_not_input(out, src)  # -o SRC would replace the downlink with the sequence
+        check_not_input(out, src, products_root=products_root)  # -o SRC would replace the downlink (or a product)
     # a named file or built-in is read (and refused) before the downlink; none named: chosen from the downlink
     rule_set = load_rule_set(rules_path, rule_options, sigma_position_m, sigma_yaw_deg)
     source = open_source(src, products_root=products_root)

@@ -32,17 +32,23 @@ def check_output_file(path, option: str = "-o") -> Path:
     return path
 
 
-def check_not_input(out, src, option: str = "-o") -> None:
+def check_not_input(out, src, option: str = "-o", products_root=None) -> None:
     """:class:`InputError` when the output file ``out`` is the input ``src`` itself, a file of a directory input
-    (its ``downlink.yaml``, anything under its ``images/`` or ``scipctl/``) or of a raw downlink's sidecar
-    ``<SRC>.scipctl/``: writing there would replace the downlink (or its products) with the command's output. Other
-    files in a workspace (e.g. ``WS/report.html``, written again by the next run) are allowed."""
+    (its ``downlink.yaml``, anything under its ``images/`` or ``scipctl/``), or a file in any other place that holds
+    the source's products (a raw downlink's sidecar ``<SRC>.scipctl/``, ``DIR/<key>/`` of ``--products-dir DIR``
+    given as ``products_root``, the per-user fallback ``.../sidecars/<key>/``): writing there would replace the
+    downlink (or its products) with the command's output. Other files in a workspace (e.g. ``WS/report.html``,
+    written again by the next run) are allowed."""
     from ..errors import InputError
+    from .product_store import source_key, user_fallback_root
 
     o, s = Path(out).resolve(), Path(src).resolve()
     rel = o.relative_to(s).parts if s.is_dir() and o.is_relative_to(s) and o != s else None
-    sidecar = Path(str(s) + ".scipctl")
-    if o == s or o.is_relative_to(sidecar) or (rel and (rel[0] in ("images", "scipctl") or rel == ("downlink.yaml",))):
+    key = source_key(s)
+    product_places = [Path(str(s) + ".scipctl")] + [Path(root).resolve() / key for root in
+                                                     (products_root, user_fallback_root()) if root is not None]
+    if (o == s or any(o.is_relative_to(d) for d in product_places)
+            or (rel and (rel[0] in ("images", "scipctl") or rel == ("downlink.yaml",)))):
         raise InputError(str(out), option, f"would overwrite the input {src} (or one of its files or products); "
                          "give a file outside the downlink")
 

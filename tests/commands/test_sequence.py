@@ -290,3 +290,22 @@ def test_the_output_may_not_be_the_input_or_one_of_its_files(tmp_path, slab_dir,
     assert r.exit_code == 2 and not (side / "targets.json").exists()
     r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "-o", str(src / "t_slab.seqn")])
     assert r.exit_code == 0, r.stderr  # another file beside the downlink's is fine
+
+
+def test_the_output_may_not_be_a_file_in_the_products_dir_or_the_fallback(tmp_path, slab_dir, monkeypatch):
+    # with --products-dir PD the source's products live in PD/<key>/ (and a read-only raw downlink's in the
+    # per-user fallback .../sidecars/<key>/): `-o` naming a file there replaced that product with the sequence text
+    from scipctl.io.product_store import source_key
+
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path / "xdg"))
+    src = tmp_path / "sol13"
+    shutil.copytree(slab_dir, src)
+    pd = tmp_path / "pd"
+    for out in (pd / source_key(src) / "targets.json",
+                tmp_path / "xdg" / "scipctl" / "sidecars" / source_key(src) / "x.seqn"):
+        r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "--products-dir", str(pd), "-o", str(out)])
+        assert r.exit_code == 2 and "would overwrite the input" in r.stderr and r.stderr.count("\n") == 1, r.stderr
+        assert not out.exists()
+    r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "--products-dir", str(pd),
+                            "-o", str(pd / "t_slab.seqn")])
+    assert r.exit_code == 0, r.stderr  # beside the products' folder is fine
