@@ -1,4 +1,4 @@
-"""How an artifact was made: tool version, command line, input hashes, time."""
+"""How an artifact was made: tool version, command line and the folder it ran in, input hashes, time."""
 
 from __future__ import annotations
 
@@ -47,9 +47,15 @@ def command_line() -> str:
 def provenance(inputs: dict | None = None, deterministic: bool = False) -> dict:
     """A provenance record. ``inputs`` maps a label to a path (hashed) or to a precomputed hash string.
 
-    With ``deterministic=True`` the time is omitted (for byte-identical outputs).
+    ``cwd`` is the folder the command ran in (its relative paths are relative to it). With ``deterministic=True``
+    the time and the folder are omitted (for byte-identical outputs, wherever the command is run from).
     """
     rec = {"tool": "scipctl", "version": __version__, "command": command_line(), "inputs": {}}
+    if not deterministic:
+        try:
+            rec["cwd"] = os.getcwd()
+        except OSError:  # the folder was removed under the command
+            rec["cwd"] = None
     for label, val in (inputs or {}).items():
         if isinstance(val, (str, os.PathLike)) and Path(val).exists():
             rec["inputs"][label] = {"path": str(val), "sha256": sha256_path(val)}

@@ -39,6 +39,7 @@ def test_seqn_sequence_is_written_and_byte_identical_on_a_rerun(tmp_path, slab_d
     sha = read_downlink(slab_dir).source_sha256
     assert meta["provenance"]["inputs"]["downlink"]["sha256"] == sha
     assert meta["provenance"]["tool"] == "scipctl" and "time_utc" not in meta["provenance"]
+    assert "cwd" not in meta["provenance"]  # same inputs, same bytes, from any folder
     assert all(r["ok"] for r in meta["rules"])
     stems = [ln.split()[1] for ln in lines if ln.startswith("R")]
     assert stems[-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"] and "TRK_HANDOFF_SCIP" in stems

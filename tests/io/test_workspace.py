@@ -28,6 +28,7 @@ def test_workspace_is_a_valid_downlink_with_provenance(tmp_path, mcap_src):
     assert info["source"] == {"path": str(mcap_src), "sha256": hashlib.sha256(mcap_src.read_bytes()).hexdigest()}
     assert info["provenance"]["inputs"]["downlink"]["sha256"] == info["source"]["sha256"]
     assert info["provenance"]["tool"] == "scipctl" and "time_utc" in info["provenance"]
+    assert info["provenance"]["cwd"] == os.getcwd()  # the command line's relative paths are relative to it
     assert info["summary"] == {"images": len(dl.images)}
 
 
