@@ -67,7 +67,7 @@ def _main(
 @app.command()
 @guarded
 def ingest(
-    src: Path = typer.Argument(..., help="Downlink: an .mcap file or a directory with downlink.yaml."),
+    src: Path = typer.Argument(..., metavar="SRC", help="Downlink: an .mcap file or a directory with downlink.yaml."),
     out: Path = typer.Option(..., "-o", "--out", help="Workspace directory to write (replaced atomically; "
                              "the products of an existing workspace are kept)."),
     force: bool = typer.Option(False, "--force", help="Replace a workspace made from a different downlink; its "
@@ -83,7 +83,7 @@ def ingest(
 @app.command()
 @guarded
 def info(
-    src: Path = typer.Argument(..., help="Downlink (.mcap or directory) or workspace."),
+    src: Path = typer.Argument(..., metavar="SRC", help="Downlink (.mcap or directory) or workspace."),
     products_dir: Optional[Path] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
@@ -130,7 +130,7 @@ def synth(
 @app.command()
 @guarded
 def designate(
-    src: Path = typer.Argument(..., help="Workspace or downlink."),
+    src: Path = typer.Argument(..., metavar="SRC", help="Workspace or downlink."),
     product: Optional[str] = typer.Option(None, "--product", help="Left-eye product id."),
     camera: Optional[str] = typer.Option(None, "--camera", help="Use this camera's left image at the latest position."),
     pixel: str = typer.Option(..., "--pixel", help="U,V (column,row; sub-pixel allowed)."),
@@ -150,7 +150,7 @@ def designate(
 @app.command("simulate-handoff")
 @guarded
 def simulate_handoff(
-    srcs: List[Path] = typer.Argument(..., help="Downlinks or workspaces."),
+    srcs: List[Path] = typer.Argument(..., metavar="SRC", help="Downlinks or workspaces."),
     target: Optional[str] = typer.Option(None, "--target", help="Only this marked target id (a target with marks in the downlink; designated-only ids have no truth to score against)."),
     from_product: Optional[str] = typer.Option(None, "--from", help="Source left navcam product id, near or far (with --pixel): hand off that pixel, unscored."),
     pixel: Optional[str] = typer.Option(None, "--pixel", help="U,V in the --from product."),
@@ -179,7 +179,7 @@ def simulate_handoff(
 @app.command("trust-evidence")
 @guarded
 def trust_evidence(
-    srcs: List[Path] = typer.Argument(..., help="Downlinks or workspaces with marks in the hazcam."),
+    srcs: List[Path] = typer.Argument(..., metavar="SRC", help="Downlinks or workspaces with marks in the hazcam."),
     out: Path = typer.Option(..., "-o", "--out", help="Evidence table to write (JSON lines)."),
     family: Optional[str] = typer.Option(None, "--family", help="Scene family name (default: the .sim.json's)."),
     products_dir: Optional[Path] = _products_dir_option(),
@@ -194,7 +194,7 @@ def trust_evidence(
 @app.command("fit-trust")
 @guarded
 def fit_trust(
-    tables: List[Path] = typer.Argument(..., help="Evidence tables (scipctl trust-evidence; .jsonl or .jsonl.gz)."),
+    tables: List[Path] = typer.Argument(..., metavar="TABLE", help="Evidence tables (scipctl trust-evidence; .jsonl or .jsonl.gz)."),
     out: Path = typer.Option(..., "-o", "--out", help="Trust model to write (e.g. scipctl/data/trust_model.json)."),
     report: Optional[Path] = typer.Option(None, "--report", help="Also write the leave-one-family-out evaluation (JSON)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success radius of the evaluation, hazcam px."),
@@ -209,7 +209,7 @@ def fit_trust(
 @app.command()
 @guarded
 def sequence(
-    src: Path = typer.Argument(..., help="Workspace or downlink."),
+    src: Path = typer.Argument(..., metavar="SRC", help="Workspace or downlink."),
     target: str = typer.Option(..., "--target", help="Target id."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Output file (default: stdout)."),
     fmt: str = typer.Option("seqn", "--format", help="seqn | seqjson | json | text"),
@@ -251,7 +251,7 @@ def sequence(
 @app.command()
 @guarded
 def report(
-    src: Path = typer.Argument(..., help="Workspace or downlink."),
+    src: Path = typer.Argument(..., metavar="SRC", help="Workspace or downlink."),
     out: Path = typer.Option(Path("report.html"), "-o", "--out", help="HTML report to write."),
     sigma_position_m: Optional[float] = typer.Option(
         None, "--sigma-position-m", help="Pose-estimate 1-sigma position noise per stop, relative to the previous stop, for the prediction (default: the rules file's default_sigma_position_m)."),
@@ -271,7 +271,7 @@ def report(
 @app.command()
 @guarded
 def campaign(
-    srcs: Optional[List[Path]] = typer.Argument(None, help="Downlinks: .mcap files, downlink folders, folders of downlinks, globs."),
+    srcs: Optional[List[Path]] = typer.Argument(None, metavar="SRC", help="Downlinks: .mcap files, downlink folders, folders of downlinks, globs."),
     out: Optional[Path] = typer.Option(None, "-o", "--out", help="Campaign folder: records/, manifest.json, summary.json, "
                                        "summary.html. A re-run into the same folder skips the downlinks already done."),
     synth: Optional[str] = typer.Option(None, "--synth", help="SCENARIO: render synthetic downlinks on the workers (paper | traverse)."),
