@@ -97,7 +97,10 @@ class RoverConfig:
         """(pan_rad, tilt_rad) that put ``target_rover_m`` (3,) at ``pixel_uv`` (default: image centre) of a mast camera.
 
         Gauss-Newton on the pixel residual with finite-difference Jacobians;
-        works for any axis layout. Raises ``ValueError`` if it cannot converge.
+        works for any axis layout. Of the two head poses that centre a target (turned towards it, or turned half
+        round and tilted over), the one whose image is upright (image down along the rover's +z): a head whose
+        zero pose looks straight down (Mars 2020's RSM) otherwise reaches targets ahead upside down, beyond its
+        joints' limits. Angles in [-pi, pi). Raises ``ValueError`` if it cannot converge.
         """
         cam = self.cameras[camera]
         if cam.mount != "mast":
@@ -148,8 +151,20 @@ class RoverConfig:
         r = resid(x)
         if not np.all(np.isfinite(r)) or np.linalg.norm(r) > 1e-3:
             raise ValueError(f"cannot point {camera} at {X.tolist()} (residual {np.linalg.norm(r):.3g} px)")
+        # Two head poses centre the target: the head turned one way, or turned half round and tilted over the
+        # other way, which sees the same ray with the image upside down. Keep the one whose image is upright.
+        if self._upright(camera, eye, x) < 0.0:
+            for flipped in (np.array([x[0] + np.pi, -x[1]]), np.array([x[0] + np.pi, np.pi - x[1]])):
+                y, err = solve(flipped)
+                if err <= 1e-3 and self._upright(camera, eye, y) > self._upright(camera, eye, x):
+                    x = y
         x = (x + np.pi) % (2 * np.pi) - np.pi
         return float(x[0]), float(x[1])
+
+    def _upright(self, camera: str, eye: str, pan_tilt_rad: np.ndarray) -> float:
+        """How upright ``camera``'s image is at these joint angles: the image's down direction (increasing ``v``)
+        along the rover's down (+z); > 0 upright, < 0 upside down, ~0 looking straight down."""
+        return float(self.camera_model(camera, eye, pan_tilt_rad[0], pan_tilt_rad[1]).v_axis[2])
 
     def _pointing_guess(self, model0: CameraModel, X: np.ndarray) -> np.ndarray:
         pan_ax = self.mast.pan.axis

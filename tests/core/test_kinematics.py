@@ -89,6 +89,27 @@ def test_point_at_centres_the_target(target, axes):
     assert np.allclose(uv2, [300.0, 700.0], atol=1e-6)
 
 
+def test_point_at_keeps_the_image_upright_for_a_head_whose_zero_pose_looks_down():
+    # Mars 2020's RSM: at zero angles the cameras look straight down (A = +z) with the image's down forward (+x)
+    # and its right to the rover's left. A target ahead was reached by tilting back over the top: the target centred
+    # but the image upside down, the left eye on the rover's right (and Mars 2020's elevation joint past its limit)
+    R_rover_camdown = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # columns: h', v', A
+
+    def cam(y):
+        return cahv_from_intrinsics(1200, 1200, 511.5, 511.5, RigidTransform(R_rover_camdown, [0.5, y, -1.9]))
+
+    mast = MastGeometry(pan=JointAxis([0.5, 0.0, -1.8], (0, 0, 1)), tilt=JointAxis([0.5, 0.0, -1.9], (0, -1, 0)))
+    cfg = RoverConfig("down", mast, {"navcam": StereoCamera("mast", CameraSpec(cam(0.2), 1024, 1024),
+                                                            CameraSpec(cam(-0.2), 1024, 1024))})
+    for target in ([5.0, 0.5, 0.0], [3.0, -1.0, 0.0], [8.0, 2.0, 0.1]):
+        pan, tilt = cfg.point_at("navcam", target)
+        left, right = (cfg.camera_model("navcam", eye, pan, tilt) for eye in ("left", "right"))
+        assert np.allclose(left.project(np.array([target], float))[0], [511.5, 511.5], atol=1e-6)
+        assert left.v_axis[2] > 0.5 and right.v_axis[2] > 0.5  # image down is the world's down (ground ~20-30 deg below)
+        # the left eye on the left of the line of sight (the baseline along the image's +u)
+        assert np.dot(right.C - left.C, left.h_axis) > 0.39 and -np.pi <= pan < np.pi
+
+
 def test_point_at_body_camera_is_refused():
     with pytest.raises(ValueError):
         _config().point_at("hazcam", [2.0, 0.0, 0.0])

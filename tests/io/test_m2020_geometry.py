@@ -39,6 +39,24 @@ def test_urdf_and_fitted_mast_angles_reproduce_the_pointed_navcam_models():
         assert dA < 0.5e-3, (im.product_id, dA)
 
 
+def test_pointing_the_navcam_gives_the_real_products_head_pose():
+    """``point_at`` a point on each real product's line of sight, at its pixel there, finds the joint angles
+    fitted to that product (two head poses centre a point; the other is ~pi away, upside down and beyond the
+    URDF's elevation limit): within 5 mrad, against the fit's 0.6-1.8 mm / 0.2 mrad residuals above."""
+    rc = m2020_rover_config(real("12_"))
+    for im in read_downlink(real("07_")).images:
+        pan_fit, tilt_fit = fit_mast_angles(rc, "navcam", im.eye, im.camera_model)
+        m = im.camera_model
+        X = m.C + 6.0 * m.A  # 6 m along the boresight, below the horizon
+        # the same point's pixel in the config's model at the fitted angles, scaled to the config's image size
+        uv = rc.camera_model("navcam", im.eye, pan_fit, tilt_fit).project(X[None])[0]
+        pan, tilt = rc.point_at("navcam", X, eye=im.eye, pixel_uv=tuple(uv))
+        d_pan = (pan - pan_fit + np.pi) % (2 * np.pi) - np.pi
+        assert abs(d_pan) < 5e-3 and abs(tilt - tilt_fit) < 5e-3, (im.product_id, pan, tilt, pan_fit, tilt_fit)
+        assert 0.0 <= tilt <= 3.1765  # RSM_EL_ENC's limits in m2020.urdf
+        assert rc.camera_model("navcam", im.eye, pan, tilt).v_axis[2] > 0.0  # upright
+
+
 def test_measured_rsm_angles_of_a_pds4_label_point_the_navcam(tmp_path):
     """With the label's own measured RSM angles (no fit), the URDF chain lands within 3 mm and 2 mrad of the
     label's pointed model (the flight model comes from a temperature-interpolated calibration)."""

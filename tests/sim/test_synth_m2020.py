@@ -49,6 +49,12 @@ def test_m2020_downlink_validates_and_carries_the_m2020_models_pointed_through_t
         assert im.camera_model.kind == spec.model.kind
         if im.camera == "hazcam":
             assert im.mast is None  # body-mounted
+        # upright, as the rover takes them: the image's down is the world's down and the left eye on the left
+        # (the mast images were upside down, the head tilted back over the top, before session 36)
+        assert im.camera_model.v_axis[2] > 0.3, (im.product_id, im.camera_model.v_axis)
+        other = next(o for o in dl.images if o.camera == im.camera and o.eye != im.eye and o.position == im.position)
+        left, right = (im, other) if im.eye == "left" else (other, im)
+        assert np.dot(right.camera_model.C - left.camera_model.C, left.camera_model.h_axis) > 0, im.product_id
     # Mastcam-Z stands in for the pancam, NAVL/NAVR for the navcams
     assert abs(rc.spec("pancam", "left").model.hs - dl.rover_config.spec("pancam", "left").model.hs / SCALE) \
         < 0.02 * rc.spec("pancam", "left").model.hs
