@@ -163,9 +163,14 @@ def _roi_cone_mask(P: np.ndarray, model: CameraModel, roi: tuple, margin_rad: fl
 
 
 def bilinear_sample(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """Sample ``image`` (H, W) at pixels ``uv`` (..., 2); NaN outside the image."""
-    img = np.asarray(image, dtype=np.float32)
+    """Sample ``image`` (H, W) at pixels ``uv`` (..., 2); NaN outside the pixel centres' span ``[0, W-1] x [0, H-1]``
+    (the outer half pixel has no neighbour to interpolate with). ValueError for other shapes."""
+    img = np.asarray(image, dtype=np.float32)  # no copy of a float32 view
+    if img.ndim != 2:
+        raise ValueError(f"image: expected a single-channel (H, W) image, got shape {img.shape}")
     uv = np.asarray(uv, dtype=float)
+    if uv.ndim == 0 or uv.shape[-1] != 2:
+        raise ValueError(f"uv: expected pixels of shape (..., 2), got shape {uv.shape}")
     H, W = img.shape
     u, v = uv[..., 0], uv[..., 1]
     ok = np.isfinite(u) & np.isfinite(v) & (u >= 0) & (u <= W - 1) & (v >= 0) & (v <= H - 1)

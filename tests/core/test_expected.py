@@ -97,6 +97,16 @@ def test_drape_and_bilinear_sample():
     assert np.allclose(drape(X, m, img), uv[:2, 1] + 2 * uv[:2, 0], atol=1e-3)
 
 
+def test_bilinear_sample_checks_its_shapes():
+    img = np.zeros((H, W), np.float32)
+    # (N, 3) points for (N, 2) pixels were sampled at their first two columns, silently
+    with pytest.raises(ValueError, match=r"uv: expected pixels of shape \(\.\.\., 2\)"):
+        bilinear_sample(img, np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="single-channel"):
+        bilinear_sample(np.zeros((H, W, 3)), np.zeros((4, 2)))
+    assert bilinear_sample(img, np.zeros((2, 5, 2))).shape == (2, 5)
+
+
 def test_nearest_projection_is_subpixel_exact_on_a_plane():
     haz = cam(np.radians(45), [0.5, 0.0, -0.5])
     nav = cam(np.radians(60), [0.3, 0.1, -1.5], f=250.0)
