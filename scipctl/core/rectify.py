@@ -155,8 +155,8 @@ class RectifiedPair:
         r = self.ref_range_m if range_m is None else np.asarray(range_m, float)[..., None]
         return self.orig_left.project(o + r * d)
 
-    def disparity_to_range(self, disparity_px) -> np.ndarray:
-        """Depth along ``A`` from disparity (``f B / d``), metres."""
+    def disparity_to_depth(self, disparity_px) -> np.ndarray:
+        """Depth along ``A`` (not range along the ray) from disparity (``f B / d``), metres; shape of ``disparity_px``."""
         with np.errstate(divide="ignore", invalid="ignore"):
             return self.focal_px * self.baseline_m / np.asarray(disparity_px, float)
 

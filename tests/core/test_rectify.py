@@ -24,7 +24,7 @@ def test_rectified_rows_agree(kind):
     assert np.all(disp > 0)
     # disparity gives depth along A: f B / d
     depth = (P - left.C) @ rp.left_model.A
-    assert np.allclose(rp.disparity_to_range(disp), depth, rtol=1e-9)
+    assert np.allclose(rp.disparity_to_depth(disp), depth, rtol=1e-9)
     # shared image plane
     assert np.allclose(rp.left_model.A, rp.right_model.A)
     assert np.allclose(rp.left_model.H, rp.right_model.H)
