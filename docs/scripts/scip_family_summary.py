@@ -1,7 +1,9 @@
-"""scip's answers per scene family from `simulate-handoff --json` outputs named FAMILY-SEED.json: within 4 px,
-median, GO rate, GO precision, misses NO-GO, Brier score (docs/handoff.md, "Families never used in the fit").
+"""scip's answers per scene family from `simulate-handoff --json` outputs named FAMILY-SEED.json, or from campaign
+folders (their handoff records, each with its downlink's family): within 4 px, median, GO rate, GO precision,
+misses NO-GO, Brier score (docs/handoff.md, "Families never used in the fit", and the blind populations).
 
     python docs/scripts/scip_family_summary.py OUT/*.json
+    python docs/scripts/scip_family_summary.py CAMPAIGN [CAMPAIGN ...]
 """
 
 import json
@@ -23,12 +25,24 @@ def summary(rows, success_px=4.0):
             "brier": round(sum(((p or 0.0) - w) ** 2 for (_, p, _), w in zip(rows, within)) / n, 4)}
 
 
+def scip_results(path: Path):
+    """(family, scip result record) for every scip answer with truth in a simulate-handoff output or a campaign."""
+    if path.is_dir():
+        for f in sorted((path / "records").glob("*.jsonl")):
+            for line in f.read_text().splitlines():
+                d = json.loads(line)
+                if d.get("kind") == "handoff":
+                    yield d["family"], d["record"]
+    else:
+        family = path.stem.rsplit("-", 1)[0]
+        for r in json.loads(path.read_text())["results"]:
+            yield family, r
+
+
 def main():
     by_family = {}
     for f in sys.argv[1:]:
-        doc = json.loads(Path(f).read_text())
-        family = Path(f).stem.rsplit("-", 1)[0]
-        for r in doc["results"]:
+        for family, r in scip_results(Path(f)):
             if r["method"] == "scip" and r.get("truth_uv") is not None:
                 by_family.setdefault(family, []).append((r["error_px"], r["p_success"], r["go"]))
     out = {fam: summary(rows) for fam, rows in sorted(by_family.items())}
