@@ -51,11 +51,15 @@ def test_point_stereo_recovers_3d_point(kind):
         assert res.ok, (uv, res.reason)
         r_true = np.linalg.norm(X_true - left.C)
         err = np.linalg.norm(res.xyz - X_true)
+        # Measured over POINTS (session 36, /work/scratch/s36/bounds/measure.py; the same digits on OpenCV 5.0 and
+        # 4.14 and at one thread), worst of CAHV / CAHVOR / CAHVORE: error 0.25 / 0.14 / 0.52 sigma, |epipolar
+        # offset| 0.034 / 0.032 / 0.073 px, miss distance 0.17 / 0.16 / 0.75 mm, score >= 0.997, right-image
+        # match 0.062 / 0.032 / 0.130 px. Each bound is at least 1.25x the worst (the chain tests' rule).
         # the error is within the range uncertainty propagated from 0.25 px of disparity error
         assert err < res.range_sigma_m, f"{kind} {uv}: error {err * 1000:.1f} mm at {r_true:.2f} m (sigma {res.range_sigma_m * 1000:.1f} mm)"
         assert res.range_m == pytest.approx(np.linalg.norm(res.xyz - left.C))
-        assert abs(res.epipolar_offset_px) < 0.1
-        assert res.miss_distance_m < 1e-3
+        assert abs(res.epipolar_offset_px) < 0.1  # 1.37x the CAHVORE worst
+        assert res.miss_distance_m < 1e-3  # 1.34x the CAHVORE worst (a non-central model's rays)
         assert res.score > 0.9
         uv_r_true = right.project(X_true)
         # the window is sheared between the views of the slanted ground: allow the assumed 0.25 px sigma

@@ -19,7 +19,9 @@ def test_rectified_rows_agree(kind):
     P = _points_in_view(left)
     uvl = rp.left_model.project(P)
     uvr = rp.right_model.project(P)
-    assert np.abs(uvl[:, 1] - uvr[:, 1]).max() < 0.01
+    # both rectified models are linear CAHV sharing A, H, V, the baseline along H: the rows agree up to float
+    # rounding (measured 3.4e-13 to 4.5e-13 px, points within 20 m and |uv| ~ 1e3 px)
+    assert np.abs(uvl[:, 1] - uvr[:, 1]).max() < 1e-9
     disp = uvl[:, 0] - uvr[:, 0]
     assert np.all(disp > 0)
     # disparity gives depth along A: f B / d
@@ -103,7 +105,10 @@ def test_linearize_keeps_centre_and_axis():
     # the linear model covers the field without magnifying beyond the centre resolution
     assert lin.hs <= 0.5 * (m.hs + m.vs) + 1e-9
     P = m.C + 5.0 * m.A
-    assert np.all(np.abs(lin.project(P[None])[0] - np.array([511.5, 511.5])) < 200)
+    assert np.allclose(lin.project(P[None])[0], [lin.hc, lin.vc], atol=1e-9)  # the axis is the linear centre
+    # which sits off the image centre by the inner box's asymmetry (the model's distortion is not symmetric about
+    # A): measured (3.95, 5.05) px for this model (numpy only, no build dependence); bound 2x
+    assert np.all(np.abs(np.array([lin.hc, lin.vc]) - np.array([511.5, 511.5])) < 10.0)
 
 
 @pytest.mark.parametrize("kind", ["CAHVOR", "CAHVORE"])

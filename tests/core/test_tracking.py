@@ -100,14 +100,17 @@ def test_gain_and_offset_invariance():
     tpl = BASE[105:136, 105:136]
     img = _shifted(s)
     ref = track(tpl, img, c, 8)
+    # NCC is exactly invariant to gain and offset: what is left is float32 rounding of the correlation surface,
+    # measured (session 36, OpenCV 5.0 and 4.14, and at one thread, the same digits) at 5.3e-7 px and one ulp
+    # of the score (6e-8); the bounds allow ~20x that for other CPUs' vector code
     for gain, off in [(0.3, 40.0), (2.5, -120.0), (1.0, 1000.0)]:
         res = track(tpl, gain * img + off, c, 8)
         assert res.ok
-        assert np.abs(res.uv - ref.uv).max() < 2e-3
-        assert abs(res.score - ref.score) < 1e-4
-    # and for a gain change of the template instead
+        assert np.abs(res.uv - ref.uv).max() < 1e-5
+        assert abs(res.score - ref.score) < 1e-6
+    # and for a gain change of the template instead (measured 2.3e-7 px)
     res = track(0.2 * tpl + 7.0, img, c, 8)
-    assert np.abs(res.uv - ref.uv).max() < 2e-3
+    assert np.abs(res.uv - ref.uv).max() < 1e-5
 
 
 @pytest.mark.parametrize("dtype,gain,offset", [(np.uint8, 30.0, 128.0), (np.uint16, 6000.0, 30000.0)])
