@@ -71,15 +71,18 @@ def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=No
                            sequence_document, _exposures)
 
     checks = check_rules(pred, dl.rover_config, rules)
-    if getattr(record, "go", None) is False:
-        # `designate` called this designation NO-GO ("saved, but re-designate before planning on it"): no uplink
+    go = getattr(record, "go", None)
+    if go is not None:
+        # NO-GO: `designate` said "saved, but re-designate before planning on it": no uplink. A designation
+        # without a verdict (a targets.json written before designations had one) has no row.
         from .sequence import RuleCheck
 
         p = getattr(record, "p_ok", None)
         checks.insert(0, RuleCheck(
-            "designation-go", False, p, None, "",
-            "the designation is NO-GO" + ("" if p is None else f" (P(within {record.ok_tolerance_pct:g} % of the range) "
-                                                                f"{p:.2f})") + ": re-designate (another pixel or image)"))
+            "designation-go", bool(go), p, None, "",
+            ("the designation is GO" if go else "the designation is NO-GO")
+            + ("" if p is None else f" (P(within {record.ok_tolerance_pct:g} % of the range) {p:.2f})")
+            + ("" if go else ": re-designate (another pixel or image)")))
     if broken(checks):
         return None, checks
     handoff = choose_handoff(table1_rows, handoff_choice, *_scip_success_and_go() if handoff_choice == "scip" else ())

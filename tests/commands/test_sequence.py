@@ -256,7 +256,8 @@ def test_a_designation_called_no_go_gets_no_sequence_and_exit_1(tmp_path, slab_d
     src2, _ = _with_targets_and_handoff(tmp_path, slab_dir, "sol10", records=[replace(rec, id="t_go", p_ok=0.97, go=True)])
     r = runner.invoke(app, ["sequence", str(src2), "--target", "t_go", "--json"])
     summary = json.loads(r.stdout)
-    assert "designation-go" not in {c["rule"] for c in summary["rules"]}
+    rule = next(c for c in summary["rules"] if c["rule"] == "designation-go")  # listed, and passed
+    assert rule["ok"] and rule["value"] == 0.97 and "re-designate" not in rule["message"]
     assert summary["provenance"]["tool"] == "scipctl"
 
 
@@ -310,3 +311,23 @@ def test_the_output_may_not_be_a_file_in_the_products_dir_or_the_fallback(tmp_pa
     r = runner.invoke(app, ["sequence", str(src), "--target", "t_slab", "--products-dir", str(pd),
                             "-o", str(pd / "t_slab.seqn")])
     assert r.exit_code == 0, r.stderr  # beside the products' folder is fine
+
+
+def test_a_marked_target_designated_on_the_fly_gets_designates_verdict(sol):
+    # `sequence --target <marked id>` designates at the mark itself; it planned without the designation trust
+    # model, so a designation that `designate` (and the chain) call NO-GO could be uplinked
+    from scipctl.io.downlink import read_downlink
+    from scipctl.io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
+    from scipctl.pipeline.designate import designate
+    from scipctl.pipeline.predict.from_downlink import resolve_target
+
+    dl = read_downlink(sol)
+    rec, now = resolve_target(dl, "t2", [])
+    assert now and rec.designated_from == "mark" and rec.go is not None and rec.p_ok is not None
+    im = dl.product(rec.product_id)
+    mk = next(t for t in dl.targets if t.id == "t2").mark_in(im.product_id)
+    want = designate(dl, im, [mk.u, mk.v], target_id="t2", trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
+    assert (rec.p_ok, rec.go) == (want.p_ok, want.go)
+    r = runner.invoke(app, ["sequence", str(sol), "--target", "t2", "--json"])
+    rule = next(c for c in json.loads(r.stdout)["rules"] if c["rule"] == "designation-go")
+    assert rule["ok"] == rec.go and rule["value"] == rec.p_ok

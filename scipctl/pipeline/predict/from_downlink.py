@@ -22,7 +22,8 @@ _PRIORITY = {"pancam": 0, "navcam": 1, "hazcam": 2}
 def resolve_target(dl, target_id: str, designations, with_normal: bool = True) -> tuple:
     """The :class:`~scipctl.pipeline.designate.Designation` of ``target_id``: from ``designations`` (read from
     ``targets.json``, :func:`~scipctl.pipeline.designate.designations_from_doc`) if designated there, else
-    designated on the fly from its mark in the first left pancam image (or navcam if there is no pancam).
+    designated on the fly from its mark in the first left pancam image (or navcam if there is no pancam), with the
+    packaged designation trust model's verdict as ``designate`` gives it.
 
     Returns ``(designation, designated_now: bool)``. Raises ``InputError`` when the id is neither designated nor
     marked, or the mark is in no usable image.
@@ -40,6 +41,7 @@ def resolve_target(dl, target_id: str, designations, with_normal: bool = True) -
     if marks is None:
         raise InputError(target_id, "--target", "not designated (targets.json) and not a marked target in the downlink"
                          + (f"; known: {', '.join(str(k) for k in known)}" if known else ""))
+    from ...io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
     from ..designate import designate
 
     for cam in ("pancam", "navcam"):
@@ -47,7 +49,10 @@ def resolve_target(dl, target_id: str, designations, with_normal: bool = True) -
         for im in lefts:
             mk = marks.mark_in(im.product_id)
             if mk is not None and dl.stereo_pair(im) is not None:
-                rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal)
+                # the mark is only the pixel an operator would click: the designation gets the same verdict
+                # (p_ok, go) as `designate` and the chain give it
+                rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal,
+                                trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
                 return replace(rec, designated_from="mark"), True
         if lefts:
             break
