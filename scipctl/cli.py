@@ -103,7 +103,8 @@ def synth(
     runs: Optional[str] = typer.Option(None, "--runs", help="Comma-separated run names to make (default: all)."),
     no_errors: bool = typer.Option(False, "--no-errors", help="Inject no calibration/pose/vibration/gain errors."),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable list of what was written."),
-    rover: str = typer.Option("default", "--rover", help="default | m2020 (Mars 2020 static camera models + URDF)."),
+    rover: Optional[str] = typer.Option(None, "--rover", help="default | m2020 (Mars 2020 static camera models + URDF); "
+                                        "default: the default rover, or the --family's."),
     rover_dir: Optional[Path] = typer.Option(
         None, "--rover-dir", help="Folder of m2020-camera-models.json + m2020.urdf (default: shared/real/12_* beside the checkout)."),
     texture_from: Optional[Path] = typer.Option(

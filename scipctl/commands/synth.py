@@ -79,7 +79,7 @@ def m2020_sim_rover(folder, **config_kwargs):
     return load(folder, **config_kwargs)
 
 
-def load_family(name: Optional[str], scenario: str, seed: int, runs: list, rover: str, rover_dir: Optional[Path],
+def load_family(name: Optional[str], scenario: str, seed: int, runs: list, rover: Optional[str], rover_dir: Optional[Path],
                 texture_from: Optional[Path]):
     """``--family``: ``(family, sim_rover, texture)`` -- the :class:`~scipctl.sim.families.SceneFamily` (None without
     ``--family``) and the rover / texture it needs, loaded now (from ``--rover-dir`` / ``--texture-from`` if given,
@@ -92,7 +92,7 @@ def load_family(name: Optional[str], scenario: str, seed: int, runs: list, rover
     if name not in FAMILIES:
         raise InputError("synth", "--family", f"unknown family {name!r} (want one of: {', '.join(FAMILIES)})")
     fam = FAMILIES[name]
-    if rover != "default" and (fam.randomised or fam.rover != rover):
+    if rover is not None and (fam.randomised or fam.rover != rover):  # None: --rover not given
         raise InputError("synth", "--rover", f"family {name} sets the rover ({'drawn per scene' if fam.randomised else fam.rover}): leave --rover out")
     if rover_dir is not None and (fam.randomised or fam.rover != "m2020"):
         raise InputError("synth", "--rover-dir", f"family {name} does not use a fixed Mars 2020 rover")
@@ -143,7 +143,7 @@ _plain = json_default
 
 
 def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[str], no_errors: bool, json_out: bool,
-        rover: str = "default", rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
+        rover: Optional[str] = None, rover_dir: Optional[Path] = None, texture_from: Optional[Path] = None,
         texture_crop: Optional[str] = None, texture_pixel_mm: float = 2.5, family: Optional[str] = None,
         error_draw: int = 0) -> None:
     from ..sim.scenarios import SCENARIOS, list_runs
@@ -193,6 +193,7 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
                              supersample=supersample, rover=sim_rover, texture=texture, extra_args=" ".join(extra),
                              family=fam, error_draw=error_draw)
     else:
+        rover = rover or "default"
         sim_rover = load_rover(rover, rover_dir)
         _check_scale(image_scale, sim_rover)
         crop = parse_crop(texture_crop)

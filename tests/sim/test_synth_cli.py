@@ -100,6 +100,9 @@ def test_unknown_family_exits_2_naming_the_option_and_the_families(tmp_path):
 
 @pytest.mark.parametrize("args,field", [
     (["--family", "low-sun", "--rover", "m2020"], "--rover"),
+    # an explicit --rover default could not be told from no --rover: the family's Mars 2020 rover was used, exit 0
+    (["--family", "m2020", "--rover", "default"], "--rover"),
+    (["--family", "mixed", "--rover", "default"], "--rover"),
     (["--family", "default", "--texture-from", "."], "--texture-from"),
     (["--family", "mixed", "--rover-dir", "."], "--rover-dir"),
     (["--family", "real-texture", "--texture-crop", "0,0,1,1"], "--texture-crop"),
