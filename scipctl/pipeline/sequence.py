@@ -143,17 +143,22 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
     from ..core.image_margin import pair_margin_px
 
     worst_margin = float(pair_margin_px(rover_config, "hazcam", fin.T_site_rover.inverse().apply(X)[None])[0])
+    if not np.isfinite(worst_margin):
+        where = "target behind a hazcam at the final pose"
+    elif worst_margin < 0:
+        where = f"target outside a hazcam image at the final pose ({-worst_margin:.0f} px beyond its edge)"
+    else:
+        where = f"target inside both hazcam images at the final pose ({worst_margin:.0f} px from the edge)"
     out.append(RuleCheck("hazcam-fov-final", worst_margin >= r.hazcam_fov_margin_px, _fin(worst_margin),
                          r.hazcam_fov_margin_px, "px",
-                         "target inside both hazcam images at the final pose" + (
-                             f" ({worst_margin:.0f} px from the edge)" if np.isfinite(worst_margin) else " (behind the camera)")
+                         where + f" (margin {r.hazcam_fov_margin_px:g} px)"
                          + _searched(plan, "hazcam-fov-final", worst_margin >= r.hazcam_fov_margin_px)))
     xy = fin.T_site_rover.inverse().apply(X)[:2]
     in_arm = bool(plan.params.arm.contains(xy[None])[0])
     a = plan.params.arm
     out.append(RuleCheck("arm-workspace", in_arm, float(np.hypot(*xy)), None, "m",
-                         f"target at ({xy[0]:.2f}, {xy[1]:.2f}) m in the final rover frame; workspace "
-                         f"{a.r_min_m:.2f}-{a.r_max_m:.2f} m ahead, |y| <= {a.half_width_m:.2f} m"))
+                         f"target at ({xy[0]:.3f}, {xy[1]:.3f}) m in the final rover frame, {np.hypot(*xy):.3f} m "
+                         f"away; workspace {a.r_min_m:.2f}-{a.r_max_m:.2f} m ahead, |y| <= {a.half_width_m:.2f} m"))
     am = plan.arm_margin
     if am is not None:
         room = min(float(np.hypot(*xy)) - a.r_min_m, a.r_max_m - float(np.hypot(*xy)))

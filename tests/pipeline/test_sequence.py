@@ -44,6 +44,21 @@ def test_each_rule_can_be_broken_alone(rc, flat_terrain):
     assert "hazcam-fov-final" in broken_names(high, rc)
 
 
+def test_broken_rule_messages_say_what_is_wrong(rc, flat_terrain):
+    # a target outside a hazcam image was reported "inside both hazcam images ... (-61 px from the edge)", and a
+    # target 3 mm beyond the arm's reach "at (1.00, -0.00) m" against a 0.60-1.00 m workspace
+    high = {c.rule: c for c in Q.check_rules(prediction(rc, flat_terrain, target=np.array([9.0, 0.0, -1.6])), rc)}
+    fov = high["hazcam-fov-final"]
+    assert not fov.ok and "inside" not in fov.message
+    assert ("outside a hazcam image" in fov.message and f"{-fov.value:.0f} px beyond its edge" in fov.message
+            if np.isfinite(fov.value) else "behind a hazcam" in fov.message), fov.message
+    short_arm = prediction(rc, flat_terrain, approach=P.ApproachParams(standoff_m=0.8, arm=P.ArmWorkspace(0.9, 1.2, 0.4)))
+    arm = {c.rule: c for c in Q.check_rules(short_arm, rc)}["arm-workspace"]
+    assert not arm.ok and f"{arm.value:.3f} m away" in arm.message
+    good = {c.rule: c for c in Q.check_rules(prediction(rc, flat_terrain), rc)}["hazcam-fov-final"]
+    assert good.ok and "inside both hazcam images" in good.message
+
+
 def test_the_planner_moves_the_standoff_to_keep_a_long_nose_off_the_target(rc, flat_terrain):
     """Free standoff: the search (centre 0.8 m first, then outwards) keeps the first standoff whose footprint
     (front 0.7 m) stays 0.25 m off the target: 0.95 or 1.0 m, still inside the arm workspace (0.6-1.0 m)."""
