@@ -14,6 +14,7 @@ Import-light (the CLI loads this at start-up): rich is imported when a console i
 
 from __future__ import annotations
 
+import errno
 import functools
 import json
 import signal
@@ -26,7 +27,7 @@ from ..errors import CommandFailed, InputError
 from ..jsonutil import strict_json
 
 EXIT_OK, EXIT_NO, EXIT_BAD_INPUT, EXIT_BUG, EXIT_INTERRUPTED, EXIT_TERMINATED = 0, 1, 2, 3, 130, 143
-EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout went away (`scipctl ... --json | head -1`)
+EXIT_BROKEN_PIPE = 141  # 128 + SIGPIPE: the reader of stdout (or stderr) went away (`scipctl ... --json | head -1`)
 
 
 class Terminated(BaseException):
@@ -39,8 +40,24 @@ def _raise_terminated(signum, frame):
 
 
 def error(msg: str) -> None:
-    """The one ``scipctl: error:`` line on stderr."""
-    sys.stderr.write(f"scipctl: error: {msg}\n")
+    """The one ``scipctl: error:`` line on stderr; nothing when stderr's reader has gone away (the exit code
+    still says what happened)."""
+    try:
+        sys.stderr.write(f"scipctl: error: {msg}\n")
+        sys.stderr.flush()
+    except (BrokenPipeError, ValueError):  # closed pipe, or a closed stream
+        _to_devnull(sys.stderr)
+
+
+def _to_devnull(stream) -> None:
+    """Point ``stream``'s file descriptor at /dev/null, so that the interpreter's final flush of a stream whose
+    reader went away does not fail again."""
+    import os
+
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+    except (OSError, ValueError):
+        pass
 
 
 def note(msg: str) -> None:
@@ -53,9 +70,15 @@ def stderr_console():
     so that logs of operations scripts keep whole table rows."""
     from rich.console import Console
 
-    con = Console(stderr=True)
+    class _Console(Console):
+        def on_broken_pipe(self) -> None:
+            # rich's own exits 1 ("the answer is no"): raise instead, for guarded's exit 141
+            self.quiet = True
+            raise BrokenPipeError(errno.EPIPE, "stderr closed by its reader")
+
+    con = _Console(stderr=True)
     if not con.is_terminal:
-        con = Console(stderr=True, width=160)
+        con = _Console(stderr=True, width=160)
     return con
 
 
@@ -91,15 +114,11 @@ def guarded(fn):
             error(f"{getattr(e, 'filename', '') or ''}: {e.strerror or e}")
             raise typer.Exit(EXIT_BAD_INPUT)
         except BrokenPipeError:
-            # not a bug in scipctl: stdout's reader closed the pipe. Point stdout at /dev/null so that the
-            # interpreter's final flush does not fail again, and exit as a shell reports SIGPIPE.
-            import os
-
-            try:
-                os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            except OSError:
-                pass
-            error("stdout closed by its reader (broken pipe)")
+            # not a bug in scipctl: stdout's (or stderr's: `2>&1 | head`) reader closed the pipe. Point stdout at
+            # /dev/null so that the interpreter's final flush does not fail again, and exit as a shell reports
+            # SIGPIPE (error() gives up quietly when stderr is the closed one).
+            _to_devnull(sys.stdout)
+            error("stdout or stderr closed by its reader (broken pipe)")
             raise typer.Exit(EXIT_BROKEN_PIPE)
         except KeyboardInterrupt:
             error("interrupted")

@@ -123,3 +123,15 @@ def test_a_real_closed_pipe_exits_141_with_one_line(tmp_path):
     err = p.stderr.read().decode()
     assert p.wait(timeout=300) == 141, err
     assert err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_a_closed_stderr_exits_141_too(tmp_path):
+    import subprocess
+    import sys
+
+    # `scipctl info SOL 2>&1 | head -1`: the tables go to stderr, whose reader went away. The handler then wrote
+    # its error line to the closed stderr, failed again, and click exited 1 ("the answer is no")
+    p = subprocess.Popen([sys.executable, "-m", "scipctl.cli", "info", str(SAMPLE)],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    p.stderr.close()
+    assert p.wait(timeout=300) == 141
