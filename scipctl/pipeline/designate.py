@@ -16,7 +16,8 @@ import numpy as np
 from ..core.point_stereo import PointStereoParams
 from ..jsonutil import RecordReader, finite_or_none
 from ..model import Downlink, ImageProduct, InputError, unit_float
-from .designation_trust import LOW_TEXTURE_WARNING, SATURATED_WARNING, VETO_WARNING_PREFIX, assess
+from .designation_trust import (FITTED_CAMERAS, LOW_TEXTURE_WARNING, OTHER_CAMERA_WARNING, SATURATED_WARNING,
+                                VETO_WARNING_PREFIX, assess)
 
 EDGE_MARGIN_PX = 20  # a designation closer than this to the image edge is warned about
 # a pose with no heading (Mars 2020 raw JSON: position only, sigma_yaw pi) puts the site point on a placeholder heading
@@ -303,11 +304,14 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
 def with_trust(rec: Designation, trust) -> Designation:
     """``rec`` with ``p_ok``/``ok_tolerance_pct``/``go`` from the designation trust model ``trust``
     (:func:`~scipctl.pipeline.designation_trust.assess` at its default tolerance) and, when the model's veto makes
-    it NO-GO whatever ``p_ok``, the warning that says why."""
+    it NO-GO whatever ``p_ok``, the warning that says why; for a camera the model was not fitted on (a hazcam), a
+    warning that ``p_ok`` is outside its data."""
     a = assess(trust, rec)
     rec = replace(rec, p_ok=a.p_ok, ok_tolerance_pct=a.tolerance_pct, go=a.go)
     if a.veto:
         rec = replace(rec, warnings=rec.warnings + (VETO_WARNING_PREFIX + a.veto,))
+    if a.p_ok is not None and rec.camera not in FITTED_CAMERAS:  # a hazcam's, scored as if it were a pancam's
+        rec = replace(rec, warnings=rec.warnings + (OTHER_CAMERA_WARNING.format(camera=rec.camera),))
     return rec
 
 

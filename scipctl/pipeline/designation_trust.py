@@ -32,6 +32,10 @@ GO_GRID = tuple(round(0.90 + 0.01 * i, 2) for i in range(10))
 # the designation's warnings that are evidence (pipeline/designate.py writes them, DesignationEvidence reads them)
 SATURATED_WARNING = "saturated pixels in the window"
 LOW_TEXTURE_WARNING = "low texture"
+#: the cameras the packaged designation trust model was fitted on; another camera's p_ok is outside its data
+FITTED_CAMERAS = ("pancam", "navcam")
+OTHER_CAMERA_WARNING = ("the designation trust model was fitted on pancam and navcam designations: p_ok for a {camera} "
+                        "designation is outside its data")
 VETO_WARNING_PREFIX = "NO-GO whatever p_ok: "  # the warning that says why assess() vetoed a GO
 
 # feature name -> (DesignationEvidence field, transform of core.handoff.trust_model.transform)

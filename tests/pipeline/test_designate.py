@@ -299,3 +299,21 @@ def test_a_position_only_pose_warns_that_the_site_point_has_no_heading(far):
     rec2, _, _ = _designate_mark(dl2, "pancam", "t_slab")
     assert rec2.ok and UNKNOWN_HEADING_WARNING in rec2.warnings
     assert rec2.xyz_rover_m == rec.xyz_rover_m  # the measurement itself does not change
+
+
+@pytest.mark.parametrize("camera", ["pancam", "navcam", "hazcam"])
+def test_a_camera_the_trust_model_was_not_fitted_on_is_warned_about(camera, near):
+    # a hazcam designation got a calibrated-looking p_ok and GO from a model fitted on pancam and navcam
+    # designations only (scored as if it were a pancam's), with no word of it
+    from scipctl.io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
+    from scipctl.pipeline.designation_trust import FITTED_CAMERAS
+
+    _, dl = near
+    rec, _, _ = _designate_mark(dl, camera, "t_slab", with_normal=False,
+                                trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
+    assert rec.p_ok is not None
+    warned = [w for w in rec.warnings if "outside its data" in w]
+    if camera in FITTED_CAMERAS:
+        assert warned == []
+    else:
+        assert len(warned) == 1 and f"for a {camera} designation" in warned[0]
