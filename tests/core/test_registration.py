@@ -5,6 +5,12 @@ from scipctl.core.registration import register_clouds
 from scipctl.core.transforms import RigidTransform, rotvec_to_matrix
 from tests.core.clouds import terrain as _terrain
 
+# Two samplings of one exact surface (points ~6 mm apart): ICP's answer is the truth up to the samplings'
+# discretisation, measured 0.002-0.04 mm here (session 36, /work/scratch/s36/bounds/icp.py; the same at one and two
+# threads) and 0 with the true seed. The bound, 0.2 mm, is 5x the worst and 1/30 of the point spacing: a wrong
+# basin, a lost correspondence scale or a frame slip is millimetres or more.
+ICP_EXACT_SURFACE_M = 0.2e-3
+
 
 @pytest.mark.parametrize("method", ["point-to-plane", "generalized"])
 def test_icp_recovers_a_small_transform(method):
@@ -14,8 +20,8 @@ def test_icp_recovers_a_small_transform(method):
     res = register_clouds(src, tgt, RigidTransform.identity(), method=method)
     P = np.array([[1.5, 0.3, -0.2], [2.0, 0.0, 0.0]])
     err = np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P), axis=1).max()
-    assert err < 0.003, f"{method}: residual {err * 1000:.2f} mm"
-    assert res.fitness > 0.8
+    assert err < ICP_EXACT_SURFACE_M, f"{method}: residual {err * 1000:.2f} mm"
+    assert res.fitness > 0.8  # measured 0.980: the share of source points with a target point within reach
     assert res.correction_rad > 0.01
 
 
@@ -26,7 +32,7 @@ def test_icp_uses_the_seed_and_crop():
     seed = RigidTransform(rotvec_to_matrix([0.0, 0.0, 0.29]), [0.49, 0.21, 0.0])
     res = register_clouds(src, tgt, seed, crop_center_m=[2.0, 0.0, 0.0], crop_radius_m=1.2)
     P = np.array([[2.0, 0.0, 0.0]])
-    assert np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P)) < 0.003
+    assert np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P)) < ICP_EXACT_SURFACE_M
     with pytest.raises(ValueError):
         register_clouds(src[:10], tgt, seed)
 
@@ -38,7 +44,7 @@ def test_a_perfect_seed_is_kept():
     src = T_target_source_true.inverse().apply(_terrain(1))
     res = register_clouds(src, tgt, T_target_source_true, scales_m=(0.32, 0.16, 0.08, 0.04, 0.02))
     P = np.array([[1.5, 0.3, -0.2], [2.0, 0.0, 0.0]])
-    assert np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P), axis=1).max() < 0.002
+    assert np.linalg.norm(res.T_target_source.apply(P) - T_target_source_true.apply(P), axis=1).max() < ICP_EXACT_SURFACE_M
     if res.kept_seed:
         assert res.correction_m == 0.0
 

@@ -64,7 +64,7 @@ def test_a_right_registration_is_kept_and_not_flagged():
     assert reg.chosen_basin == 0 and reg.chosen is not None and "prior" in reg.chosen_seeds
     # the plain ICP answer, unchanged (to Open3D's run-to-run rounding: see test_same_answer_twice)
     np.testing.assert_allclose(reg.T_target_source.matrix, plain.T_target_source.matrix, rtol=0, atol=1e-9)
-    assert _err_m(reg.T_target_source) < 0.002  # measured 0.06 mm
+    assert _err_m(reg.T_target_source) < 0.2e-3  # measured 0.06 mm (two samplings of one exact surface: 3x)
     for ev, (ok, reason) in _verdicts(reg, p):
         assert ok, reason
         assert ev.refined and ev.global_found and ev.global_agrees and ev.competing_px == 0.0
@@ -77,7 +77,7 @@ def test_a_seed_wrong_by_a_large_rotation_and_translation_is_avoided():
     prep, reg, p = _checked(prior, 0.3, 0.25)
     plain = register_clouds(None, None, prior, prepared=prep)
     assert _err_m(plain.T_target_source) > 0.5  # the failure the multi-seed registration must avoid
-    assert _err_m(reg.T_target_source) < 0.002  # measured 0.09 mm (two samplings of one exact surface)
+    assert _err_m(reg.T_target_source) < 0.2e-3  # measured 0.09 mm (two samplings of one exact surface: 2.2x)
     assert reg.chosen_basin != 0 and any(n.startswith("global") for n in reg.chosen_seeds)
     for ev, (ok, reason) in _verdicts(reg, p):
         assert ok, reason

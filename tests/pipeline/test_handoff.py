@@ -71,6 +71,8 @@ def _cases():
 def test_no_error_handoff_recovers_the_mark(noerr, method, navcam):
     dl, _, recs = noerr
     errs = _err(recs, method, navcam, SURFACE, dl)
+    # issue #14's bound for a no-error sol: 1 px (2 px for mesh registration); the measured largest errors per
+    # method and navcam, 0.03-0.79 px, are in docs/handoff.md, "With no injected error"
     bound = 2.0 if method == "mesh-registration" else 1.0
     assert errs and all(e is not None for e in errs.values()), errs
     assert max(errs.values()) <= bound, errs
