@@ -51,12 +51,15 @@ def test_homography_maps_the_point(scene, downsample):
     img, warped, _ = scene
     a = detect_features(img, downsample=downsample)
     b = detect_features(warped, downsample=downsample)
-    assert len(a) > 100 and len(b) > 100
+    assert len(a) > 100 and len(b) > 100  # measured >= 2044 keypoints
     for p in ([240.0, 250.0], [180.5, 300.25]):
         loc = locate_by_features(a, p, b, ref_radius_px=150, model="homography")
         assert loc.ok, loc.reason
-        assert loc.n_inliers >= 50
-        tol = 0.3 * downsample
+        assert loc.n_inliers >= 50  # measured >= 536
+        # measured (session 36, /work/scratch/s36/bounds/feat.py; OpenCV 5.0 and 4.14 within 0.002 px of each
+        # other, one thread the same): 0.042 / 0.093 / 0.067 px at downsample 1 / 2 / 1.5, i.e. <= 0.047 px per
+        # downsampled pixel; the bound is 3x that
+        tol = 0.15 * downsample
         assert np.linalg.norm(loc.uv - _map(H_TRUE, p)) < tol, (loc.uv, _map(H_TRUE, p))
         # the returned transform maps reference pixels to target pixels
         assert np.allclose(_map(loc.transform, p), loc.uv)
@@ -108,10 +111,11 @@ def test_similarity_model_recovers_rotation_and_scale(scene):
     p = np.array([230.0, 210.0])
     loc = locate_by_features(a, p, b, ref_radius_px=120, model="similarity")
     assert loc.ok, loc.reason
-    assert np.linalg.norm(loc.uv - _map(S_TRUE, p)) < 0.3
+    # measured on both OpenCV builds: 0.122 px, scale off by 4.6e-5, angle by 0.0043 deg
+    assert np.linalg.norm(loc.uv - _map(S_TRUE, p)) < 0.25
     M = loc.transform[:2, :2]
-    assert np.hypot(M[0, 0], M[1, 0]) == pytest.approx(1.3, abs=0.005)
-    assert np.degrees(np.arctan2(M[1, 0], M[0, 0])) == pytest.approx(7.0, abs=0.2)
+    assert np.hypot(M[0, 0], M[1, 0]) == pytest.approx(1.3, abs=1e-3)
+    assert np.degrees(np.arctan2(M[1, 0], M[0, 0])) == pytest.approx(7.0, abs=0.05)
 
 
 def test_translation_model_on_a_shift():
@@ -122,7 +126,7 @@ def test_translation_model_on_a_shift():
     p = np.array([200.0, 260.0])
     loc = locate_by_features(detect_features(img), p, detect_features(warped), ref_radius_px=100, model="translation")
     assert loc.ok, loc.reason
-    assert np.linalg.norm(loc.uv - (p + shift)) < 0.2
+    assert np.linalg.norm(loc.uv - (p + shift)) < 0.05  # an integer shift: measured 0.0002-0.0009 px
 
 
 def test_search_region_restricts_the_target_keypoints(scene):
@@ -135,7 +139,7 @@ def test_search_region_restricts_the_target_keypoints(scene):
     assert not far.ok
     near = locate_by_features(a, p, b, ref_radius_px=100, search_center_uv=q, search_radius_px=120,
                               model="homography")
-    assert near.ok and np.linalg.norm(near.uv - q) < 0.5
+    assert near.ok and np.linalg.norm(near.uv - q) < 0.15  # measured 0.026-0.028 px
 
 
 def test_unrelated_image_is_a_weak_match(scene):
