@@ -57,9 +57,11 @@ def test_recovers_subpixel_shift(fmax):
         img = _shifted(s, tex)
         res = track(tpl, img, c + rng.uniform(-3, 3, 2), search_radius_px=12)
         assert res.ok, res.reason
-        assert res.score > 0.99
+        assert res.score > 0.99  # measured >= 0.9988
         errs.append(res.uv - (c + s))
     err = np.abs(np.array(errs)).max()
+    # measured 0.017 / 0.005 / 0.003 px at fmax 0.1 / 0.2 / 0.3 (session 36, /work/scratch/s36/bounds/track.py: the
+    # same digits on OpenCV 5.0 and 4.14 and at one thread); the bound is 3x the worst
     assert err < 0.05, f"max sub-pixel error {err:.4f} px"
 
 
@@ -75,8 +77,8 @@ def test_plain_quadratic_fit_is_worse_than_iterated():
         truth = c + (s, -s / 2)
         e_plain.append(np.abs(track(tpl, img, c, 5, subpixel_iterations=0).uv - truth).max())
         e_iter.append(np.abs(track(tpl, img, c, 5).uv - truth).max())
-    assert max(e_iter) < 0.05
-    assert max(e_iter) < 0.5 * max(e_plain)
+    assert max(e_iter) < 0.05  # measured 0.0022 px
+    assert max(e_iter) < 0.5 * max(e_plain)  # measured 0.0022 against 0.062 px: the iteration is 28x better
 
 
 def test_pyramid_search_over_large_radius():
@@ -91,7 +93,7 @@ def test_pyramid_search_over_large_radius():
         res = track(tpl, img, c, search_radius_px=90)
         assert res.levels >= 1
         assert res.ok, res.reason
-        assert np.abs(res.uv - (c + s)).max() < 0.05
+        assert np.abs(res.uv - (c + s)).max() < 0.05  # measured 0.0053 px over the three
 
 
 def test_gain_and_offset_invariance():
