@@ -118,7 +118,10 @@ def test_nearest_projection_is_subpixel_exact_on_a_plane():
         X = ray_ground(haz, uv_h[None])[0]
         goal = nav.project(X[None])[0]
         res = nearest_projection(xyz, (0, 0), nav, goal)
+        # exact on a plane up to the sub-pixel solver's convergence: measured 0.0009 px (numpy only, session 36)
         assert np.linalg.norm(res.uv - uv_h) < 0.01
+        # the best grid pixel is within half a pixel's diagonal (0.71 px) of the point, plus 0.2 px for the
+        # nav-distance ordering of neighbours not being the hazcam-distance ordering; measured 0.62 px
         assert np.linalg.norm(res.uv_integer - uv_h) <= np.sqrt(2) * 0.5 + 0.2
     # a window of the map gives the same answer in full-image pixels
     X = ray_ground(haz, np.array([[100.3, 90.7]]))[0]
