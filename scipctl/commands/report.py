@@ -60,6 +60,7 @@ def _summary(data, sequences) -> dict:
         fin = next((s for s in reversed(t["chain"]) if s.error_px is not None), None)
         near = [r for r in t["handoff"] if r.navcam == "near" and r.error_px is not None]
         best = min(near, key=lambda r: r.error_px) if near else None
+        scip = next((r for r in t["handoff"] if r.method == "scip"), None)
         seq = sequences.get(t["id"])
         targets.append({
             "id": t["id"], "designated": t["record"] is not None,
@@ -68,6 +69,8 @@ def _summary(data, sequences) -> dict:
                                                          "render_pose", "ncc", "shift_px")}
                                  for r in t.get("prediction_check", [])],
             "chain_final_error_px": None if fin is None else fin.error_px,
+            "scip": None if scip is None else {"navcam": scip.navcam, "error_px": scip.error_px,
+                                               "p_success": scip.p_success, "go": scip.go},
             "best_near_handoff": None if best is None else {"method": best.method, "error_px": best.error_px},
             "predicted_success": None if pred is None else pred.confidence,
             "predicted_p_simulated": None if pred is None else pred.p_simulated,

@@ -117,7 +117,10 @@ def plot_methods(rows: list) -> Optional[bytes]:
     fig = _figure(8.0, 3.6)
     ax = fig.add_subplot(111)
     x = np.arange(len(methods))
-    for k, (nc, col) in enumerate((("near", "#2f7ed8"), ("far", "#f28f43"))):
+    # scip answers from either navcam (its row's navcam is "any"): a third series, present only when it is
+    series = [("near", "#2f7ed8"), ("far", "#f28f43")] + ([("any", "#2e8b57")] if any(r["navcam"] == "any" for r in rows) else [])
+    width = 0.76 / len(series)
+    for k, (nc, col) in enumerate(series):
         mean, lo, hi = [], [], []
         for m in methods:
             r = next((r for r in rows if r["method"] == m and r["navcam"] == nc), None)
@@ -128,7 +131,8 @@ def plot_methods(rows: list) -> Optional[bytes]:
             mean.append(max(s["mean"], 0.05))
             lo.append(max(s["mean"] - s["min"], 0))
             hi.append(max(s["max"] - s["mean"], 0))
-        ax.bar(x + (k - 0.5) * 0.38, mean, 0.38, yerr=[lo, hi], color=col, label=f"{nc} navcam", capsize=2)
+        ax.bar(x + (k - (len(series) - 1) / 2) * width, mean, width, yerr=[lo, hi], color=col,
+               label="either navcam (scip)" if nc == "any" else f"{nc} navcam", capsize=2)
     ax.set_yscale("log")
     ax.set_xticks(x)
     ax.set_xticklabels(methods, rotation=20, ha="right", fontsize=8)
@@ -208,7 +212,10 @@ def _e(x) -> str:
 def _f(x, nd=2, unit="") -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "-"
-    return f"{x:.{nd}f}{unit}"
+    text = f"{x:.{nd}f}"
+    if text.startswith("-") and not text.strip("-0."):  # -0.00: a value that rounds to zero is shown as zero
+        text = text[1:]
+    return text + unit
 
 
 def _img(png: bytes, alt: str, width: Optional[int] = None) -> str:
@@ -267,11 +274,13 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         bad = [c["rule"] for c in seq.get("checks", []) if c["blocking"] and not c["ok"]]
         fin = next((s for s in reversed(t["chain"]) if s.error_px is not None), None)
         best = _best_handoff(t["handoff"])
+        scip = next((r for r in t["handoff"] if r.method == "scip"), None)
         rows.append([
             f'<a href="#t-{_e(t["id"])}">{_e(t["id"])}</a>',
             "-" if rec is None else _e(rec.product_id) + (" (from mark)" if rec.designated_from == "mark" else ""),
             _f(None if rec is None else rec.range_m), _f(t["designation_error_m"], 3),
             "-" if fin is None else f"{_f(fin.error_px, 1)} px ({_e(fin.camera)})",
+            _scip_answer(scip),
             best,
             "-" if pred is None else _f(pred.confidence),
             "-" if pred is None else str(len(pred.risks)),
@@ -280,7 +289,8 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         ])
     if rows:
         add(_table(["target", "designated in", "range m", "3-D error m (truth)", "chain final error",
-                    "best handoff (near)", "P(success) predicted", "risks", "sequence"], rows))
+                    "scip (recommended): error, p_success, GO", "best handoff (near, by truth)",
+                    "P(success) predicted (calibrated)", "risks", "sequence"], rows))
     else:
         add('<p class="small">No targets: the downlink marks none and none has been designated '
             "(<code>scipctl designate</code> adds one).</p>")
@@ -438,7 +448,7 @@ def _prediction_html(pred, chips, palette) -> str:
                f"tracked on expected views: simulated P {pred.p_simulated:.2f}. <b>P(success) {pred.confidence:.2f}</b> "
                f"({_e(pred.calibration or 'not calibrated')}); P(arm reaches) "
                f"{_f(pred.mc.p_arm_workspace, 2)}; predicted final error (nominal) "
-               f"{_f(None if acc.get('nominal_final_error_m') is None else 100 * acc['nominal_final_error_m'], 1)} cm "
+               f"{_f(None if acc.get('nominal_final_error_m') is None else 100 * acc['nominal_final_error_m'], 1, ' cm')} "
                f"(goal {_f(100 * acc.get('goal_m', 0.01), 1)} cm).</p>")
     mcv = {(v.stop, v.camera): v for v in pred.mc.views} if pred.mc else {}
     chv = {(v["stop"], v["camera"]): v for v in pred.chain.per_view} if pred.chain else {}
@@ -471,6 +481,16 @@ def _prediction_html(pred, chips, palette) -> str:
     if pred.notes:
         out.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in pred.notes) + "</ul>")
     return "\n".join(out)
+
+
+def _scip_answer(r) -> str:
+    """scip's answer for a target: its error against the mark (when marked), p_success and GO/NO-GO; "-" when the
+    handoff results hold no scip record (computed for the report: run simulate-handoff to include it)."""
+    if r is None:
+        return "-"
+    err = "no truth" if r.error_px is None else f"{r.error_px:.1f} px"
+    verdict = '<span class="ok">GO</span>' if r.go else '<span class="bad">NO-GO</span>'
+    return f"{err}, p {_f(r.p_success)}, {verdict}"
 
 
 def _best_handoff(recs: list) -> str:

@@ -191,7 +191,8 @@ class HandoffRecord:
             error_px=r.number("error_px", required=True), success=r.flag("success", required=True),
             ok=r.flag("ok", required=True, nullable=False), reason=r.text("reason", required=True, nullable=False),
             diagnostics=r.mapping("diagnostics", required=True, nullable=False),
-            seconds=r.number("seconds", required=True, nullable=False))
+            seconds=r.number("seconds", required=True, nullable=False),
+            p_success=r.number("p_success"), go=r.flag("go"))  # absent in files written before scip's trust
         return out
 
 

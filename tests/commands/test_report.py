@@ -214,3 +214,33 @@ def test_the_report_may_not_overwrite_its_input(tmp_path, report):
     r = runner.invoke(app, ["report", str(src), "-o", str(src / "downlink.yaml")])
     assert r.exit_code == 2 and "would overwrite the input" in r.stderr and r.stderr.count("\n") == 1
     assert (src / "downlink.yaml").read_bytes() == before
+
+
+def test_the_summary_shows_scips_answer_with_its_trust(report):
+    # the page showed every method's error but never scip's own answer, p_success and GO: the Summary named the
+    # best near handoff by truth only (a NO-GO answer among them)
+    from scipctl.commands.report import build
+    from scipctl.io.report_html import _f
+    from scipctl.io.workspace import open_source
+    from scipctl.pipeline.report_data import ReportParams
+
+    src, _, _, _, _ = report
+    source = open_source(src)
+    rec = {"downlink": "x", "target": "t_slab", "method": "scip", "navcam": "near", "source_product": "p",
+           "source_uv": [1.0, 2.0], "predicted_uv": [100.0, 50.0], "truth_uv": [101.0, 50.0], "error_px": 1.0,
+           "success": True, "ok": True, "reason": "", "diagnostics": {}, "seconds": 0.1, "p_success": 0.97,
+           "go": True}
+    row = {"method": "scip", "navcam": "any", "paper_method": False, "cases": 1, "answered": 1,
+           "success_rate": 1.0, "all": {"n": 1, "mean": 1.0, "std": 0.0, "min": 1.0, "max": 1.0},
+           "successes": {"n": 1, "mean": 1.0, "std": 0.0, "min": 1.0, "max": 1.0}, "failures": None, "refined": False}
+    source.save_json("handoff.json", {"results": [rec], "table1": [row]})
+    try:
+        html, summary, _ = build(source, params=ReportParams(run_prediction=False, run_chain=False,
+                                                             calib_points_per_pair=1))
+    finally:
+        (source.products_dir / "handoff.json").unlink()
+    assert next(t for t in summary["targets"] if t["id"] == "t_slab")["scip"] == {
+        "navcam": "near", "error_px": 1.0, "p_success": 0.97, "go": True}
+    assert "scip (recommended): error, p_success, GO" in html
+    assert '1.0 px, p 0.97, <span class="ok">GO</span>' in html
+    assert _f(-0.0004) == "0.00" and _f(-0.004, 3, " m") == "-0.004 m" and _f(None, 1, " cm") == "-"

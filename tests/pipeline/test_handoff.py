@@ -201,6 +201,18 @@ GOOD_RECORD = HandoffRecord("sol.mcap", "t1", "pure-kinematic", "near", "nav-L",
                             0.5, True, True, "", {"ncc_peak": 0.9}, 0.01).to_dict()
 
 
+def test_a_scip_record_reads_back_with_its_trust():
+    # from_dict dropped p_success and go: the report showed a saved scip answer without its verdict
+    scip = HandoffRecord("sol.mcap", "t1", "scip", "both", "nav-L", [1.0, 2.0], [3.0, 4.0], [3.5, 4.0], 0.5, True, True,
+                         "", {"ncc_peak": 0.9}, 0.01, p_success=0.97, go=True).to_dict()
+    back = HandoffRecord.from_dict(scip)
+    assert (back.p_success, back.go) == (0.97, True) and back.to_dict() == scip
+    from scipctl.model import InputError
+
+    with pytest.raises(InputError, match=r"results\[1\]\.p_success"):
+        handoff_records_from_doc({"results": [scip, dict(scip, p_success="high")]}, "handoff.json")
+
+
 @pytest.mark.parametrize("change, field", [
     ({"predicted_uv": [3.0]}, "results[1].predicted_uv"),
     ({"success": "yes"}, "results[1].success"),
