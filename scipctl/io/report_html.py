@@ -138,7 +138,7 @@ def plot_methods(rows: list) -> Optional[bytes]:
     ax.set_xticklabels(methods, rotation=20, ha="right", fontsize=8)
     ax.set_ylabel("hazcam error (px)")
     ax.axhline(4.0, color="k", lw=0.8, ls=":")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside the axes: over them it hid bars
     ax.set_title("navcam -> hazcam handoff error per method (bars: mean, whiskers: range; dotted: 4 px)", fontsize=9)
     return _fig_png(fig)
 
