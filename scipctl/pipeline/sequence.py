@@ -163,8 +163,9 @@ def check_rules(pred: Prediction, rover_config, rules: Optional[FlightRules] = N
     if am is not None:
         room = min(float(np.hypot(*xy)) - a.r_min_m, a.r_max_m - float(np.hypot(*xy)))
         kept = room >= am.margin_m
-        msg = (f"designated point {room:.3f} m inside the arm workspace's radial limits; the final drive's error "
-               f"needs {am.margin_m:.3f} m ({am.n_sigma:g} x {am.sigma_m:.3f} m)")
+        # in mm with a decimal: a 0.4 mm sigma printed in metres read "needs 0.001 m (2 x 0.000 m)"
+        msg = (f"designated point {1000 * room:.1f} mm inside the arm workspace's radial limits; the final drive's "
+               f"error needs {1000 * am.margin_m:.1f} mm ({am.n_sigma:g} x {1000 * am.sigma_m:.1f} mm)")
         if not kept and plan.search is not None and plan.search.found and plan.search.kept is not None:
             msg = plan.search.describe_margin()
         out.append(RuleCheck("arm-margin", kept, room, am.margin_m, "m", msg, blocking=False))

@@ -285,5 +285,8 @@ def test_the_arm_margin_rule_is_advisory_and_names_what_the_candidates_with_the_
     assert all(x.ok for x in checks.values() if x.blocking)  # the edge plan itself breaks no flight rule
     ok = {c.rule: c for c in Q.check_rules(prediction(rc, flat_terrain, uncertainty=up), rc)}["arm-margin"]
     assert ok.ok and ok.value >= ok.limit
+    # in mm: "needs 0.001 m (2 x 0.000 m)" did not add up
+    am = prediction(rc, flat_terrain, uncertainty=up).plan.arm_margin
+    assert f"needs {1000 * am.margin_m:.1f} mm ({am.n_sigma:g} x {1000 * am.sigma_m:.1f} mm)" in ok.message
     # without the error model (a pinned standoff, or no uncertainty) there is no such rule
     assert "arm-margin" not in {c.rule for c in Q.check_rules(prediction(rc, flat_terrain), rc)}
