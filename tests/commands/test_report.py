@@ -79,25 +79,29 @@ def test_report_content_and_summary(report):
     assert pv["inputs"]["downlink"]["sha256"] in html
 
 
-def test_report_reuses_saved_handoff_results(report):
+def _build_with_saved_handoff(report, rec: dict, row: dict):
+    """(html, summary, data) of the report built (no prediction, no chain) with ``handoff.json`` holding ``rec``
+    and the Table 1 ``row``; the file is removed afterwards."""
     from scipctl.commands.report import build
     from scipctl.io.workspace import open_source
     from scipctl.pipeline.report_data import ReportParams
 
-    src, _, _, _, _ = report
-    source = open_source(src)
+    source = open_source(report[0])
+    source.save_json("handoff.json", {"results": [rec], "table1": [row]})
+    try:
+        return build(source, params=ReportParams(run_prediction=False, run_chain=False, calib_points_per_pair=1))
+    finally:
+        (source.products_dir / "handoff.json").unlink()
+
+
+def test_report_reuses_saved_handoff_results(report):
     rec = {"downlink": "x", "target": "t_slab", "method": "pure-geometric", "navcam": "near", "source_product": "p",
            "source_uv": [1.0, 2.0], "predicted_uv": [100.0, 50.0], "truth_uv": [103.0, 54.0], "error_px": 5.0,
            "success": False, "ok": True, "reason": "", "diagnostics": {}, "seconds": 0.1}
     row = {"method": "pure-geometric", "navcam": "near", "paper_method": True, "cases": 1, "answered": 1,
            "success_rate": 0.0, "all": {"n": 1, "mean": 5.0, "std": 0.0, "min": 5.0, "max": 5.0},
            "successes": None, "failures": {"n": 1, "mean": 5.0, "std": 0.0, "min": 5.0, "max": 5.0}, "refined": False}
-    source.save_json("handoff.json", {"results": [rec], "table1": [row]})
-    try:
-        html, summary, data = build(source, params=ReportParams(run_prediction=False, run_chain=False,
-                                                                calib_points_per_pair=1))
-    finally:
-        (source.products_dir / "handoff.json").unlink()
+    html, summary, data = _build_with_saved_handoff(report, rec, row)
     assert data["handoff"]["source"].startswith("handoff.json")
     assert data["handoff"]["table1"] == [row]
     assert "100.0, 50.0" in html and "5.0±0.0 (5.0-5.0)" in html
@@ -219,13 +223,8 @@ def test_the_report_may_not_overwrite_its_input(tmp_path, report):
 def test_the_summary_shows_scips_answer_with_its_trust(report):
     # the page showed every method's error but never scip's own answer, p_success and GO: the Summary named the
     # best near handoff by truth only (a NO-GO answer among them)
-    from scipctl.commands.report import build
     from scipctl.io.report_html import _f
-    from scipctl.io.workspace import open_source
-    from scipctl.pipeline.report_data import ReportParams
 
-    src, _, _, _, _ = report
-    source = open_source(src)
     rec = {"downlink": "x", "target": "t_slab", "method": "scip", "navcam": "near", "source_product": "p",
            "source_uv": [1.0, 2.0], "predicted_uv": [100.0, 50.0], "truth_uv": [101.0, 50.0], "error_px": 1.0,
            "success": True, "ok": True, "reason": "", "diagnostics": {}, "seconds": 0.1, "p_success": 0.97,
@@ -233,12 +232,7 @@ def test_the_summary_shows_scips_answer_with_its_trust(report):
     row = {"method": "scip", "navcam": "any", "paper_method": False, "cases": 1, "answered": 1,
            "success_rate": 1.0, "all": {"n": 1, "mean": 1.0, "std": 0.0, "min": 1.0, "max": 1.0},
            "successes": {"n": 1, "mean": 1.0, "std": 0.0, "min": 1.0, "max": 1.0}, "failures": None, "refined": False}
-    source.save_json("handoff.json", {"results": [rec], "table1": [row]})
-    try:
-        html, summary, _ = build(source, params=ReportParams(run_prediction=False, run_chain=False,
-                                                             calib_points_per_pair=1))
-    finally:
-        (source.products_dir / "handoff.json").unlink()
+    html, summary, _ = _build_with_saved_handoff(report, rec, row)
     assert next(t for t in summary["targets"] if t["id"] == "t_slab")["scip"] == {
         "navcam": "near", "error_px": 1.0, "p_success": 0.97, "go": True}
     assert "scip (recommended): error, p_success, GO" in html
