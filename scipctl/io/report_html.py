@@ -17,8 +17,21 @@ STYLE = {
     "tracked": ((255, 255, 0), "square", "#00ffff"),
     "expected": ((0, 140, 255), "diamond", "#ff8c00"),
 }
-METHOD_COLOURS = [(255, 80, 80), (80, 80, 255), (255, 0, 255), (0, 255, 255), (160, 80, 255), (255, 160, 0),
-                  (180, 255, 100), (200, 200, 200)]
+# handoff predictions: one BGR colour per method, in the registry's order (core/handoff/registry.ALL_METHODS), none
+# of them a STYLE colour; then spares for names the registry does not know. The navcam a prediction started from is
+# the marker's shape (NAVCAM_MARKERS)
+METHOD_COLOURS = [(75, 25, 230),     # pure-kinematic: red #e6194b
+                  (216, 99, 67),     # alt-pure-kinematic: blue #4363d8
+                  (230, 50, 240),    # refined-kinematic: magenta #f032e6
+                  (180, 30, 145),    # pure-geometric: purple #911eb4
+                  (255, 190, 220),   # refined-geometric: lavender #dcbeff
+                  (36, 99, 154),     # mesh-registration: brown #9a6324
+                  (212, 190, 250),   # coarse-fine-geometric: pink #fabed4
+                  (144, 153, 70),    # consensus: teal #469990
+                  (255, 255, 255),   # scip: white
+                  (0, 0, 128), (117, 0, 0), (0, 128, 128)]  # spares: maroon, navy, olive
+# navcam -> (OpenCV marker, the glyph beside its label on the page)
+NAVCAM_MARKERS = {"near": ("triangle", "&#9650;"), "far": ("triangle_down", "&#9660;")}
 CHIP_PX = 264  # displayed chip size
 
 
@@ -45,10 +58,28 @@ def data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def _method_colour(label: str, palette: dict) -> tuple:
-    if label not in palette:
-        palette[label] = METHOD_COLOURS[len(palette) % len(METHOD_COLOURS)]
-    return palette[label]
+def _method_colour(method: str, palette: dict) -> tuple:
+    """The BGR colour of a handoff method's predictions: its own for every registered method, whatever else the page
+    shows; a name the registry does not know gets the next spare colour (``palette``: the page's such names)."""
+    from ..core.handoff.registry import ALL_METHODS
+
+    if method in ALL_METHODS:
+        return METHOD_COLOURS[ALL_METHODS.index(method)]
+    if method not in palette:
+        spare = METHOD_COLOURS[len(ALL_METHODS):]
+        palette[method] = spare[len(palette) % len(spare)]
+    return palette[method]
+
+
+def _marker_style(m, palette: dict) -> tuple:
+    """(BGR colour, marker kind, glyph for the page) of a chip marker: :data:`STYLE`'s for its kind, else a
+    handoff prediction's (colour by method, shape by navcam)."""
+    if m.kind in STYLE:
+        col, mk, _ = STYLE[m.kind]
+        return col, mk, ""
+    method = getattr(m, "method", None) or m.label
+    mk, glyph = NAVCAM_MARKERS.get(getattr(m, "navcam", None) or "", NAVCAM_MARKERS["near"])
+    return _method_colour(method, palette), mk, glyph
 
 
 def annotate_chip(chip, palette: dict, size: int = CHIP_PX) -> np.ndarray:
@@ -65,16 +96,14 @@ def annotate_chip(chip, palette: dict, size: int = CHIP_PX) -> np.ndarray:
                      interpolation=cv2.INTER_NEAREST).astype(bool)
     out[nan] = (60, 20, 20)
     kinds = {"tilted": cv2.MARKER_TILTED_CROSS, "cross": cv2.MARKER_CROSS, "square": cv2.MARKER_SQUARE,
-             "diamond": cv2.MARKER_DIAMOND, "triangle": cv2.MARKER_TRIANGLE_UP}
+             "diamond": cv2.MARKER_DIAMOND, "triangle": cv2.MARKER_TRIANGLE_UP,
+             "triangle_down": cv2.MARKER_TRIANGLE_DOWN}
     for m in chip.markers:
         uv = (np.asarray(m.uv, float) + 0.5) / chip.scale - 0.5 - np.asarray(chip.origin_uv, float)
         p = ((uv + 0.5) * zoom).astype(float)
         if not np.all(np.isfinite(p)):
             continue
-        if m.kind in STYLE:
-            col, mk, _ = STYLE[m.kind]
-        else:
-            col, mk = _method_colour(m.label, palette), "triangle"
+        col, mk, _ = _marker_style(m, palette)
         x, y = int(round(p[0])), int(round(p[1]))
         if -20 <= x <= out.shape[1] + 20 and -20 <= y <= out.shape[0] + 20:
             cv2.drawMarker(out, (x, y), (0, 0, 0), kinds[mk], 17, 4, cv2.LINE_AA)
@@ -236,11 +265,13 @@ def _chip_html(chip, palette) -> str:
     true = next((m.uv for m in chip.markers if m.kind == "true"), None)
     lines = []
     for m in chip.markers:
-        col = STYLE[m.kind][2] if m.kind in STYLE else _bgr_css(_method_colour(m.label, palette))
+        bgr, _, glyph = _marker_style(m, palette)
+        col = STYLE[m.kind][2] if m.kind in STYLE else _bgr_css(bgr)
         err = ""
         if true is not None and m.kind != "true":
             err = f", {math.hypot(m.uv[0] - true[0], m.uv[1] - true[1]):.1f} px from true"
-        lines.append(f'<span class="sw" style="background:{col}"></span>{_e(m.label)}: ({m.uv[0]:.1f}, {m.uv[1]:.1f}){err}')
+        lines.append(f'<span class="sw" style="background:{col}"></span>{glyph + " " if glyph else ""}{_e(m.label)}: '
+                     f'({m.uv[0]:.1f}, {m.uv[1]:.1f}){err}')
     return f'<div class="chip"><b>{_e(chip.title)}</b>{_img(png, chip.title)}' + "<br>".join(lines) + "</div>"
 
 
@@ -336,7 +367,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         add("<h3>Image chips: designated, predicted (per method), tracked and true positions</h3>")
         add('<p class="small">' + " ".join(f'<span class="sw" style="background:{v[2]}"></span>{_e(k)}'
                                            for k, v in STYLE.items()) +
-            ' <span class="sw" style="background:#f55"></span>handoff methods (triangles, one colour each)</p>')
+            "; handoff methods (triangles): one colour per method, &#9650; from the near navcam, &#9660; from the far</p>")
         add('<div class="chips">' + "".join(_chip_html(c, palette) for c in t["chips"]) + "</div>")
         if t["chain"]:
             add("<h3>Tracking chain through the downlink's stops</h3>")

@@ -72,6 +72,8 @@ class ChipMarker:
     kind: str  # designated | predicted | tracked | true | expected
     label: str
     uv: tuple
+    method: Optional[str] = None  # a handoff prediction's method (kind "predicted"): its colour on the page
+    navcam: Optional[str] = None  # and the navcam it started from ("near" | "far"): its marker's shape
 
 
 @dataclass
@@ -330,7 +332,7 @@ def chips_for_target(dl: Downlink, target_id: str, record: Optional[Designation]
             if st.tracked_uv is not None:
                 marks.append(ChipMarker("tracked", f"tracked ({st.kind})", tuple(st.tracked_uv)))
         for r in sorted(preds.get(im.product_id, []), key=lambda r: (r.method, r.navcam)):
-            marks.append(ChipMarker("predicted", f"{r.method} ({r.navcam})", tuple(r.predicted_uv)))
+            marks.append(ChipMarker("predicted", f"{r.method} ({r.navcam})", tuple(r.predicted_uv), r.method, r.navcam))
         if not marks:
             continue
         ref = next((m.uv for m in marks if m.kind == "true"), None) or next(
