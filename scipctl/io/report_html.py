@@ -359,7 +359,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
             add("<p>Not designated.</p>")
         else:
             xyz = rec.xyz_site_m
-            add(_table(["designated in", "pixel", "site xyz m", "range m", "range σ m", "epipolar offset px", "warnings"],
+            add(_table(["designated in", "pixel (u, v) px", "site xyz m", "range m", "range σ m", "epipolar offset px", "warnings"],
                        [[_e(rec.product_id), _e(_uv(rec.pixel_uv)),
                          "-" if xyz is None else _e(", ".join(f"{v:.3f}" for v in xyz)), _f(rec.range_m),
                          _f(rec.range_sigma_m, 3), _f(rec.epipolar_offset_px),
@@ -371,7 +371,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
         add('<div class="chips">' + "".join(_chip_html(c, palette) for c in t["chips"]) + "</div>")
         if t["chain"]:
             add("<h3>Tracking chain through the downlink's stops</h3>")
-            add(_table(["stop", "camera", "kind", "chain prediction", "tracked", "mark", "error px", "NCC", "range m",
+            add(_table(["stop", "camera", "kind", "chain prediction px", "tracked px", "mark px", "error px", "NCC", "range m",
                         "3-D error m", "p_success", "GO", "note"],
                        [[f"{s.position[0]}/{s.position[1]}", _e(s.camera), _e(s.kind), _uv(s.predicted_uv),
                          _uv(s.tracked_uv), _uv(s.mark_uv), _f(s.error_px, 2), _f(s.ncc_peak),
@@ -381,7 +381,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
                          _e(s.reason or "")] for s in t["chain"]]))
         if t["handoff"]:
             add("<h3>Handoff predictions for this target</h3>")
-            add(_table(["method", "navcam", "predicted", "true", "error px", "success", "note"],
+            add(_table(["method", "navcam", "predicted px", "true px", "error px", "success", "note"],
                        [[_e(r.method), _e(r.navcam), _uv(r.predicted_uv), _uv(r.truth_uv),
                          _f(r.error_px, 1), _yes(r.success), _e(r.reason or "")]
                         for r in t["handoff"]]))
@@ -394,7 +394,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
                 "downlinked (estimated) pose. Render check: today's stereo terrain rendered through the same model, "
                 "NCC-matched to the real image around the mark (best shift within ±150 px): the NCC measures how well the "
                 "expected appearance matches, the shift how far today's geometry (calibration) puts it.</p>")
-            add(_table(["image", "camera", "position", "mark", "expected (downlinked pose)", "error px",
+            add(_table(["image", "camera", "position", "mark px", "expected px (downlinked pose)", "error px",
                         "error px at the true pose", "rendered at pose", "terrain coverage", "render NCC", "render shift px"],
                        [[_e(r["product_id"]), _e(r["camera"]), f"{r['position'][0]}/{r['position'][1]}", _uv(r["mark_uv"]),
                          _uv(r["expected_uv"]), _f(r["expected_error_px"], 1), _f(r.get("expected_error_true_pose_px"), 1),

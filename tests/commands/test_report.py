@@ -238,3 +238,28 @@ def test_the_summary_shows_scips_answer_with_its_trust(report):
     assert "scip (recommended): error, p_success, GO" in html
     assert '1.0 px, p 0.97, <span class="ok">GO</span>' in html
     assert _f(-0.0004) == "0.00" and _f(-0.004, 3, " m") == "-0.004 m" and _f(None, 1, " cm") == "-"
+
+
+def _tables(html: str) -> list:
+    """[(headers, rows of cell texts)] of every table of the page (tags inside cells dropped)."""
+    out = []
+    for t in re.findall(r"<table>(.*?)</table>", html, re.S):
+        trs = re.findall(r"<tr>(.*?)</tr>", t, re.S)
+        head = [re.sub(r"<[^>]+>", "", h) for h in re.findall(r"<th>(.*?)</th>", trs[0], re.S)]
+        rows = [[re.sub(r"<[^>]+>", "", c) for c in re.findall(r"<td>(.*?)</td>", tr, re.S)] for tr in trs[1:]]
+        out.append((head, rows))
+    return out
+
+
+def test_every_pixel_column_says_px(report):
+    # the chain table's "chain prediction", "tracked" and "mark", the handoff table's "predicted" and "true", the
+    # designation's "pixel" and the prediction check's "mark" and "expected" held pixels with no unit in their header
+    _, out, _, _, _ = report
+    pixel_pair = re.compile(r"-?\d+\.\d, -?\d+\.\d")  # io/report_html._uv: an image pixel (u, v)
+    seen = set()
+    for head, rows in _tables(out.read_text()):
+        for j, h in enumerate(head):
+            if any(j < len(r) and pixel_pair.fullmatch(r[j]) for r in rows):
+                seen.add(h)
+    assert len(seen) >= 7, seen  # the designation, chain, handoff, prediction and mast-bias tables
+    assert [h for h in sorted(seen) if "px" not in h.split()] == []
