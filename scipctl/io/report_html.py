@@ -350,6 +350,7 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
     png = plot_chain(data["targets"])
     if png:
         add("<h3>Tracking chain error per stop</h3>" + _img(png, "chain error per stop"))
+        add(_chain_error_table(data["targets"]))
 
     # ---- per target
     for t in data["targets"]:
@@ -512,6 +513,24 @@ def _prediction_html(pred, chips, palette) -> str:
     if pred.notes:
         out.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in pred.notes) + "</ul>")
     return "\n".join(out)
+
+
+def _chain_error_table(targets: list) -> str:
+    """The plot's numbers: per chain step (the plot's x) and target, the error against the mark with the step's
+    stop, camera and kind (each target's own chain table has the rest)."""
+    chained = [t for t in targets if t["chain"]]
+    rows = []
+    for i in range(max(len(t["chain"]) for t in chained)):
+        row = [str(i)]
+        for t in chained:
+            if i >= len(t["chain"]):
+                row.append("")
+                continue
+            s = t["chain"][i]
+            where = f"{s.position[0]}/{s.position[1]} {_e(s.camera)} {_e(s.kind)}"
+            row.append(f"{_f(s.error_px, 2)} ({where})" if s.error_px is not None else f"- ({where})")
+        rows.append(row)
+    return _table(["step"] + [f"{t['id']}: error px (stop, camera, kind)" for t in chained], rows)
 
 
 def _scip_answer(r) -> str:

@@ -263,3 +263,22 @@ def test_every_pixel_column_says_px(report):
                 seen.add(h)
     assert len(seen) >= 7, seen  # the designation, chain, handoff, prediction and mast-bias tables
     assert [h for h in sorted(seen) if "px" not in h.split()] == []
+
+
+def test_the_chain_error_plot_has_its_table(report):
+    # docs/report.md promises the tracking-chain error per stop as a plot and a table: the page had the plot only,
+    # its x an unnamed step index
+    _, out, _, _, dl = report
+    html = out.read_text()
+    sec = html.split("<h3>Tracking chain error per stop</h3>", 1)[1].split("<h2", 1)[0]
+    (head, rows), = _tables(sec)
+    assert head[0] == "step" and [r[0] for r in rows] == [str(i) for i in range(len(rows))]
+    n = 0
+    for j, h in enumerate(head[1:], 1):
+        tid = h.split(":")[0]
+        # each target's own chain table, step by step: stop, camera, kind, error
+        chain = next(t for hd, t in _tables(html.split(f'id="t-{tid}"', 1)[1].split("<h2", 1)[0]) if hd[0] == "stop")
+        want = [f"{r[6]} ({r[0]} {r[1]} {r[2]})" for r in chain]
+        assert [r[j] for r in rows][:len(want)] == want and all(r[j] == "" for r in rows[len(want):])
+        n += 1
+    assert n == sum(1 for t in dl.targets) >= 1
