@@ -44,7 +44,7 @@ def _parse_methods(methods):
 def _fmt_stats(s):
     if s is None:
         return "-"
-    return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
+    return f"{s['mean_px']:.1f}±{s['std_px']:.1f} ({s['min_px']:.1f}-{s['max_px']:.1f})"
 
 
 def _inputs(inputs: dict, trust_model) -> dict:

@@ -15,10 +15,18 @@ def _pct(x) -> str:
 
 
 def _stats(s) -> str:
+    """The summary's statistics (``{n, mean, median, std, min, max}``, campaign/summary.py)."""
     if not s:
         return "-"
     med = f", median {s['median']:.2f}" if "median" in s else ""
     return f"{s['mean']:.2f}±{s['std']:.2f} ({s['min']:.2f}-{s['max']:.2f}{med})"
+
+
+def _px_stats(s) -> str:
+    """A Table-1 row's error statistics (``{n, mean_px, std_px, min_px, max_px}``, pipeline/handoff.table1)."""
+    if not s:
+        return "-"
+    return f"{s['mean_px']:.2f}±{s['std_px']:.2f} ({s['min_px']:.2f}-{s['max_px']:.2f})"
 
 
 def plot_reliability(rels: dict, title: str) -> Optional[bytes]:
@@ -72,9 +80,9 @@ def _table1_html(rows: list, paper: Optional[dict]) -> str:
         head.append("paper")
     body = []
     for r in rows:
-        split = f"{_stats(r['successes'])} / {_stats(r['failures'])}" if r.get("refined") else "-"
+        split = f"{_px_stats(r['successes'])} / {_px_stats(r['failures'])}" if r.get("refined") else "-"
         row = [_e(r["method"]), _e(r["navcam"]), _pct(r["success_rate"]), f"{r['answered']}/{r['cases']}",
-               _stats(r["all"]), split]
+               _px_stats(r["all"]), split]
         if paper is not None:
             row.append(_e(paper.get((r["method"], r["navcam"]), "(not in paper)")))
         body.append(row)

@@ -157,9 +157,9 @@ def plot_methods(rows: list) -> Optional[bytes]:
                 mean.append(np.nan), lo.append(0), hi.append(0)
                 continue
             s = r["all"]
-            mean.append(max(s["mean"], 0.05))
-            lo.append(max(s["mean"] - s["min"], 0))
-            hi.append(max(s["max"] - s["mean"], 0))
+            mean.append(max(s["mean_px"], 0.05))
+            lo.append(max(s["mean_px"] - s["min_px"], 0))
+            hi.append(max(s["max_px"] - s["mean_px"], 0))
         ax.bar(x + (k - (len(series) - 1) / 2) * width, mean, width, yerr=[lo, hi], color=col,
                label="either navcam (scip)" if nc == "any" else f"{nc} navcam", capsize=2)
     ax.set_yscale("log")
@@ -552,9 +552,10 @@ def _best_handoff(recs: list) -> str:
 
 
 def _stats(s) -> str:
+    """A Table-1 row's error statistics (``{n, mean_px, std_px, min_px, max_px}``) as ``mean±std (min-max)``."""
     if not s:
         return "-"
-    return f"{s['mean']:.1f}±{s['std']:.1f} ({s['min']:.1f}-{s['max']:.1f})"
+    return f"{s['mean_px']:.1f}±{s['std_px']:.1f} ({s['min_px']:.1f}-{s['max_px']:.1f})"
 
 
 def _uv(uv) -> str:

@@ -208,9 +208,10 @@ def handoff_records_from_doc(doc, product: str = "handoff.json") -> list:
 
 def table1_rows_from_doc(doc, product: str = "handoff.json") -> Optional[list]:
     """The ``table1`` rows of a ``handoff.json`` document, checked (None when it has none): each row a JSON object
-    with a known method name, a navcam, whole ``cases``/``answered`` and a ``success_rate`` and ``all.mean`` that
+    with a known method name, a navcam, whole ``cases``/``answered`` and a ``success_rate`` and ``all.mean_px`` that
     are numbers (or null). :class:`InputError` naming the product and the field otherwise: these rows choose the
-    handoff method that the uplink sequence commands, so nothing unchecked may reach it."""
+    handoff method that the uplink sequence commands, so nothing unchecked may reach it. Statistics written before
+    their keys carried the unit (``mean``, ``std``, ``min``, ``max``) are read as ``mean_px`` ... ``max_px``."""
     from ..jsonutil import RecordReader
 
     if not isinstance(doc, dict) or doc.get("table1") is None:
@@ -218,6 +219,7 @@ def table1_rows_from_doc(doc, product: str = "handoff.json") -> Optional[list]:
     rows = doc["table1"]
     if not isinstance(rows, list):
         raise InputError(product, "table1", f"expected a list of rows, got {type(rows).__name__}")
+    rows = [_with_px_keys(row) for row in rows]
     for i, row in enumerate(rows):
         r = RecordReader(row, product, f"table1[{i}].", "table1 row")
         method = r.text("method", required=True, nullable=False)
@@ -229,8 +231,21 @@ def table1_rows_from_doc(doc, product: str = "handoff.json") -> Optional[list]:
         r.number("success_rate")
         stats = r.mapping("all")
         if stats is not None:
-            RecordReader(stats, product, f"table1[{i}].all.", "statistics").number("mean")
+            RecordReader(stats, product, f"table1[{i}].all.", "statistics").number("mean_px")
     return rows
+
+
+def _with_px_keys(row):
+    """A Table-1 row with its statistics' keys as :data:`STATS_KEYS` (a row of an older ``handoff.json`` has
+    ``mean`` ... ``max``); anything else as it is (the checks name it)."""
+    if not isinstance(row, dict):
+        return row
+    out = dict(row)
+    for part in ("all", "successes", "failures"):
+        s = out.get(part)
+        if isinstance(s, dict) and any(k in s for k in _STATS_KEYS_BEFORE):
+            out[part] = {_STATS_KEYS_BEFORE.get(k, k): v for k, v in s.items()}
+    return out
 
 
 def run_targets(
@@ -376,11 +391,16 @@ def marked_targets(dl: Downlink, setup: HandoffSetup, only: Optional[str] = None
     return out
 
 
+STATS_KEYS = ("n", "mean_px", "std_px", "min_px", "max_px")  # a Table-1 row's error statistics (all, successes, failures)
+_STATS_KEYS_BEFORE = {"mean": "mean_px", "std": "std_px", "min": "min_px", "max": "max_px"}  # handoff.json before session 37
+
+
 def _stats(errs):
+    """``{n, mean_px, std_px, min_px, max_px}`` of hazcam errors ``errs`` (px); None for none."""
     if not errs:
         return None
     a = np.asarray(errs, float)
-    return {"n": int(len(a)), "mean": float(a.mean()), "std": float(a.std()), "min": float(a.min()), "max": float(a.max())}
+    return dict(zip(STATS_KEYS, (int(len(a)), float(a.mean()), float(a.std()), float(a.min()), float(a.max()))))
 
 
 def table1(records: list) -> list:

@@ -262,7 +262,7 @@ def choose_handoff(table1_rows: Optional[list], choice: str = "scip", success_px
 
     def mean(r):
         s = r.get("all") or {}
-        return float(s.get("mean", float("inf")) if s.get("mean") is not None else float("inf"))
+        return float(s["mean_px"]) if s.get("mean_px") is not None else float("inf")
 
     best = sorted(rows, key=lambda r: (-float(r.get("success_rate", 0.0)), mean(r), r["method"]))[0]
     rest = [r for r in rows if r["method"] != best["method"] and r.get("answered") == r.get("cases")]

@@ -99,8 +99,8 @@ def test_report_reuses_saved_handoff_results(report):
            "source_uv": [1.0, 2.0], "predicted_uv": [100.0, 50.0], "truth_uv": [103.0, 54.0], "error_px": 5.0,
            "success": False, "ok": True, "reason": "", "diagnostics": {}, "seconds": 0.1}
     row = {"method": "pure-geometric", "navcam": "near", "paper_method": True, "cases": 1, "answered": 1,
-           "success_rate": 0.0, "all": {"n": 1, "mean": 5.0, "std": 0.0, "min": 5.0, "max": 5.0},
-           "successes": None, "failures": {"n": 1, "mean": 5.0, "std": 0.0, "min": 5.0, "max": 5.0}, "refined": False}
+           "success_rate": 0.0, "all": {"n": 1, "mean_px": 5.0, "std_px": 0.0, "min_px": 5.0, "max_px": 5.0},
+           "successes": None, "failures": {"n": 1, "mean_px": 5.0, "std_px": 0.0, "min_px": 5.0, "max_px": 5.0}, "refined": False}
     html, summary, data = _build_with_saved_handoff(report, rec, row)
     assert data["handoff"]["source"].startswith("handoff.json")
     assert data["handoff"]["table1"] == [row]
@@ -230,8 +230,8 @@ def test_the_summary_shows_scips_answer_with_its_trust(report):
            "success": True, "ok": True, "reason": "", "diagnostics": {}, "seconds": 0.1, "p_success": 0.97,
            "go": True}
     row = {"method": "scip", "navcam": "any", "paper_method": False, "cases": 1, "answered": 1,
-           "success_rate": 1.0, "all": {"n": 1, "mean": 1.0, "std": 0.0, "min": 1.0, "max": 1.0},
-           "successes": {"n": 1, "mean": 1.0, "std": 0.0, "min": 1.0, "max": 1.0}, "failures": None, "refined": False}
+           "success_rate": 1.0, "all": {"n": 1, "mean_px": 1.0, "std_px": 0.0, "min_px": 1.0, "max_px": 1.0},
+           "successes": {"n": 1, "mean_px": 1.0, "std_px": 0.0, "min_px": 1.0, "max_px": 1.0}, "failures": None, "refined": False}
     html, summary, _ = _build_with_saved_handoff(report, rec, row)
     assert next(t for t in summary["targets"] if t["id"] == "t_slab")["scip"] == {
         "navcam": "near", "error_px": 1.0, "p_success": 0.97, "go": True}

@@ -14,7 +14,7 @@ import pytest
 from scipctl.core.handoff import ALL_METHODS, PAPER_METHODS
 from scipctl.io.downlink import read_downlink
 from scipctl.pipeline.handoff import (HandoffRecord, build_setup, handoff_records_from_doc, marked_targets,
-                                      run_targets, table1)
+                                      run_targets, table1, table1_rows_from_doc)
 
 ROOT = Path(__file__).resolve().parents[2]
 NOERR = ROOT / "tests/data/handoff/paper-s1-straight-noerr.mcap"
@@ -199,6 +199,39 @@ def test_handoff_records_read_back_from_handoff_json(sample):
 
 GOOD_RECORD = HandoffRecord("sol.mcap", "t1", "pure-kinematic", "near", "nav-L", [1.0, 2.0], [3.0, 4.0], [3.5, 4.0],
                             0.5, True, True, "", {"ncc_peak": 0.9}, 0.01).to_dict()
+
+
+def _scored(method, err, navcam="near"):
+    """A record of ``method`` whose answer is ``err`` px below the mark (success within 4 px)."""
+    return HandoffRecord("sol.mcap", "t1", method, navcam, "nav-L", [1.0, 2.0], [3.0, 4.0 + err], [3.0, 4.0], err,
+                         err <= 4.0, True, "", {}, 0.01)
+
+
+def test_table1_statistics_carry_their_unit():
+    # a Table-1 row's statistics held hazcam pixels under keys without the unit (mean, std, min, max)
+    from scipctl.pipeline.sequence import choose_handoff
+
+    recs = ([_scored("refined-geometric", e) for e in (1.0, 2.0)] + [_scored("pure-kinematic", e) for e in (5.0, 7.0)]
+            + [_scored("pure-geometric", e) for e in (8.0, 10.0)])
+    rows = {r["method"]: r for r in table1(recs)}
+    assert rows["pure-kinematic"]["all"] == {"n": 2, "mean_px": 6.0, "std_px": 1.0, "min_px": 5.0, "max_px": 7.0}
+    assert rows["pure-kinematic"]["failures"] == rows["pure-kinematic"]["all"] and rows["pure-kinematic"]["successes"] is None
+    assert rows["refined-geometric"]["successes"] == {"n": 2, "mean_px": 1.5, "std_px": 0.5, "min_px": 1.0, "max_px": 2.0}
+    # and what reads them: the sequence's fallback method is the one with the smaller mean error, 6 px against 9 px
+    ch = choose_handoff(list(rows.values()), "best-single")
+    assert (ch["primary"], ch["fallback"]) == ("refined-geometric", "pure-kinematic")
+
+
+def test_table1_rows_of_an_older_handoff_json_read_with_the_unit():
+    """handoff.json files written before the statistics' keys carried the unit are read with the new keys."""
+    from scipctl.io.report_html import _stats
+
+    old = {"method": "pure-kinematic", "navcam": "near", "paper_method": True, "cases": 2, "answered": 2,
+           "success_rate": 0.0, "all": {"n": 2, "mean": 6.0, "std": 1.0, "min": 5.0, "max": 7.0}, "successes": None,
+           "failures": {"n": 2, "mean": 6.0, "std": 1.0, "min": 5.0, "max": 7.0}, "refined": False}
+    row, = table1_rows_from_doc({"results": [], "table1": [old]})
+    assert row == table1([_scored("pure-kinematic", e) for e in (5.0, 7.0)])[0]
+    assert _stats(row["all"]) == "6.0±1.0 (5.0-7.0)"
 
 
 def test_a_scip_record_reads_back_with_its_trust():

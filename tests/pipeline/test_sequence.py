@@ -124,10 +124,10 @@ def test_steep_or_unknown_terrain_at_the_final_pose_breaks_the_tilt_rule(rc):
 
 def test_choose_handoff_from_results_and_default():
     rows = [
-        {"method": "pure-kinematic", "navcam": "near", "cases": 6, "answered": 6, "success_rate": 0.2, "all": {"mean": 9.0}},
-        {"method": "pure-geometric", "navcam": "near", "cases": 6, "answered": 6, "success_rate": 0.3, "all": {"mean": 5.0}},
-        {"method": "refined-geometric", "navcam": "near", "cases": 6, "answered": 5, "success_rate": 0.8, "all": {"mean": 30.0}},
-        {"method": "refined-kinematic", "navcam": "far", "cases": 6, "answered": 6, "success_rate": 1.0, "all": {"mean": 1.0}},
+        {"method": "pure-kinematic", "navcam": "near", "cases": 6, "answered": 6, "success_rate": 0.2, "all": {"mean_px": 9.0}},
+        {"method": "pure-geometric", "navcam": "near", "cases": 6, "answered": 6, "success_rate": 0.3, "all": {"mean_px": 5.0}},
+        {"method": "refined-geometric", "navcam": "near", "cases": 6, "answered": 5, "success_rate": 0.8, "all": {"mean_px": 30.0}},
+        {"method": "refined-kinematic", "navcam": "far", "cases": 6, "answered": 6, "success_rate": 1.0, "all": {"mean_px": 1.0}},
     ]
     ch = Q.choose_handoff(rows, "best-single")
     assert ch["primary"] == "refined-geometric" and ch["fallback"] == "pure-geometric" and ch["navcam"] == "near"
@@ -142,7 +142,7 @@ def test_choose_handoff_from_results_and_default():
 def test_the_default_handoff_is_scip_with_its_go_threshold_and_saved_results_quoted():
     # issue #14: scip, the recommended handoff, is the sequence's default (it uplinked a paper method before,
     # because scip's Table 1 row has navcam "any" and the choice kept near-navcam rows only)
-    rows = [{"method": "scip", "navcam": "any", "cases": 3, "answered": 3, "success_rate": 2 / 3, "all": {"mean": 2.0}},
+    rows = [{"method": "scip", "navcam": "any", "cases": 3, "answered": 3, "success_rate": 2 / 3, "all": {"mean_px": 2.0}},
             {"method": "pure-geometric", "navcam": "near", "cases": 3, "answered": 3, "success_rate": 1.0}]
     for r in (rows, None):
         d = Q.choose_handoff(r, success_px=4.0, min_p_success=0.9)
