@@ -91,10 +91,12 @@ def fit_logistic(Z: np.ndarray, y: np.ndarray):
 
 def fit_raw_model(rows: list[EvidenceRow], radii=RADII_PX, features: Optional[dict] = None) -> TrustModel:
     spec = dict(FEATURES if features is None else features)
-    X, err = _prep(rows, spec)
+    X, err = _prep(rows, spec)  # every feature of every row, built once
     names = usable_features(X, list(spec))
+    # the columns kept (each column is its feature's alone), C-ordered as feature_matrix makes them: the column
+    # means and sums, and so the fit, round as they did (a Fortran-ordered copy moved coefficients in the 10th digit)
+    X = np.ascontiguousarray(X[:, [list(spec).index(n) for n in names]])
     spec = {n: spec[n] for n in names}
-    X, _ = _prep(rows, spec)
     fill, mean, scale = standardise(X)
     Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)  # as TrustModel evaluates
     fits = []
