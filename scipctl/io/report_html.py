@@ -441,7 +441,8 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
                                         f"{math.degrees(tr['about_rover_y_rad']):+.3f})"]]))
         add("<p class=\"small\">The mast (pan, tilt) correction that best makes navcam-triangulated marks land on their "
             "hazcam marks at the same rover position (the paper's 13-row kinematic handoff bias pointed at ~1° of mast "
-            "tilt error).</p>")
+            "tilt error). It takes up every mast error it can: a tilt axis off true or a displaced head shows in it "
+            "too, so it is not the encoders' offsets alone (docs/report.md, \"What the pan estimate holds\").</p>")
     else:
         add("<p>Needs targets marked in a near navcam pair and the hazcam at the same position.</p>")
 

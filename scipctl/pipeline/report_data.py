@@ -209,6 +209,10 @@ def mast_bias(dl: Downlink) -> Optional[dict]:
     """Systematic mast (pan, tilt) bias from marks: the angles that best make the navcam-triangulated targets
     project onto their hazcam marks at the same rover position (the paper's 13-row kinematic-handoff bias).
 
+    Exact for pan and tilt encoder offsets; mast errors the two angles cannot represent (a tilt axis turned about
+    the pan axis, a displaced head) are taken up into them as far as they move the marks (docs/report.md, "What the
+    pan estimate holds").
+
     Returns ``{cases, dpan_rad, dtilt_rad, residual_before_px (mean du, dv), rms_before_px, rms_after_px}``
     or None without suitable marks (near navcam pair + hazcam left at one position, all marked).
     """
