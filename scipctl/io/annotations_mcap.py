@@ -5,7 +5,7 @@ For every left image that carries a report chip: a ``foxglove.CompressedImage``
 ``foxglove.ImageAnnotations`` on ``/scipctl/<camera>_left/annotations`` at the
 same time (``log_time = round(time_s * 1e9)``), with a circle and a label per
 position: true (mark), designated, tracked, chain prediction and each handoff
-method's prediction, for every target. Foxglove's image coordinates put the
+method's prediction (in the method's colour on the report's page), for every target. Foxglove's image coordinates put the
 origin at the top-left corner of the top-left pixel, so a scipctl pixel
 ``(u, v)`` (pixel centres) is written as ``(u + 0.5, v + 0.5)``.
 """
@@ -20,8 +20,8 @@ from .. import __version__
 
 COLOURS = {  # r, g, b in [0, 1]
     "true": (0.24, 0.78, 0.24), "designated": (1.0, 0.86, 0.0), "tracked": (0.0, 1.0, 1.0),
-    "expected": (1.0, 0.55, 0.0), "predicted": (1.0, 0.31, 0.31),
-}
+    "expected": (1.0, 0.55, 0.0),
+}  # a handoff prediction ("predicted"): its method's colour, _predicted_rgb
 _TIME = {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}}
 _POINT = {"type": "object", "properties": {"x": {"type": "number"}, "y": {"type": "number"}}}
 _COLOR = {"type": "object", "properties": {k: {"type": "number"} for k in "rgba"}}
@@ -50,6 +50,14 @@ def _colour(rgb, a=1.0):
     return {"r": rgb[0], "g": rgb[1], "b": rgb[2], "a": a}
 
 
+def _predicted_rgb(m, palette: dict) -> tuple:
+    """A handoff prediction's colour, r, g, b in [0, 1]: its method's on the report's page (one per method)."""
+    from .report_html import _method_colour
+
+    b, g, r = _method_colour(getattr(m, "method", None) or m.label, palette)
+    return (r / 255.0, g / 255.0, b / 255.0)
+
+
 def _stamp(ns: int) -> dict:
     return {"sec": int(ns // 1_000_000_000), "nsec": int(ns % 1_000_000_000)}
 
@@ -61,13 +69,14 @@ def annotation_messages(dl, data) -> list:
         for ch in t["chips"]:
             per_product.setdefault(ch.product_id, []).extend((t["id"], m) for m in ch.markers)
     out = []
+    palette: dict = {}  # the report page's colours of methods the registry does not know
     for pid in sorted(per_product, key=lambda p: (dl.product(p).time_s, p)):
         im = dl.product(pid)
         ns = int(round(im.time_s * 1e9))
         ts = _stamp(ns)
         circles, texts = [], []
         for tid, m in per_product[pid]:
-            rgb = COLOURS.get(m.kind, COLOURS["predicted"])
+            rgb = COLOURS.get(m.kind) or _predicted_rgb(m, palette)
             pos = {"x": float(m.uv[0]) + 0.5, "y": float(m.uv[1]) + 0.5}
             circles.append({"timestamp": ts, "position": pos, "diameter": 12.0, "thickness": 2.0,
                             "fill_color": _colour(rgb, 0.0), "outline_color": _colour(rgb)})

@@ -282,3 +282,29 @@ def test_the_chain_error_plot_has_its_table(report):
         assert [r[j] for r in rows][:len(want)] == want and all(r[j] == "" for r in rows[len(want):])
         n += 1
     assert n == sum(1 for t in dl.targets) >= 1
+
+
+def test_foxglove_handoff_predictions_have_their_methods_colours(report):
+    # every handoff prediction was drawn in one red in Foxglove, whatever its method; the page gives each its own
+    from mcap.reader import make_reader
+
+    from scipctl.core.handoff.registry import ALL_METHODS
+    from scipctl.io.report_html import _method_colour
+
+    _, out, _, _, _ = report
+    with open(out.with_suffix(".annotations.mcap"), "rb") as f:
+        anns = [json.loads(m.data) for sch, _, m in make_reader(f).iter_messages()
+                if sch.name == "foxglove.ImageAnnotations"]
+    colours = {}
+    for d in anns:
+        for c, x in zip(d["circles"], d["texts"]):
+            label = x["text"].split(": ", 1)[1]
+            method = label.split(" (")[0]
+            if method in ALL_METHODS:
+                rgb = tuple(round(c["outline_color"][k], 6) for k in "rgb")
+                assert rgb == tuple(round(x["text_color"][k], 6) for k in "rgb")
+                colours.setdefault(method, set()).add(rgb)
+    assert len(colours) >= 2, colours  # the report ran several methods
+    for method, seen in colours.items():
+        b, g, r = _method_colour(method, {})
+        assert seen == {(round(r / 255, 6), round(g / 255, 6), round(b / 255, 6))}, method
