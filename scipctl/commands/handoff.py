@@ -87,6 +87,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..pipeline.chain_targets import run_marked_chains
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
+    from .sources import distinct_sources
 
     success_px = success_threshold(success_px)
     params = handoff_params(fast, success_px, trust_model)
@@ -105,6 +106,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
         raise InputError("simulate-handoff", "--chain-answer", "is the chain's answer: give --chain too")
     con = stderr_console()
     records, chains, per_dl, pending = [], [], [], []
+    srcs = distinct_sources(srcs)  # a downlink named twice would count twice in Table 1
     sources = [open_source(s, products_root=products_root) for s in srcs]  # validate every input before any work
     for source in sources:
         source.check_writable()  # and say now if a handoff.json could not be saved

@@ -160,3 +160,15 @@ def test_a_bad_option_for_a_later_source_leaves_every_source_as_it_was(tmp_path)
     assert r.stderr.strip().splitlines()[-1].startswith("scipctl: error: ") and "s1-straight-near-navcam-L" in r.stderr
     assert (side / "handoff.json").read_text() == '{"earlier": true}'
     assert not Path(str(b) + ".scipctl", "handoff.json").exists()
+
+
+def test_a_downlink_named_twice_is_scored_once(sol):
+    # `simulate-handoff a.mcap ./a.mcap` (or a glob that also matches a named file) used to score every target
+    # twice: Table 1's n doubled and its statistics weighted that downlink twice; campaign uses each once
+    again = Path(sol.parent, ".", sol.name)
+    r = runner.invoke(app, ["simulate-handoff", str(sol), str(again), "--methods", "pure-kinematic-near", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert len(doc["results"]) == 3 and len(doc["downlinks"]) == 1
+    assert [row["cases"] for row in doc["table1"]] == [3]
+    assert "given again: used once" in r.stderr
