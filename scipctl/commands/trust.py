@@ -39,8 +39,10 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
+    from .sources import distinct_sources
 
     out = check_output_file(out)
+    srcs = distinct_sources(srcs)  # a downlink named twice would give its rows twice (weighted twice in the fit)
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
     rows = []
     con = stderr_console()

@@ -107,3 +107,20 @@ def test_fit_trust_refuses_a_table_it_cannot_fit_in_one_line(tmp_path, case):
     assert r.exit_code == 2, (r.exit_code, r.stderr)
     assert r.stderr.count("\n") == 1 and r.stderr.startswith("scipctl: error: ")
     assert not out.exists()
+
+
+def test_a_downlink_named_twice_gives_its_rows_once(hidden_t1, tmp_path):
+    # `trust-evidence a.mcap ./a.mcap` used to write every candidate row twice: fit-trust then weighted that
+    # downlink twice (campaign and simulate-handoff use each downlink once)
+    out1, out2 = tmp_path / "once.jsonl", tmp_path / "twice.jsonl"
+    assert runner.invoke(app, ["trust-evidence", str(hidden_t1), "-o", str(out1)]).exit_code == 0
+    again = hidden_t1.parent / "." / hidden_t1.name
+    r = runner.invoke(app, ["trust-evidence", str(hidden_t1), str(again), "-o", str(out2), "--json"])
+    assert r.exit_code == 0, r.stderr
+    def rows(path):  # which candidate of which target (the features' last digits vary from run to run)
+        return [(d["group"], d["target"], d["sources"]) for d in map(json.loads, path.read_text().splitlines()[1:])]
+
+    once, twice = rows(out1), rows(out2)
+    assert len(once) > 0 and twice == once
+    assert json.loads(r.stdout)["rows"] == len(once)
+    assert "given again: used once" in r.stderr
