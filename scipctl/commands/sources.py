@@ -20,3 +20,11 @@ def distinct_sources(srcs) -> list:
         seen[key] = s
         out.append(s)
     return out
+
+
+def source_names(srcs) -> list:
+    """The name each downlink's results are reported under: its file or folder name, or the path as given when
+    another source has the same name (``sol42/ws sol43/ws``), so that no two downlinks share one (their targets
+    would be counted, and grouped, as one)."""
+    names = [Path(s).name for s in srcs]
+    return [str(s) if names.count(n) > 1 else n for s, n in zip(srcs, names)]

@@ -172,3 +172,18 @@ def test_a_downlink_named_twice_is_scored_once(sol):
     assert len(doc["results"]) == 3 and len(doc["downlinks"]) == 1
     assert [row["cases"] for row in doc["table1"]] == [3]
     assert "given again: used once" in r.stderr
+
+
+def test_two_downlinks_of_one_name_are_told_apart(tmp_path):
+    # sol42/ws and sol43/ws: every result used to say downlink "ws" for both (a script could not tell which
+    # answer is whose, a NO-GO line named "ws:t1") and the table counted their 6 targets as 3
+    a, b = tmp_path / "sol42" / SAMPLE.name, tmp_path / "sol43" / SAMPLE.name
+    for p in (a, b):
+        p.parent.mkdir()
+        p.write_bytes(SAMPLE.read_bytes())
+    r = runner.invoke(app, ["simulate-handoff", str(a), str(b), "--methods", "pure-kinematic-near", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert {x["downlink"] for x in doc["results"]} == {str(a), str(b)}
+    assert [d["downlink"] for d in doc["downlinks"]] == [str(a), str(b)]
+    assert "(6 targets)" in r.stderr

@@ -124,3 +124,20 @@ def test_a_downlink_named_twice_gives_its_rows_once(hidden_t1, tmp_path):
     assert len(once) > 0 and twice == once
     assert json.loads(r.stdout)["rows"] == len(once)
     assert "given again: used once" in r.stderr
+
+
+def test_two_downlinks_of_one_name_stay_two_groups(hidden_t1, tmp_path):
+    # a/hid.mcap and b/hid.mcap: their rows used to share the group "hid.mcap", so fit-trust's per-target
+    # evaluation (trust_fit.targets_of: (group, target)) merged a's t1 with b's t1
+    srcs = []
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        for f in (hidden_t1, hidden_t1.with_name("hid.sim.json")):
+            shutil.copy(f, tmp_path / d / f.name)
+        srcs.append(str(tmp_path / d / hidden_t1.name))
+    out = tmp_path / "ev.jsonl"
+    r = runner.invoke(app, ["trust-evidence", *srcs, "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.stderr
+    rows = [json.loads(x) for x in out.read_text().splitlines()[1:]]
+    assert {x["group"] for x in rows} == set(srcs)
+    assert json.loads(r.stdout)["targets"] == 6
