@@ -87,6 +87,11 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from .params import handoff_params, success_threshold
     from .sources import distinct_sources, source_names
 
+    for option, value in (("--target", target), ("--from", from_product), ("--near", near), ("--far", far),
+                          ("--hazcam", hazcam)):
+        # `--target "$T"` with T unset: an empty value used to mean "not given" (every target, the chosen product)
+        if value is not None and not value.strip():
+            raise InputError(option, option.lstrip("-"), "empty: give a name, or leave the option out")
     success_px = success_threshold(success_px)
     params = handoff_params(fast, success_px, trust_model)
     if (from_product is None) != (pixel is None):

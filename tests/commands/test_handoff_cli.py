@@ -76,6 +76,12 @@ def test_from_pixel_runs_one_source_pixel(sol):
     (["--far", "s1-straight-near-navcam-L"], "s1-straight-near-navcam-L: position: the far navcam must be at"),
     (["--near", "s1-straight-near-navcam-R"], "eye: expected a left-eye navcam product, got right"),
     (["--target", "nope"], "nope"),
+    # an empty value (`--target "$T"`, T unset) was taken as "not given": every target, or the chosen product
+    (["--target", ""], "--target: target: empty"),
+    (["--near", " "], "--near: near: empty"),
+    (["--far", ""], "--far: far: empty"),
+    (["--hazcam", ""], "--hazcam: hazcam: empty"),
+    (["--from", "", "--pixel", "10,10"], "--from: from: empty"),
 ])
 def test_bad_input_exits_2_with_one_line(sol, args, needle):
     r = runner.invoke(app, ["simulate-handoff", str(sol)] + args)
