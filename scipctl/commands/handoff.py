@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from ..errors import InputError
 from .output import emit_json, note, stderr_console
 
@@ -87,7 +85,13 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..pipeline.chain_targets import run_marked_chains
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
+    from .sources import distinct_sources, source_names
 
+    for option, value in (("--target", target), ("--from", from_product), ("--near", near), ("--far", far),
+                          ("--hazcam", hazcam)):
+        # `--target "$T"` with T unset: an empty value used to mean "not given" (every target, the chosen product)
+        if value is not None and not value.strip():
+            raise InputError(option, option.lstrip("-"), "empty: give a name, or leave the option out")
     success_px = success_threshold(success_px)
     params = handoff_params(fast, success_px, trust_model)
     if (from_product is None) != (pixel is None):
@@ -105,6 +109,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
         raise InputError("simulate-handoff", "--chain-answer", "is the chain's answer: give --chain too")
     con = stderr_console()
     records, chains, per_dl, pending = [], [], [], []
+    srcs = distinct_sources(srcs)  # a downlink named twice would count twice in Table 1
     sources = [open_source(s, products_root=products_root) for s in srcs]  # validate every input before any work
     for source in sources:
         source.check_writable()  # and say now if a handoff.json could not be saved
@@ -112,9 +117,8 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
         task = prog.add_task("handoff", total=n_work)
-        for src, source in zip(srcs, sources):
+        for src, source, name in zip(srcs, sources, source_names(srcs)):
             dl = source.downlink
-            name = Path(src).name
             setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far, shared=True)
             if from_product is not None:
                 p = dl.product(from_product)

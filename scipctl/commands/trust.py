@@ -39,12 +39,14 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
+    from .sources import distinct_sources, source_names
 
     out = check_output_file(out)
+    srcs = distinct_sources(srcs)  # a downlink named twice would give its rows twice (weighted twice in the fit)
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
     rows = []
     con = stderr_console()
-    for src, source in zip(srcs, sources):
+    for src, source, name in zip(srcs, sources, source_names(srcs)):
         rec = _sim_record(Path(src))
         fam = family or family_of_record(rec)
         meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
@@ -53,10 +55,10 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
         if not isinstance(occ, list) or not all(isinstance(o, dict) and isinstance(o.get("id"), str) for o in occ):
             raise InputError(str(src), "sim record occluded_targets", "not a list of {id: ...} records")
         try:
-            got = evidence_rows(source.downlink, Path(src).name, str(fam), meta, occluded_ids=[o["id"] for o in occ])
+            got = evidence_rows(source.downlink, name, str(fam), meta, occluded_ids=[o["id"] for o in occ])
         except OccludedTargetError as e:
             raise InputError(str(src), "sim record occluded_targets", str(e)) from None
-        note(f"{Path(src).name}: {len(got)} candidate rows, family {fam}")
+        note(f"{name}: {len(got)} candidate rows, family {fam}")
         rows += got
     prov = provenance({f"downlink{i}": source.downlink.source_sha256 for i, source in enumerate(sources)})
     for i, src in enumerate(srcs):

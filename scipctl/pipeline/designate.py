@@ -171,6 +171,9 @@ def check_target_id(text: str) -> str:
 
 
 def pick_left_product(dl: Downlink, product_id: Optional[str], camera: Optional[str]) -> ImageProduct:
+    for option, value in (("--product", product_id), ("--camera", camera)):
+        if value is not None and not value.strip():  # `--product "$P"` with P unset is not "not given"
+            raise InputError("designate", option, "empty: give a name, or leave the option out")
     if product_id and camera:
         raise InputError("designate", "--product", "give --product PRODUCT_ID or --camera NAME, not both")
     if product_id:

@@ -229,3 +229,17 @@ def test_two_designates_at_once_keep_both_targets(tmp_path, dl):
     assert [p.returncode for p in procs] == [0, 0], out
     saved = json.loads((ws / "scipctl" / "targets.json").read_text())["targets"]
     assert sorted(t["id"] for t in saved) == ["a", "b"]
+
+
+@pytest.mark.parametrize("args", [["--product", "", "--camera", "pancam"], ["--camera", " ", "--product", "x"],
+                                  ["--product", ""]])
+def test_an_empty_product_or_camera_exits_2_and_saves_nothing(tmp_path, args):
+    # `--product "$P" --camera pancam` with P unset designated from the pancam (exit 0, saved), as if the
+    # empty --product had not been given
+    src = tmp_path / SAMPLE.name
+    src.write_bytes(SAMPLE.read_bytes())
+    r = runner.invoke(app, ["designate", str(src), *args, "--pixel", "512.25,380.5"])
+    assert r.exit_code == 2, r.stderr
+    assert r.stderr.strip().splitlines() == [f"scipctl: error: designate: {args[0]}: empty: give a name, or leave "
+                                             "the option out"]
+    assert not Path(str(src) + ".scipctl", "targets.json").exists()

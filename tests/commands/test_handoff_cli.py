@@ -76,6 +76,12 @@ def test_from_pixel_runs_one_source_pixel(sol):
     (["--far", "s1-straight-near-navcam-L"], "s1-straight-near-navcam-L: position: the far navcam must be at"),
     (["--near", "s1-straight-near-navcam-R"], "eye: expected a left-eye navcam product, got right"),
     (["--target", "nope"], "nope"),
+    # an empty value (`--target "$T"`, T unset) was taken as "not given": every target, or the chosen product
+    (["--target", ""], "--target: target: empty"),
+    (["--near", " "], "--near: near: empty"),
+    (["--far", ""], "--far: far: empty"),
+    (["--hazcam", ""], "--hazcam: hazcam: empty"),
+    (["--from", "", "--pixel", "10,10"], "--from: from: empty"),
 ])
 def test_bad_input_exits_2_with_one_line(sol, args, needle):
     r = runner.invoke(app, ["simulate-handoff", str(sol)] + args)
@@ -160,3 +166,30 @@ def test_a_bad_option_for_a_later_source_leaves_every_source_as_it_was(tmp_path)
     assert r.stderr.strip().splitlines()[-1].startswith("scipctl: error: ") and "s1-straight-near-navcam-L" in r.stderr
     assert (side / "handoff.json").read_text() == '{"earlier": true}'
     assert not Path(str(b) + ".scipctl", "handoff.json").exists()
+
+
+def test_a_downlink_named_twice_is_scored_once(sol):
+    # `simulate-handoff a.mcap ./a.mcap` (or a glob that also matches a named file) used to score every target
+    # twice: Table 1's n doubled and its statistics weighted that downlink twice; campaign uses each once
+    again = Path(sol.parent, ".", sol.name)
+    r = runner.invoke(app, ["simulate-handoff", str(sol), str(again), "--methods", "pure-kinematic-near", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert len(doc["results"]) == 3 and len(doc["downlinks"]) == 1
+    assert [row["cases"] for row in doc["table1"]] == [3]
+    assert "given again: used once" in r.stderr
+
+
+def test_two_downlinks_of_one_name_are_told_apart(tmp_path):
+    # sol42/ws and sol43/ws: every result used to say downlink "ws" for both (a script could not tell which
+    # answer is whose, a NO-GO line named "ws:t1") and the table counted their 6 targets as 3
+    a, b = tmp_path / "sol42" / SAMPLE.name, tmp_path / "sol43" / SAMPLE.name
+    for p in (a, b):
+        p.parent.mkdir()
+        p.write_bytes(SAMPLE.read_bytes())
+    r = runner.invoke(app, ["simulate-handoff", str(a), str(b), "--methods", "pure-kinematic-near", "--json"])
+    assert r.exit_code == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert {x["downlink"] for x in doc["results"]} == {str(a), str(b)}
+    assert [d["downlink"] for d in doc["downlinks"]] == [str(a), str(b)]
+    assert "(6 targets)" in r.stderr

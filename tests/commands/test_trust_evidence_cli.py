@@ -107,3 +107,37 @@ def test_fit_trust_refuses_a_table_it_cannot_fit_in_one_line(tmp_path, case):
     assert r.exit_code == 2, (r.exit_code, r.stderr)
     assert r.stderr.count("\n") == 1 and r.stderr.startswith("scipctl: error: ")
     assert not out.exists()
+
+
+def test_a_downlink_named_twice_gives_its_rows_once(hidden_t1, tmp_path):
+    # `trust-evidence a.mcap ./a.mcap` used to write every candidate row twice: fit-trust then weighted that
+    # downlink twice (campaign and simulate-handoff use each downlink once)
+    out1, out2 = tmp_path / "once.jsonl", tmp_path / "twice.jsonl"
+    assert runner.invoke(app, ["trust-evidence", str(hidden_t1), "-o", str(out1)]).exit_code == 0
+    again = hidden_t1.parent / "." / hidden_t1.name
+    r = runner.invoke(app, ["trust-evidence", str(hidden_t1), str(again), "-o", str(out2), "--json"])
+    assert r.exit_code == 0, r.stderr
+    def rows(path):  # which candidate of which target (the features' last digits vary from run to run)
+        return [(d["group"], d["target"], d["sources"]) for d in map(json.loads, path.read_text().splitlines()[1:])]
+
+    once, twice = rows(out1), rows(out2)
+    assert len(once) > 0 and twice == once
+    assert json.loads(r.stdout)["rows"] == len(once)
+    assert "given again: used once" in r.stderr
+
+
+def test_two_downlinks_of_one_name_stay_two_groups(hidden_t1, tmp_path):
+    # a/hid.mcap and b/hid.mcap: their rows used to share the group "hid.mcap", so fit-trust's per-target
+    # evaluation (trust_fit.targets_of: (group, target)) merged a's t1 with b's t1
+    srcs = []
+    for d in ("a", "b"):
+        (tmp_path / d).mkdir()
+        for f in (hidden_t1, hidden_t1.with_name("hid.sim.json")):
+            shutil.copy(f, tmp_path / d / f.name)
+        srcs.append(str(tmp_path / d / hidden_t1.name))
+    out = tmp_path / "ev.jsonl"
+    r = runner.invoke(app, ["trust-evidence", *srcs, "-o", str(out), "--json"])
+    assert r.exit_code == 0, r.stderr
+    rows = [json.loads(x) for x in out.read_text().splitlines()[1:]]
+    assert {x["group"] for x in rows} == set(srcs)
+    assert json.loads(r.stdout)["targets"] == 6
