@@ -365,9 +365,12 @@ def read_marker(ws) -> dict:
     """The parsed ``WS/scipctl/workspace.json``; InputError if unreadable."""
     f = Path(ws) / PRODUCTS_DIR / MARKER
     try:
-        return json.loads(f.read_text(encoding="utf-8"))
+        doc = json.loads(f.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise InputError(str(f), "json", f"unreadable workspace marker ({e})") from None
+    if not isinstance(doc, dict):
+        raise InputError(str(f), "json", f"unreadable workspace marker (a JSON {type(doc).__name__}, not an object)")
+    return doc
 
 
 def open_source(path, validate: bool = True, products_root=None) -> Source:
@@ -378,8 +381,10 @@ def open_source(path, validate: bool = True, products_root=None) -> Source:
     from .downlink import read_downlink
 
     p = Path(path)
-    dl = read_downlink(p, validate=validate)
     ws = p if is_workspace(p) else None
+    if ws is not None:
+        read_marker(ws)  # a damaged workspace is refused by every command, as `info` refuses it
+    dl = read_downlink(p, validate=validate)
     source = Source(downlink=dl, path=p, workspace_dir=ws, products_root=None if products_root is None else Path(products_root))
     source.places  # noqa: B018  (checks --products-dir now: InputError if it is a file)
     return source

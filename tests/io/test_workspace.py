@@ -79,6 +79,16 @@ def test_malformed_product_json(tmp_path, mcap_src):
     assert ei.value.field == "json" and ei.value.product.endswith("targets.json")
 
 
+@pytest.mark.parametrize("marker", ['{"provenance": {"tool": "scip', "[1, 2]"])
+def test_a_damaged_workspace_marker_is_refused_on_open(tmp_path, mcap_src, marker):
+    # a truncated workspace.json (a copy cut short): designate, sequence ... refuse it as `info` does
+    ws = create_workspace(read_downlink(mcap_src), tmp_path / "ws")
+    (ws / "scipctl" / "workspace.json").write_text(marker)
+    with pytest.raises(InputError) as ei:
+        open_source(ws)
+    assert ei.value.field == "json" and ei.value.product.endswith("workspace.json")
+
+
 def test_reingest_keeps_products_but_replaces_nothing_else(tmp_path, mcap_src):
     dl = read_downlink(mcap_src)
     ws = create_workspace(dl, tmp_path / "ws", source_path=mcap_src)
