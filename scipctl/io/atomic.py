@@ -15,6 +15,15 @@ def _umask() -> int:
     return mask
 
 
+def _refuse_stdout(path, option: str) -> None:
+    """``-``, the usual name for standard output, is not taken for a file of that name in the current folder."""
+    from ..errors import InputError
+
+    if str(path) == "-":
+        raise InputError("-", option, "standard output is not an output file here; give a file path "
+                         "(--json prints the machine-readable answer on stdout)")
+
+
 def check_output_file(path, option: str = "-o") -> Path:
     """``path`` as a :class:`Path` if a file can be written there (not a directory; its folder, or the nearest
     existing ancestor that would hold it, writable), else :class:`InputError` naming ``path`` and ``option``.
@@ -23,6 +32,7 @@ def check_output_file(path, option: str = "-o") -> Path:
     from ..errors import InputError
     from .product_store import is_writable_dir, nearest_existing
 
+    _refuse_stdout(path, option)
     path = Path(path)
     if path.is_dir():
         raise InputError(str(path), option, "is a directory; give the file to write")
@@ -58,6 +68,7 @@ def check_output_dir(path, option: str = "-o") -> Path:
     from ..errors import InputError
     from .product_store import is_writable_dir, nearest_existing
 
+    _refuse_stdout(path, option)
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError(str(path), option, "exists and is not a folder")

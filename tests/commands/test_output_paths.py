@@ -60,9 +60,22 @@ def test_a_write_that_fails_late_is_exit_2_too(tmp_path, monkeypatch):
     assert list(d.iterdir()) == []
 
 
+@pytest.mark.parametrize("args", [["report", str(SAMPLE), "-o", "-"],
+                                  ["sequence", str(SAMPLE), "--target", "t2", "-o", "-"]])
+def test_dash_is_not_a_file_named_dash(tmp_path, monkeypatch, args):
+    # a script's `-o -` expecting stdout wrote a file literally named "-" in the current folder
+    monkeypatch.chdir(tmp_path)
+    r = runner.invoke(app, args)
+    _one_line_exit_2(r, "-", "-o")
+    assert "standard output" in r.stderr and list(tmp_path.iterdir()) == []
+
+
 def test_check_output_paths(tmp_path, monkeypatch):
     assert check_output_file(tmp_path / "new/deeper/f.txt") == tmp_path / "new/deeper/f.txt"  # folders to be made
     assert check_output_dir(tmp_path / "a/b") == tmp_path / "a/b"
+    for check in (check_output_file, check_output_dir):
+        with pytest.raises(InputError, match="standard output"):
+            check("-")
     with pytest.raises(InputError, match="is a directory"):
         check_output_file(tmp_path)
     (tmp_path / "file").write_text("x")
