@@ -141,3 +141,13 @@ def test_two_downlinks_of_one_name_stay_two_groups(hidden_t1, tmp_path):
     rows = [json.loads(x) for x in out.read_text().splitlines()[1:]]
     assert {x["group"] for x in rows} == set(srcs)
     assert json.loads(r.stdout)["targets"] == 6
+
+
+@pytest.mark.parametrize("family", ["", "  "])
+def test_an_empty_family_is_bad_input(tmp_path, family):
+    # a script's `--family "$F"` with F unset labelled every row with the family "" (exit 0)
+    out = tmp_path / "ev.jsonl"
+    r = runner.invoke(app, ["trust-evidence", str(SAMPLE), "--family", family, "-o", str(out)])
+    assert r.exit_code == 2, r.output
+    assert r.stderr.count("\n") == 1 and "--family" in r.stderr and "Traceback" not in r.stderr
+    assert not out.exists()
