@@ -37,10 +37,11 @@ app = typer.Typer(
 )
 
 
-def _products_dir_option():
+def _products_dir_option(writes: bool = True):
+    what = "Write (and also look for)" if writes else "Look for"
     return typer.Option(
         None, "--products-dir", envvar="SCIPCTL_PRODUCTS_DIR",
-        help="Write (and also look for) products of raw downlinks and workspaces in DIR/<name>-<hash>/ "
+        help=f"{what} products of raw downlinks and workspaces in DIR/<name>-<hash>/ "
         "instead of beside them (docs/workspace.md).")
 
 
@@ -84,7 +85,7 @@ def ingest(
 @guarded
 def info(
     src: Path = typer.Argument(..., metavar="SRC", help="Downlink (.mcap or directory) or workspace."),
-    products_dir: Optional[Path] = _products_dir_option(),
+    products_dir: Optional[Path] = _products_dir_option(writes=False),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Validate and summarise a downlink or workspace without writing anything."""
