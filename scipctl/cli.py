@@ -85,7 +85,7 @@ def ingest(
 @guarded
 def info(
     src: Path = typer.Argument(..., metavar="SRC", help="Downlink (.mcap or directory) or workspace."),
-    products_dir: Optional[Path] = _products_dir_option(writes=False),
+    products_dir: Optional[str] = _products_dir_option(writes=False),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable summary on stdout."),
 ):
     """Validate and summarise a downlink or workspace without writing anything."""
@@ -139,7 +139,7 @@ def designate(
     target_id: Optional[str] = typer.Option(None, "--id", help="Target name: letters, digits, _ . - (default: d<N>, the first free one)."),
     replace_id: bool = typer.Option(False, "--replace", help="Designate --id anew although it is already a saved designation or a marked target."),
     band_px: Optional[float] = typer.Option(None, "--band-px", help="Half-width of the epipolar search band."),
-    products_dir: Optional[Path] = _products_dir_option(),
+    products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
 ):
     """Designate a 3-D target from a pixel in a left stereo image."""
@@ -165,7 +165,7 @@ def simulate_handoff(
     chain_answer: Optional[str] = typer.Option(None, "--chain-answer", help="With --chain: the chain's final hazcam answer, closure (the default: the closure's pixel when it is confirmed, else the handoff's) or handoff (scip's handoff of the chain's navcam pixel); docs/stereo-and-tracking.md, 'Closure as the answer'."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
     trust_model: Optional[Path] = typer.Option(None, "--trust-model", help="scip's trust model (scipctl fit-trust; default: the packaged one)."),
-    products_dir: Optional[Path] = _products_dir_option(),
+    products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
     """Predict and validate navcam->hazcam (and pancam->navcam) handoffs offline.
@@ -184,7 +184,7 @@ def trust_evidence(
     srcs: List[Path] = typer.Argument(..., metavar="SRC", help="Downlinks or workspaces with marks in the hazcam."),
     out: Path = typer.Option(..., "-o", "--out", help="Evidence table to write (JSON lines)."),
     family: Optional[str] = typer.Option(None, "--family", help="Scene family name (default: the .sim.json's)."),
-    products_dir: Optional[Path] = _products_dir_option(),
+    products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="A summary on stdout."),
 ):
     """Evidence of every scip candidate answer of every marked target, with its true error (trust-model data)."""
@@ -236,7 +236,7 @@ def sequence(
         "scip", "--handoff", help="The navcam->hazcam handoff the sequence commands: scip (the recommended handoff, "
         "near and far navcams, NO-GO halts before the arm) | best-single (one paper method, chosen by the saved "
         "near-navcam results of simulate-handoff, else the paper's Table 1)."),
-    products_dir: Optional[Path] = _products_dir_option(),
+    products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
     """Emit the uplink command sequence for the single-cycle approach."""
@@ -260,7 +260,7 @@ def report(
     sigma_yaw_deg: Optional[float] = typer.Option(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading noise per stop, relative to the previous stop, degrees (default: the rules file's default_sigma_yaw_deg)."),
     rules: Optional[Path] = _rules_option(),
-    products_dir: Optional[Path] = _products_dir_option(),
+    products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
 ):
     """Write a self-contained HTML diagnostic report."""

@@ -109,3 +109,14 @@ def test_products_dir_that_is_a_file_is_exit_2(tmp_path, archive):
                             "--products-dir", str(tmp_path / "afile")])
     assert r.exit_code == 2
     assert r.stderr == f"scipctl: error: {tmp_path / 'afile'}: products-dir: exists and is not a directory\n"
+
+
+@pytest.mark.parametrize("command", [["designate", "--camera", "pancam", "--pixel", "500,500"], ["info"]])
+def test_an_empty_products_dir_is_exit_2(tmp_path, archive, monkeypatch, command):
+    # `--products-dir "$D"` with D unset: the CLI read "" as ".", and products went to the current folder
+    monkeypatch.chdir(tmp_path)
+    before = sorted(p.name for p in tmp_path.iterdir())
+    r = runner.invoke(app, [command[0], str(archive), *command[1:], "--products-dir", ""])
+    assert r.exit_code == 2, r.output
+    assert r.stderr == "scipctl: error: --products-dir: products-dir: empty: give a folder, or leave the option out\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == before
