@@ -51,6 +51,8 @@ def test_relief_keep_masks_the_box_and_keeps_the_ground(scene_and_template):
             near_edge |= scene.point_at(left, uv + [du, dv])[:, 2] < -1e-3
     ground = ~on_box & ~near_edge
     assert ground.sum() > 300
+    # measured 100 % kept (OpenCV 5.0 and 4.14, 1 and 2 threads; the dense stereo is the only OpenCV step and gave
+    # the same mask on all four); bound 95 %: a 5 % loss of clear ground is allowed, none is seen
     assert keep[ground].mean() > 0.95, f"{100 * keep[ground].mean():.1f}% of clear ground kept"
     # box pixels the plane misplaces by more than the stereo's error bound can hide (0.45 px of disparity about
     # the true one moves the point, seen from prev, by ~3.5 template pixels here) plus the 1 px allowed: masked
@@ -67,6 +69,7 @@ def test_relief_keep_masks_the_box_and_keeps_the_ground(scene_and_template):
                                  np.linalg.norm(seen_from_prev(d_true - 0.45) - seen_from_prev(d_true), axis=1))
     far = on_box & (parallax_px > band_px + 1.0)
     assert far.sum() > 300
+    # measured 99.0 % masked (OpenCV 5.0 and 4.14, 1 and 2 threads); bound 90 %: 10x the measured 1 % miss rate
     assert (~keep[far]).mean() > 0.9, f"{100 * (~keep[far]).mean():.1f}% of misplaced box pixels masked"
     # and none of the box pixels the plane places within 1 px is masked
     assert keep[on_box & (parallax_px < 1.0)].all()
@@ -84,6 +87,7 @@ def test_relief_keep_a_plane_offset_is_common_to_the_window(scene_and_template):
     keep = relief_keep(ds, uv, X_off, RigidTransform.identity(), prev, centre, 0.45, 1.0, other_px_scale=scale)
     far_from_box = ~on_box & (X_plane[:, 0] < 2.9)
     assert far_from_box.sum() > 300
+    # measured 100 % kept (OpenCV 5.0 and 4.14, 1 and 2 threads); bound 95 %, as for the ground above
     assert keep[far_from_box].mean() > 0.95
 
 
