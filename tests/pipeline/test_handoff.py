@@ -87,6 +87,10 @@ def test_beyond_paper_refinements_are_used_and_reported(noerr):
             continue
         if r.method == "pure-geometric":
             assert r.diagnostics["refined_by"] == "hazcam point stereo", r.diagnostics
+            # 0.5 px is the refinement's own gate (HandoffParams.geometric_max_residual_px), so this holds whenever
+            # refined_by is set; measured 9e-6 to 3.1e-4 navcam px (converged in 2-5 of the 6 iterations), the same on
+            # OpenCV 5.0 and 4.14, 1 and 2 threads. Not tightened: a bound from match_projection's tol_px needs the
+            # hazcam-to-navcam Jacobian's norm, not measured here
             assert r.diagnostics["refinement_residual_navcam_px"] < 0.5
             # the dense answer (the paper's) is reported beside the refined one
             assert len(r.diagnostics["dense_uv"]) == 2
@@ -138,8 +142,14 @@ def test_kinematic_errors_are_the_modelled_errors(sample, method, navcam):
         assert np.linalg.norm(modelled) > 5.0  # the default errors are big enough to see
         cos = float(modelled @ actual / (np.linalg.norm(modelled) * np.linalg.norm(actual)))
         ratio = np.linalg.norm(actual) / np.linalg.norm(modelled)
-        assert cos > 0.95, (t.id, modelled, actual)
-        assert 0.75 < ratio < 1.33, (t.id, modelled, actual)
+        # error model: actual = modelled + the method's own error, which on a no-error sol is under 1 px (issue
+        # #14's bound, tested above); on a modelled error over 5 px (asserted above) that turns it by at most
+        # asin(1/5) (cos > 0.9798) and scales it by 0.8-1.2. Measured (both navcams, both methods, t1 and t2;
+        # modelled 17.5-29.3 px, |actual - modelled| 0.02-0.67 px): cos >= 0.99980 and ratio 0.986-1.038 on OpenCV
+        # 5.0 and 4.14, 1 and 2 threads (4.14 differs in the 5th digit on one target). Bounds from the model, a
+        # 100x margin on 1 - cos and 5x on the ratio's spread (were 0.95 and 0.75-1.33)
+        assert cos > 0.979, (t.id, modelled, actual)
+        assert 0.8 < ratio < 1.2, (t.id, modelled, actual)
         checked += 1
     assert checked >= 1
 
