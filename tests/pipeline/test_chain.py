@@ -42,6 +42,8 @@ def test_pancam_to_navcam_handoff_by_fov_scaling(dl):
         tpl = scale_window(extract_window(pan.pixels_float(), [mp.u, mp.v], int(np.ceil(15 / scale))), scale)
         tr = track(tpl, nav.pixels_float(), [mn.u + 20, mn.v - 15], 60)
         assert tr.ok, (t.id, tr.reason)
+        # measured 0.047-0.77 px over the five targets of the two sols, the same on OpenCV 5.0 and 4.14, 1 and 2
+        # threads; bound 1 px, the paper's sub-pixel claim (1.3x the worst: s1-arc t1)
         assert np.linalg.norm(tr.uv - [mn.u, mn.v]) < 1.0, (t.id, tr.uv, (mn.u, mn.v))
         n += 1
     assert n >= 2
@@ -70,6 +72,8 @@ def test_plane_warped_template_matches_the_next_view(dl):
         assert tpl is not None
         tr = track(tpl, b.pixels_float(), [mb.u + 10, mb.v + 10], 30, template_center_uv=tc, min_score=0.5)
         assert tr.ok, (t.id, tr.reason)
+        # measured 0.50-0.59 px over the three targets checked, the same on OpenCV 5.0 and 4.14, 1 and 2 threads;
+        # bound 1 px (1.7x the worst)
         assert np.linalg.norm(tr.uv - [mb.u, mb.v]) < 1.0, (t.id, tr.uv, (mb.u, mb.v), tr.score)
         checked += 1
     if checked == 0:
