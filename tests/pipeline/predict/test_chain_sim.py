@@ -19,6 +19,8 @@ def test_chain_on_exact_terrain_keeps_the_slab_target(slab_case):
     for st in nominal.steps:
         assert st["kept"] and st["error_m"] is not None and st["error_m"] < params.lost_m
     # the surface point is the true target (exact terrain)
+    # measured 0.15 mm and 0.56 mm, the same on OpenCV 5.0 and 4.14, 1 and 2 threads: bounds 10 mm and 20 mm (66x,
+    # 36x). Not tightened: no error model of the rendered chain's residual is written down yet
     assert np.linalg.norm(pred.surface_point_site - S.TARGET_SLAB_SITE) < 0.01
     assert pred.accuracy["nominal_final_error_m"] < 0.02
     # simulated P = P(geometry ok) x fraction of the geometrically ok rendered chains that kept the target
