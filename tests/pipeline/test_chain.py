@@ -316,6 +316,9 @@ def test_chain_flags_a_track_it_cannot_verify(dl, chains):
         assert hand.camera == "navcam" and hand.kind == "handoff"
         assert hand.extra["template"] == "plane, feature-guided"  # from the 10 m pancam image, across the drive
         assert hand.extra["reference"] == steps[0].product_id
+        # the same step as chain_expected.EXPECTED_ERROR_PX["paper-s1-straight"]["t1"][1]: measured 0.12-0.33 px on
+        # OpenCV 5.0.0 and 0.08-0.25 px on 4.14.0 over four runs each (a thread count changes no bit:
+        # test_chain_stability.py); that table's 0.5 px is the tight bound, this one only says it is on the mark
         assert hand.ok and hand.error_px < 1.0
     else:
         pan = chains["t1"][1]
