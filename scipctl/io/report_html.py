@@ -58,7 +58,7 @@ def data_uri(png: bytes) -> str:
     return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
 
 
-def _method_colour(method: str, palette: dict) -> tuple:
+def method_colour(method: str, palette: dict) -> tuple:
     """The BGR colour of a handoff method's predictions: its own for every registered method, whatever else the page
     shows; a name the registry does not know gets the next spare colour (``palette``: the page's such names)."""
     from ..core.handoff.registry import ALL_METHODS
@@ -79,7 +79,7 @@ def _marker_style(m, palette: dict) -> tuple:
         return col, mk, ""
     method = getattr(m, "method", None) or m.label
     mk, glyph = NAVCAM_MARKERS.get(getattr(m, "navcam", None) or "", NAVCAM_MARKERS["near"])
-    return _method_colour(method, palette), mk, glyph
+    return method_colour(method, palette), mk, glyph
 
 
 def annotate_chip(chip, palette: dict, size: int = CHIP_PX) -> np.ndarray:

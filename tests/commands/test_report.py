@@ -289,7 +289,7 @@ def test_foxglove_handoff_predictions_have_their_methods_colours(report):
     from mcap.reader import make_reader
 
     from scipctl.core.handoff.registry import ALL_METHODS
-    from scipctl.io.report_html import _method_colour
+    from scipctl.io.report_html import method_colour
 
     _, out, _, _, _ = report
     with open(out.with_suffix(".annotations.mcap"), "rb") as f:
@@ -306,5 +306,5 @@ def test_foxglove_handoff_predictions_have_their_methods_colours(report):
                 colours.setdefault(method, set()).add(rgb)
     assert len(colours) >= 2, colours  # the report ran several methods
     for method, seen in colours.items():
-        b, g, r = _method_colour(method, {})
+        b, g, r = method_colour(method, {})
         assert seen == {(round(r / 255, 6), round(g / 255, 6), round(b / 255, 6))}, method
