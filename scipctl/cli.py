@@ -21,6 +21,7 @@ from typing import List, Optional
 import typer
 
 from . import __version__
+from .commands.empty_values import NonEmptyCommand
 from .commands.output import guarded
 
 app = typer.Typer(
@@ -65,7 +66,7 @@ def _main(
     pass
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def ingest(
     src: Path = typer.Argument(..., metavar="SRC", help="Downlink: an .mcap file or a directory with downlink.yaml."),
@@ -81,7 +82,7 @@ def ingest(
     command.ingest(src, out, json_out, force=force)
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def info(
     src: Path = typer.Argument(..., metavar="SRC", help="Downlink (.mcap or directory) or workspace."),
@@ -94,7 +95,7 @@ def info(
     command.info(src, json_out, products_root=products_dir)
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def synth(
     scenario: str = typer.Option("paper", "--scenario", help="paper | traverse"),
@@ -129,7 +130,7 @@ def synth(
         error_draw=error_draw)
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def designate(
     src: Path = typer.Argument(..., metavar="SRC", help="Workspace or downlink."),
@@ -149,7 +150,7 @@ def designate(
                       replace_id=replace_id)
 
 
-@app.command("simulate-handoff")
+@app.command("simulate-handoff", cls=NonEmptyCommand)
 @guarded
 def simulate_handoff(
     srcs: List[Path] = typer.Argument(..., metavar="SRC", help="Downlinks or workspaces."),
@@ -178,7 +179,7 @@ def simulate_handoff(
         products_root=products_dir, trust_model=trust_model, chain_answer=chain_answer)
 
 
-@app.command("trust-evidence")
+@app.command("trust-evidence", cls=NonEmptyCommand)
 @guarded
 def trust_evidence(
     srcs: List[Path] = typer.Argument(..., metavar="SRC", help="Downlinks or workspaces with marks in the hazcam."),
@@ -193,7 +194,7 @@ def trust_evidence(
     command.trust_evidence(srcs, out, family, json_out, products_root=products_dir)
 
 
-@app.command("fit-trust")
+@app.command("fit-trust", cls=NonEmptyCommand)
 @guarded
 def fit_trust(
     tables: List[Path] = typer.Argument(..., metavar="TABLE", help="Evidence tables (scipctl trust-evidence; .jsonl or .jsonl.gz)."),
@@ -208,7 +209,7 @@ def fit_trust(
     command.fit_trust(tables, out, report, success_px, json_out)
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def sequence(
     src: Path = typer.Argument(..., metavar="SRC", help="Workspace or downlink."),
@@ -250,7 +251,7 @@ def sequence(
                       "--standoff-m": standoff_m})
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def report(
     src: Path = typer.Argument(..., metavar="SRC", help="Workspace or downlink."),
@@ -270,7 +271,7 @@ def report(
         products_root=products_dir, rules_path=rules)
 
 
-@app.command()
+@app.command(cls=NonEmptyCommand)
 @guarded
 def campaign(
     srcs: Optional[List[Path]] = typer.Argument(None, metavar="SRC", help="Downlinks: .mcap files, downlink folders, folders of downlinks, globs."),

@@ -12,9 +12,6 @@ def _parse_methods(methods):
     """
     from ..core.handoff import ALL_METHODS
 
-    if methods is not None and not methods.strip():
-        raise InputError("--methods", "methods", "empty: name methods (comma-separated), 'all', or leave the option "
-                         "out for scip")
     if not methods or methods.strip() == "scip":  # the default: the recommended handoff alone
         return ["scip"], ["near", "far"], {("scip", n) for n in ("near", "far")}
     if methods.strip() == "all":  # scip first, then every other method
@@ -87,11 +84,6 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from .params import handoff_params, success_threshold
     from .sources import distinct_sources, source_names
 
-    for option, value in (("--target", target), ("--from", from_product), ("--near", near), ("--far", far),
-                          ("--hazcam", hazcam)):
-        # `--target "$T"` with T unset: an empty value used to mean "not given" (every target, the chosen product)
-        if value is not None and not value.strip():
-            raise InputError(option, option.lstrip("-"), "empty: give a name, or leave the option out")
     success_px = success_threshold(success_px)
     params = handoff_params(fast, success_px, trust_model)
     if (from_product is None) != (pixel is None):

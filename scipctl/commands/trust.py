@@ -41,9 +41,6 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
     from .sources import distinct_sources, source_names
 
-    if family is not None and not family.strip():
-        raise InputError("--family", "family", "empty: give a name, or leave the option out (each downlink's "
-                         ".sim.json names its family)")
     out = check_output_file(out)
     srcs = distinct_sources(srcs)  # a downlink named twice would give its rows twice (weighted twice in the fit)
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work

@@ -380,8 +380,6 @@ def open_source(path, validate: bool = True, products_root=None) -> Source:
     """
     from .downlink import read_downlink
 
-    if products_root is not None and not str(products_root).strip():  # `--products-dir "$D"` with D unset
-        raise InputError("--products-dir", "products-dir", "empty: give a folder, or leave the option out")
     p = Path(path)
     ws = p if is_workspace(p) else None
     if ws is not None:

@@ -171,14 +171,11 @@ def check_target_id(text: str) -> str:
 
 
 def pick_left_product(dl: Downlink, product_id: Optional[str], camera: Optional[str]) -> ImageProduct:
-    for option, value in (("--product", product_id), ("--camera", camera)):
-        if value is not None and not value.strip():  # `--product "$P"` with P unset is not "not given"
-            raise InputError("designate", option, "empty: give a name, or leave the option out")
-    if product_id and camera:
+    if product_id is not None and camera is not None:
         raise InputError("designate", "--product", "give --product PRODUCT_ID or --camera NAME, not both")
-    if product_id:
+    if product_id is not None:  # "" too: no product has that id (the CLI refuses empty values before this)
         p = dl.product(product_id)
-    elif camera:
+    elif camera is not None:
         cands = [im for im in dl.images if im.camera == camera and im.eye == "left"]
         if not cands:
             raise InputError(dl.source or "downlink", "camera", f"no left {camera} image in the downlink")

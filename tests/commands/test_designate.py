@@ -240,6 +240,6 @@ def test_an_empty_product_or_camera_exits_2_and_saves_nothing(tmp_path, args):
     src.write_bytes(SAMPLE.read_bytes())
     r = runner.invoke(app, ["designate", str(src), *args, "--pixel", "512.25,380.5"])
     assert r.exit_code == 2, r.stderr
-    assert r.stderr.strip().splitlines() == [f"scipctl: error: designate: {args[0]}: empty: give a name, or leave "
+    assert r.stderr.strip().splitlines() == [f"scipctl: error: {args[0]}: {args[0][2:]}: empty: give a value, or leave "
                                              "the option out"]
     assert not Path(str(src) + ".scipctl", "targets.json").exists()

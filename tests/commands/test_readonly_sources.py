@@ -118,5 +118,6 @@ def test_an_empty_products_dir_is_exit_2(tmp_path, archive, monkeypatch, command
     before = sorted(p.name for p in tmp_path.iterdir())
     r = runner.invoke(app, [command[0], str(archive), *command[1:], "--products-dir", ""])
     assert r.exit_code == 2, r.output
-    assert r.stderr == "scipctl: error: --products-dir: products-dir: empty: give a folder, or leave the option out\n"
+    assert r.stderr == ("scipctl: error: --products-dir: products-dir: empty: give a value, or leave the option "
+                         "out\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == before
