@@ -53,7 +53,7 @@ def test_smooth_grid_reduces_range_noise_and_keeps_steps():
     # no point is pulled across the 3 m step: measured at most 0.016 m off (the noise left, 0.02 m std before
     # smoothing), the same on all four; bound 0.1 m (6x, and 3 % of the step)
     assert np.all(np.abs(rs - r) < 0.1)
-    # points only move along their own rays: the unit directions agree to float rounding (measured 2.2e-16, one
+    # points only move along their own rays: the unit directions agree to float rounding (measured 2.2e-16, 1-2
     # ulp, on OpenCV 5.0 and 4.14, 1 and 2 threads); 1e-12 is a float-identity tolerance
     d0 = g / np.linalg.norm(g, axis=2, keepdims=True)
     d1 = sm / np.linalg.norm(sm, axis=2, keepdims=True)
