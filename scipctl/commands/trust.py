@@ -41,7 +41,7 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically): first a
     ``{"provenance": ...}`` line (tool version, command line, each input's SHA-256), then one row per line."""
     from ..io.atomic import check_not_input, check_output_file, write_output_text
-    from ..io.provenance import provenance
+    from ..io.provenance import provenance, sha256_file
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
     from .sources import distinct_sources, source_names
@@ -76,6 +76,9 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     prov = provenance({f"downlink{i}": source.downlink.source_sha256 for i, source in enumerate(sources)})
     for i, src in enumerate(srcs):
         prov["inputs"][f"downlink{i}"]["path"] = str(src)
+        sim = _sim_record_path(Path(src))
+        if sim.is_file():  # the record gave the rows their family and occluded flags: an input too
+            prov["inputs"][f"sim_record{i}"] = {"path": str(sim), "sha256": sha256_file(sim)}
     head = json.dumps({"provenance": prov}, sort_keys=True, allow_nan=False) + "\n"
     write_output_text(out, head + "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))
     if json_out:

@@ -41,6 +41,11 @@ def test_occluded_target_rows_are_flagged_and_have_no_error(hidden_t1, tmp_path)
     prov = head["provenance"]
     assert set(head) == {"provenance"} and prov["version"] and prov["command"]  # (here: pytest's argv)
     assert prov["inputs"]["downlink0"] == {"path": str(hidden_t1), "sha256": read_downlink(hidden_t1).source_sha256}
+    # and the .sim.json that gave the rows their family and occluded flags (it was not recorded)
+    import hashlib
+
+    sim = hidden_t1.with_name("hid.sim.json")
+    assert prov["inputs"]["sim_record0"] == {"path": str(sim), "sha256": hashlib.sha256(sim.read_bytes()).hexdigest()}
     from scipctl.commands.trust import read_rows
 
     assert len(read_rows([out])) == len(rows)
