@@ -81,7 +81,10 @@ class CampaignStore:
         from ..io.atomic import atomic_write_text
 
         path = self.records_path(result.job)
-        atomic_write_text(path, result.to_jsonl())
+        try:
+            atomic_write_text(path, result.to_jsonl())
+        except OSError as e:  # a full disk, a folder in the way: not a bug (exit 3), and named by the records file
+            raise InputError(str(path), "-o/--out", f"cannot write the records: {e.strerror or e}") from None
         return path
 
     def read(self, job_id: str) -> Optional[DownlinkResult]:
@@ -107,7 +110,10 @@ class CampaignStore:
     def save_manifest(self, doc: dict) -> None:
         from ..io.atomic import atomic_write_text
 
-        atomic_write_text(self.manifest_path, json.dumps(doc, indent=1, sort_keys=True, default=json_default) + "\n")
+        try:
+            atomic_write_text(self.manifest_path, json.dumps(doc, indent=1, sort_keys=True, default=json_default) + "\n")
+        except OSError as e:
+            raise InputError(str(self.manifest_path), "-o/--out", f"cannot write the manifest: {e.strerror or e}") from None
 
 
 def manifest_entry(job: DownlinkJob, key: str, status: str, result: Optional[DownlinkResult] = None) -> dict:

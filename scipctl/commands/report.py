@@ -119,7 +119,7 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
 
     mc = out.with_suffix(".annotations.mcap")  # the same annotations for Foxglove
     try:
-        write_annotations(source.downlink, data, mc)
+        write_annotations(source.downlink, data, mc, summary["provenance"])  # the HTML's record: same inputs
         summary["annotations_mcap"] = str(mc)
     except OSError as e:  # the path was checked before the work: a full disk, a folder made meanwhile
         from ..errors import InputError

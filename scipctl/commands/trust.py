@@ -12,9 +12,14 @@ from ..errors import InputError
 from .output import emit_json, note, stderr_console
 
 
+def _sim_record_path(src: Path) -> Path:
+    """Where the simulator's record of a downlink is (``X.mcap`` -> ``X.sim.json``); it may not exist."""
+    return src.with_name(src.name[: -len(src.suffix)] + ".sim.json") if src.suffix else src.with_name(src.name + ".sim.json")
+
+
 def _sim_record(src: Path) -> dict:
     """The simulator's ``.sim.json`` beside a downlink (``X.mcap`` -> ``X.sim.json``), or {}."""
-    p = src.with_name(src.name[: -len(src.suffix)] + ".sim.json") if src.suffix else src.with_name(src.name + ".sim.json")
+    p = _sim_record_path(src)
     if not p.is_file():
         return {}
     try:
@@ -35,14 +40,19 @@ def family_of_record(rec: dict) -> str:
 def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool, products_root=None) -> None:
     """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically): first a
     ``{"provenance": ...}`` line (tool version, command line, each input's SHA-256), then one row per line."""
-    from ..io.atomic import check_output_file, write_output_text
-    from ..io.provenance import provenance
+    from ..io.atomic import check_not_input, check_output_file, write_output_text
+    from ..io.provenance import provenance, sha256_file
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
     from .sources import distinct_sources, source_names
 
     out = check_output_file(out)
     srcs = distinct_sources(srcs)  # a downlink named twice would give its rows twice (weighted twice in the fit)
+    for s in srcs:  # -o SRC (or its .sim.json) replaced the downlink with the table (exit 0)
+        check_not_input(out, s, products_root=products_root)
+        if out.resolve() == _sim_record_path(Path(s)).resolve():
+            raise InputError(str(out), "-o", f"would overwrite the input {_sim_record_path(Path(s))} (the simulator's "
+                             "record of a downlink); give a file outside the inputs")
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
     rows = []
     con = stderr_console()
@@ -63,6 +73,9 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     prov = provenance({f"downlink{i}": source.downlink.source_sha256 for i, source in enumerate(sources)})
     for i, src in enumerate(srcs):
         prov["inputs"][f"downlink{i}"]["path"] = str(src)
+        sim = _sim_record_path(Path(src))
+        if sim.is_file():  # the record gave the rows their family and occluded flags: an input too
+            prov["inputs"][f"sim_record{i}"] = {"path": str(sim), "sha256": sha256_file(sim)}
     head = json.dumps({"provenance": prov}, sort_keys=True, allow_nan=False) + "\n"
     write_output_text(out, head + "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))
     if json_out:
@@ -120,6 +133,11 @@ def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float
     out = check_output_file(out)
     if report is not None:
         report = check_output_file(report, "--report")
+        if report.resolve() == out.resolve():  # the report replaced the model just written (exit 0)
+            raise InputError(str(report), "--report", "is the -o model file; give another file for the report")
+    for option, path in (("-o", out), ("--report", report)):
+        if path is not None and any(path.resolve() == Path(t).resolve() for t in tables):  # replaced a table
+            raise InputError(str(path), option, "would overwrite an input evidence table; give another file")
     rows = read_rows(tables)
     prov = provenance({f"table{i}": str(t) for i, t in enumerate(tables)}, deterministic=True)
     import sklearn

@@ -89,7 +89,9 @@ def annotation_messages(dl, data) -> list:
     return out
 
 
-def annotations_bytes(dl, data) -> bytes:
+def annotations_bytes(dl, data, prov=None) -> bytes:
+    """The annotation MCAP. ``prov``: the provenance record of the report it goes with (the same inputs: the
+    downlink and the products and rules file the report read); None: one naming the downlink only."""
     from mcap.writer import CompressionType, Writer
 
     buf = io.BytesIO()
@@ -106,17 +108,18 @@ def annotations_bytes(dl, data) -> bytes:
         w.add_message(ca, ns, json.dumps(ann, sort_keys=True).encode(), ns)
     w.add_metadata("scipctl.report", {"mission": str(data["mission"]), "sol": str(data["sol"]),
                                       "source_sha256": str(data["sha256"])})
-    from .provenance import provenance
+    if prov is None:
+        from .provenance import provenance
 
+        prov = provenance({"downlink": str(data["sha256"])})
     # as every written artifact: tool version, command line, input hashes (MCAP metadata values are strings)
-    w.add_metadata("scipctl.provenance", {"json": json.dumps(provenance({"downlink": str(data["sha256"])}),
-                                                             sort_keys=True)})
+    w.add_metadata("scipctl.provenance", {"json": json.dumps(prov, sort_keys=True)})
     w.finish()
     return buf.getvalue()
 
 
-def write_annotations(dl, data, path) -> None:
-    """Write the annotation MCAP atomically."""
+def write_annotations(dl, data, path, prov=None) -> None:
+    """Write the annotation MCAP atomically (``prov``: as :func:`annotations_bytes`)."""
     from .atomic import atomic_write_bytes
 
-    atomic_write_bytes(path, annotations_bytes(dl, data))
+    atomic_write_bytes(path, annotations_bytes(dl, data, prov))

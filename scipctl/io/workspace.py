@@ -98,6 +98,12 @@ def write_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_pa
 
     out = Path(out)
     check_replaceable(out, "a scipctl workspace", f"{PRODUCTS_DIR}/{MARKER}")
+    if not out.exists():
+        from .product_store import nearest_existing
+
+        if not nearest_existing(out.parent).is_dir():  # `-o FILE/ws`: the mkdir's "File exists" named nothing
+            raise InputError(str(out), "output", f"cannot write the workspace: {nearest_existing(out.parent)} is "
+                             "not a folder; nothing was changed")
     src = str(source_path if source_path is not None else dl.source)
     replaced = is_workspace(out)
     entries = _product_entries(out) if replaced else []

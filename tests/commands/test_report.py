@@ -193,6 +193,9 @@ def test_the_report_and_its_annotations_say_how_they_were_made_and_from_what(rep
     ann_prov = json.loads(meta["scipctl.provenance"]["json"])
     assert ann_prov["tool"] == "scipctl" and ann_prov["inputs"]["downlink"]["sha256"] == sha
     assert ann_prov["command"]
+    # the annotations show the designations and handoff answers the report read: the same inputs as the page's
+    # (it recorded the downlink alone)
+    assert ann_prov == prov
 
 
 def test_the_report_hashes_the_saved_products_it_read(tmp_path, report):

@@ -41,6 +41,11 @@ def test_occluded_target_rows_are_flagged_and_have_no_error(hidden_t1, tmp_path)
     prov = head["provenance"]
     assert set(head) == {"provenance"} and prov["version"] and prov["command"]  # (here: pytest's argv)
     assert prov["inputs"]["downlink0"] == {"path": str(hidden_t1), "sha256": read_downlink(hidden_t1).source_sha256}
+    # and the .sim.json that gave the rows their family and occluded flags (it was not recorded)
+    import hashlib
+
+    sim = hidden_t1.with_name("hid.sim.json")
+    assert prov["inputs"]["sim_record0"] == {"path": str(sim), "sha256": hashlib.sha256(sim.read_bytes()).hexdigest()}
     from scipctl.commands.trust import read_rows
 
     assert len(read_rows([out])) == len(rows)
@@ -151,3 +156,30 @@ def test_an_empty_family_is_bad_input(tmp_path, family):
     assert r.exit_code == 2, r.output
     assert r.stderr.count("\n") == 1 and "--family" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
+
+
+def test_trust_evidence_may_not_overwrite_its_inputs(tmp_path):
+    # `-o SRC` replaced the downlink with the evidence table (exit 0); `-o X.sim.json` its simulator's record
+    src = tmp_path / "a.mcap"
+    shutil.copy(SAMPLE, src)
+    shutil.copy(SAMPLE.with_name("paper-s1-straight.sim.json"), tmp_path / "a.sim.json")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for out in (src, tmp_path / "a.sim.json", tmp_path / "." / "a.mcap"):
+        r = runner.invoke(app, ["trust-evidence", str(src), "-o", str(out)])
+        assert r.exit_code == 2, (out, r.exit_code, r.stderr)
+        assert r.stderr.count("\n") == 1 and "would overwrite the input" in r.stderr and "Traceback" not in r.stderr
+        assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_fit_trust_may_not_overwrite_its_tables_or_its_model(tmp_path):
+    # `-o TABLE` replaced the input table with the model, `--report` = `-o` the model with the report (exit 0)
+    table = tmp_path / "t.jsonl"
+    table.write_text("".join(json.dumps(r) + "\n" for r in _table_rows(400)))
+    before = table.read_bytes()
+    model = tmp_path / "m.json"
+    for args, option in ((["-o", str(table)], "-o"), (["-o", str(model), "--report", str(table)], "--report"),
+                         (["-o", str(model), "--report", str(tmp_path / "." / "m.json")], "--report")):
+        r = runner.invoke(app, ["fit-trust", str(table), *args])
+        assert r.exit_code == 2, (args, r.exit_code, r.stderr)
+        assert r.stderr.count("\n") == 1 and f": {option}: " in r.stderr and "Traceback" not in r.stderr
+        assert table.read_bytes() == before and not model.exists()

@@ -194,6 +194,15 @@ def test_unwritable_output_folder_is_an_input_error(tmp_path, mcap_src, monkeypa
     assert list((tmp_path / "ro").iterdir()) == []
 
 
+def test_a_file_in_the_output_path_is_named(tmp_path, mcap_src):
+    # `-o FILE/ws` said "cannot write the workspace: File exists"
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(InputError) as ei:
+        create_workspace(read_downlink(mcap_src), tmp_path / "afile" / "sub" / "ws")
+    assert ei.value.field == "output" and f"{tmp_path / 'afile'} is not a folder" in ei.value.message
+    assert (tmp_path / "afile").read_text() == "x"
+
+
 def test_update_json_holds_the_products_lock_from_read_to_write(tmp_path, mcap_src):
     """Two commands updating one product (two designate runs on a workspace) each see the other's change: the
     second waits for the first's write (it used to read, work for seconds, and overwrite the first's target)."""
