@@ -52,9 +52,9 @@ def _colour(rgb, a=1.0):
 
 def _predicted_rgb(m, palette: dict) -> tuple:
     """A handoff prediction's colour, r, g, b in [0, 1]: its method's on the report's page (one per method)."""
-    from .report_html import method_colour
+    from .report_html import prediction_colour
 
-    b, g, r = method_colour(getattr(m, "method", None) or m.label, palette)
+    b, g, r = prediction_colour(m, palette)
     return (r / 255.0, g / 255.0, b / 255.0)
 
 

@@ -71,15 +71,20 @@ def method_colour(method: str, palette: dict) -> tuple:
     return palette[method]
 
 
+def prediction_colour(m, palette: dict) -> tuple:
+    """The BGR colour of a handoff prediction's marker (a ``ChipMarker`` of kind "predicted"): its method's
+    (:func:`method_colour`), the page's and the Foxglove annotations' alike; a marker without a method by its label."""
+    return method_colour(m.method or m.label, palette)
+
+
 def _marker_style(m, palette: dict) -> tuple:
     """(BGR colour, marker kind, glyph for the page) of a chip marker: :data:`STYLE`'s for its kind, else a
     handoff prediction's (colour by method, shape by navcam)."""
     if m.kind in STYLE:
         col, mk, _ = STYLE[m.kind]
         return col, mk, ""
-    method = getattr(m, "method", None) or m.label
-    mk, glyph = NAVCAM_MARKERS.get(getattr(m, "navcam", None) or "", NAVCAM_MARKERS["near"])
-    return method_colour(method, palette), mk, glyph
+    mk, glyph = NAVCAM_MARKERS.get(m.navcam or "", NAVCAM_MARKERS["near"])
+    return prediction_colour(m, palette), mk, glyph
 
 
 def annotate_chip(chip, palette: dict, size: int = CHIP_PX) -> np.ndarray:
