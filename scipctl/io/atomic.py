@@ -3,13 +3,16 @@
 Temporaries are hidden names in the target's folder (a rename across folders would not be atomic) that say who
 wrote them (docs/workspace.md, "Temporary files")::
 
-    .<NAME>.<OWNER>.<PID>.<RAND>.tmp   a file or folder being written
+    .<NAME>.<OWNER>.<PID>.<RAND>.tmp   a file or folder being written; after a folder swap, the replaced copy
+                                       being removed
+    .<NAME>.<OWNER>.<PID>.<RAND>.old   a replaced folder between the two renames of a folder swap
 
 ``NAME`` is the target's name (its first 100 characters), ``OWNER`` the writer's host (and pid namespace, see
 :func:`owner_tag`) with no dot in it, ``PID`` its process id. A process killed with SIGKILL leaves these behind
 (SIGTERM and SIGINT unwind and remove them). The next write into the same folder removes the ``.tmp`` ones whose
 owner is this host and whose process is gone (:func:`remove_stale_temporaries`); those of another host or of a
-live process (or of a reused pid) are kept, and so is every name that does not match.
+live process (or of a reused pid) are kept, and so is every name that does not match. An ``.old`` is never deleted:
+the next write of its target puts it back if the target is missing (:func:`recover_interrupted`).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import socket
 import sys
 import tempfile
 from pathlib import Path
+from typing import Optional
 
 _NAME_CHARS = 100  # of the target's name kept in its temporaries' names (a name has at most 255 bytes)
 # the last four dot-separated fields carry no dot, so they are read unambiguously from the right
@@ -107,6 +111,30 @@ def remove_stale_temporaries(folder) -> list:
             continue
         removed.append(n)
     return removed
+
+
+def recover_interrupted(path) -> Optional[Path]:
+    """Put back the folder ``path`` when a process of this host was killed between the two renames of replacing
+    it (``path`` is missing, ``.<NAME>.<OWNER>.<PID>.<RAND>.old`` beside it holds the previous copy, its process
+    is gone). Returns ``path`` when it did, else None. Only names shorter than 100 characters (whole in the
+    temporary's name) are recovered; several candidates: the most recently renamed one."""
+    path = Path(path)
+    if len(path.name) >= _NAME_CHARS or os.path.lexists(path):
+        return None
+    candidates = []
+    for n, m in _left_by_dead_process(path.parent, "old"):
+        with contextlib.suppress(OSError):
+            if m["name"] == path.name and (path.parent / n).is_dir():
+                candidates.append(((path.parent / n).lstat().st_ctime_ns, n))
+    for _, n in sorted(candidates, reverse=True):
+        if os.path.lexists(path):
+            break
+        try:
+            os.replace(path.parent / n, path)
+        except OSError:
+            continue
+        return path
+    return None
 
 
 def _umask() -> int:
@@ -220,7 +248,10 @@ def write_output_text(path, text: str, option: str = "-o") -> None:
 def atomic_directory(path, overwrite: bool = True):
     """Yield a temporary directory; on success it replaces ``path``; on error it is removed.
 
-    Stale temporaries beside ``path`` are removed first (:func:`remove_stale_temporaries`).
+    Before that, a copy of ``path`` left by a replacement that was killed between its two renames is put back
+    (:func:`recover_interrupted`) and stale temporaries beside it are removed (:func:`remove_stale_temporaries`).
+    The replaced copy is renamed to the temporary's ``.tmp`` name before it is deleted, so that a kill while it is
+    being deleted leaves a ``.tmp`` (removed by the next write), never a partial ``.old``.
 
     Usage::
 
@@ -229,6 +260,7 @@ def atomic_directory(path, overwrite: bool = True):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    recover_interrupted(path)
     remove_stale_temporaries(path.parent)
     tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
     os.chmod(tmp, 0o777 & ~_umask())
@@ -241,10 +273,16 @@ def atomic_directory(path, overwrite: bool = True):
         if not overwrite:
             shutil.rmtree(tmp, ignore_errors=True)
             raise FileExistsError(str(path))
-        old = path.with_name(f".{path.name[:200]}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(path, old)
-        os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
+        old = tmp.with_name(tmp.name[:-len(".tmp")] + ".old")
+        try:
+            os.replace(path, old)
+            os.replace(tmp, path)
+        finally:
+            if os.path.lexists(old):
+                if not os.path.lexists(path):  # the new copy did not go in (an error, a signal): the previous goes back
+                    os.replace(old, path)
+                elif not os.path.lexists(tmp):  # swapped: the previous copy is now a temporary to delete
+                    os.replace(old, tmp)
+            shutil.rmtree(tmp, ignore_errors=True)
     else:
         os.replace(tmp, path)

@@ -92,6 +92,7 @@ def test_live_processes_other_hosts_and_other_names_are_kept(tmp_path, sleeper):
         _temp(tmp_path, "out.json", os.getpid(), rand="mine0000"),  # this process's own
         _temp(tmp_path, "out.json", dead, owner="otherhost"),  # another host: its pids mean nothing here
         _temp(tmp_path, "out.json", dead, owner=owner_tag()[0] + "+ns4026532000"),  # another pid namespace
+        _temp(tmp_path, "out.json", dead, kind="old", folder_temp=True),  # never deleted, only put back
     ]
     others = [".out.json.abcd1234.tmp",  # an older scipctl's temporary: no owner, left alone
               f".out.json.{owner_tag()[0]}.{dead}.tmp", f".out.json.{owner_tag()[0]}.{dead}.abcd1234.bak",
@@ -151,6 +152,41 @@ def test_without_proc_nothing_is_removed(tmp_path, monkeypatch):
     monkeypatch.undo()
     atomic_write_text(tmp_path / "out.json", "{}\n")
     assert not stale.exists()
+
+
+def test_a_replacement_killed_between_its_renames_is_put_back_not_deleted(tmp_path, sleeper):
+    """Killed after ``ws`` became ``.ws.….old`` and before the new copy took its place: the next write of ``ws``
+    starts from the previous copy (the operator's products), and the dead new copy is removed."""
+    dead = _dead_pid()
+    old = _temp(tmp_path, "ws", dead, kind="old", folder_temp=True)
+    (old / "designations.json").write_text("operator's")
+    _temp(tmp_path, "ws", dead, kind="tmp", folder_temp=True)  # the finished new copy that never went in
+    live = _temp(tmp_path, "ws2", sleeper, kind="old", folder_temp=True)  # a live process between its renames
+    with atomic_directory(tmp_path / "ws") as d:
+        assert (tmp_path / "ws" / "designations.json").read_text() == "operator's"  # back before the new one is made
+        (d / "f").write_text("new")
+    assert _names(tmp_path) == sorted(["ws", live.name]) and _names(tmp_path / "ws") == ["f"]
+
+
+def test_a_failed_swap_puts_the_previous_folder_back(tmp_path, monkeypatch):
+    """The second rename of a swap fails (or a signal lands between the two): the previous copy goes back, and
+    no temporary is left."""
+    (tmp_path / "ws").mkdir()
+    (tmp_path / "ws" / "keep").write_text("previous")
+    real = os.replace
+    calls = []
+
+    def replace(src, dst, *a, **kw):
+        calls.append(1)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return real(src, dst, *a, **kw)
+
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with atomic_directory(tmp_path / "ws") as d:
+            (d / "new").write_text("new")
+    assert _names(tmp_path) == ["ws"] and (tmp_path / "ws" / "keep").read_text() == "previous"
 
 
 _WRITER = """
