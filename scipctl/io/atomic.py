@@ -1,12 +1,140 @@
-"""Write outputs all-or-nothing: to a temporary path beside the target, then rename."""
+"""Write outputs all-or-nothing: to a temporary path beside the target, then rename.
+
+Temporaries are hidden names in the target's folder (a rename across folders would not be atomic) that say who
+wrote them (docs/workspace.md, "Temporary files")::
+
+    .<NAME>.<OWNER>.<PID>.<RAND>.tmp   a file or folder being written; after a folder swap, the replaced copy
+                                       being removed
+    .<NAME>.<OWNER>.<PID>.<RAND>.old   a replaced folder between the two renames of a folder swap
+
+``NAME`` is the target's name (its first 100 characters), ``OWNER`` the writer's host (and pid namespace, see
+:func:`owner_tag`) with no dot in it, ``PID`` its process id. A process killed with SIGKILL leaves these behind
+(SIGTERM and SIGINT unwind and remove them). The next write into the same folder removes the ``.tmp`` ones whose
+owner is this host and whose process is gone (:func:`remove_stale_temporaries`); those of another host or of a
+live process (or of a reused pid) are kept, and so is every name that does not match. An ``.old`` is never deleted:
+the next write of its target puts it back if the target is missing (:func:`recover_interrupted`).
+"""
 
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import os
+import re
 import shutil
+import socket
+import sys
 import tempfile
 from pathlib import Path
+from typing import Optional
+
+_NAME_CHARS = 100  # of the target's name kept in its temporaries' names (a name has at most 255 bytes)
+# the last four dot-separated fields carry no dot, so they are read unambiguously from the right
+_OWNED_RE = re.compile(r"^\.(?P<name>.+)\.(?P<owner>[^.]+)\.(?P<pid>[1-9][0-9]{0,9})\.(?P<rand>[a-z0-9_]+)\."
+                       r"(?P<kind>tmp|old)$")
+_HOST_RE = re.compile(r"^[A-Za-z0-9-]+(\.[A-Za-z0-9-]+)*$")
+_INIT_PID_NS = 0xEFFFFFFC  # the inode of Linux's initial pid namespace (PROC_PID_INIT_INO)
+
+
+def owner_tag() -> tuple:
+    """``(tag, may_clean)``: this process's owner field in temporaries' names, and whether pids in names with that
+    tag can be checked from here.
+
+    The tag is the host name with its dots written as ``_`` (a host name never holds ``_``; one that is not a plain
+    host name is ``%`` and a hash of it). On Linux, a process outside the initial pid namespace (a container that
+    shares its host's name, as with ``--network host``) adds ``+ns<inode of its pid namespace>``: a pid means
+    something only inside its namespace. When the namespace cannot be read (no ``/proc``) the tag ends in ``+ns``
+    and ``may_clean`` is False: such a process never removes anything.
+    """
+    host = socket.gethostname()
+    if _HOST_RE.match(host) and len(host) <= 64:
+        tag = host.replace(".", "_")
+    else:
+        tag = "%" + hashlib.sha256(host.encode("utf-8", "surrogateescape")).hexdigest()[:16]
+    if sys.platform.startswith("linux"):
+        try:
+            ns = os.stat("/proc/self/ns/pid").st_ino
+        except OSError:
+            return tag + "+ns", False
+        if ns != _INIT_PID_NS:
+            tag += f"+ns{ns}"
+    return tag, True
+
+
+def _temp_prefix(path: Path) -> str:
+    return f".{path.name[:_NAME_CHARS]}.{owner_tag()[0]}.{os.getpid()}."
+
+
+def _process_gone(pid: int) -> bool:
+    """True only when no process ``pid`` exists here (a live one, or one of another user, is not gone)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except (OSError, OverflowError):
+        return False
+    return False
+
+
+def _left_by_dead_process(folder: Path, kind: str) -> list:
+    """``(entry name, match)`` of the temporaries of ``kind`` in ``folder`` that this host's dead processes left."""
+    tag, may_clean = owner_tag()
+    if not may_clean:
+        return []
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return []
+    found = []
+    for n in sorted(names):
+        m = _OWNED_RE.match(n)
+        if m and m["kind"] == kind and m["owner"] == tag and _process_gone(int(m["pid"])):
+            found.append((n, m))
+    return found
+
+
+def remove_stale_temporaries(folder) -> list:
+    """Remove the ``.tmp`` temporaries (files or folders) in ``folder`` that a process of this host left when it was
+    killed (its pid no longer exists); returns their names. Best effort: what cannot be removed stays."""
+    folder = Path(folder)
+    removed = []
+    for n, _ in _left_by_dead_process(folder, "tmp"):
+        p = folder / n
+        try:
+            if p.is_dir() and not p.is_symlink():
+                shutil.rmtree(p)
+            else:
+                os.unlink(p)
+        except FileNotFoundError:  # another process removed it first
+            pass
+        except OSError:
+            continue
+        removed.append(n)
+    return removed
+
+
+def recover_interrupted(path) -> Optional[Path]:
+    """Put back the folder ``path`` when a process of this host was killed between the two renames of replacing
+    it (``path`` is missing, ``.<NAME>.<OWNER>.<PID>.<RAND>.old`` beside it holds the previous copy, its process
+    is gone). Returns ``path`` when it did, else None. Only names shorter than 100 characters (whole in the
+    temporary's name) are recovered; several candidates: the most recently renamed one."""
+    path = Path(path)
+    if len(path.name) >= _NAME_CHARS or os.path.lexists(path):
+        return None
+    candidates = []
+    for n, m in _left_by_dead_process(path.parent, "old"):
+        with contextlib.suppress(OSError):
+            if m["name"] == path.name and (path.parent / n).is_dir():
+                candidates.append(((path.parent / n).lstat().st_ctime_ns, n))
+    for _, n in sorted(candidates, reverse=True):
+        if os.path.lexists(path):
+            break
+        try:
+            os.replace(path.parent / n, path)
+        except OSError:
+            continue
+        return path
+    return None
 
 
 def _umask() -> int:
@@ -77,19 +205,28 @@ def check_output_dir(path, option: str = "-o") -> Path:
     return path
 
 
-def atomic_write_bytes(path, data: bytes) -> None:
+@contextlib.contextmanager
+def atomic_open(path):
+    """Yield a binary file open for writing; on success it replaces ``path``, on error it is removed. Stale
+    temporaries in ``path``'s folder are removed first (:func:`remove_stale_temporaries`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent)  # a valid name
+    remove_stale_temporaries(path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)  # a valid name
     try:
         with os.fdopen(fd, "wb") as f:
-            f.write(data)
+            yield f
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the permissions open() would
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def atomic_write_bytes(path, data: bytes) -> None:
+    with atomic_open(path) as f:
+        f.write(data)
 
 
 def atomic_write_text(path, text: str) -> None:
@@ -111,6 +248,11 @@ def write_output_text(path, text: str, option: str = "-o") -> None:
 def atomic_directory(path, overwrite: bool = True):
     """Yield a temporary directory; on success it replaces ``path``; on error it is removed.
 
+    Before that, a copy of ``path`` left by a replacement that was killed between its two renames is put back
+    (:func:`recover_interrupted`) and stale temporaries beside it are removed (:func:`remove_stale_temporaries`).
+    The replaced copy is renamed to the temporary's ``.tmp`` name before it is deleted, so that a kill while it is
+    being deleted leaves a ``.tmp`` (removed by the next write), never a partial ``.old``.
+
     Usage::
 
         with atomic_directory(out) as tmp:
@@ -118,7 +260,9 @@ def atomic_directory(path, overwrite: bool = True):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{path.name[:100]}.", suffix=".tmp", dir=path.parent))
+    recover_interrupted(path)
+    remove_stale_temporaries(path.parent)
+    tmp = Path(tempfile.mkdtemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent))
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
@@ -129,10 +273,16 @@ def atomic_directory(path, overwrite: bool = True):
         if not overwrite:
             shutil.rmtree(tmp, ignore_errors=True)
             raise FileExistsError(str(path))
-        old = path.with_name(f".{path.name[:200]}.old")
-        shutil.rmtree(old, ignore_errors=True)
-        os.replace(path, old)
-        os.replace(tmp, path)
-        shutil.rmtree(old, ignore_errors=True)
+        old = tmp.with_name(tmp.name[:-len(".tmp")] + ".old")
+        try:
+            os.replace(path, old)
+            os.replace(tmp, path)
+        finally:
+            if os.path.lexists(old):
+                if not os.path.lexists(path):  # the new copy did not go in (an error, a signal): the previous goes back
+                    os.replace(old, path)
+                elif not os.path.lexists(tmp):  # swapped: the previous copy is now a temporary to delete
+                    os.replace(old, tmp)
+            shutil.rmtree(tmp, ignore_errors=True)
     else:
         os.replace(tmp, path)

@@ -205,8 +205,9 @@ def check_replaceable(path: Path, what: str, marker: str) -> None:
 
 
 def write_dir(dl: Downlink, path: Path) -> Path:
-    from .atomic import atomic_directory
+    from .atomic import atomic_directory, recover_interrupted
 
+    recover_interrupted(path)  # before deciding what `path` is (atomic_directory)
     check_replaceable(path, "a downlink directory", YAML_NAME)
     with atomic_directory(path) as tmp:
         write_dir_contents(dl, tmp)

@@ -92,11 +92,12 @@ def write_workspace(dl: Downlink, out, summary: Optional[dict] = None, source_pa
     ``workspace.json`` records ``provenance`` (tool, version, command line, the source path and SHA-256,
     time), the source, ``summary``, ``kept_products`` and, after ``force``, what was superseded.
     """
-    from .atomic import atomic_directory
+    from .atomic import atomic_directory, recover_interrupted
     from .downlink_dir import check_replaceable, write_dir_contents
     from .provenance import provenance
 
     out = Path(out)
+    recover_interrupted(out)  # a replacement killed between its renames: the previous workspace, with its products
     check_replaceable(out, "a scipctl workspace", f"{PRODUCTS_DIR}/{MARKER}")
     if not out.exists():
         from .product_store import nearest_existing

@@ -233,3 +233,26 @@ def test_update_json_holds_the_products_lock_from_read_to_write(tmp_path, mcap_s
     assert b_read.is_set() and json.loads(path.read_text()) == {"ids": ["a", "b"]}
     assert sorted(p.name for p in path.parent.iterdir()) == ["c.json", "workspace.json"]  # no lock file left
 
+
+
+def test_reingest_after_a_kill_between_the_swap_renames_keeps_the_operators_products(tmp_path, mcap_src):
+    """A re-ingest killed (SIGKILL) after ``ws`` was renamed to ``.ws.<host>.<pid>.<rand>.old`` and before the new
+    copy took its place leaves no ``ws``: the next ingest to ``ws`` puts the previous workspace back first, so its
+    products are carried (not lost to a fresh workspace), and removes the dead process's new copy."""
+    import subprocess
+    import sys
+
+    from scipctl.io.atomic import owner_tag
+
+    dl = read_downlink(mcap_src)
+    ws = create_workspace(dl, tmp_path / "ws", source_path=mcap_src)
+    (ws / "scipctl" / "targets.json").write_text('{"targets": [{"id": "r1"}]}')
+    p = subprocess.Popen([sys.executable, "-c", "pass"])
+    p.wait()  # a process of this host that is gone
+    left = f".ws.{owner_tag()[0]}.{p.pid}.k2j4h6g8"
+    create_workspace(dl, tmp_path / "new", source_path=mcap_src).rename(tmp_path / f"{left}.tmp")
+    ws.rename(tmp_path / f"{left}.old")
+    done = write_workspace(dl, tmp_path / "ws", source_path=mcap_src)
+    assert done.replaced and done.kept_products == ["targets.json"]
+    assert (ws / "scipctl" / "targets.json").read_text() == '{"targets": [{"id": "r1"}]}'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sol42.mcap", "ws"]
