@@ -86,10 +86,22 @@ def test_seqn_is_recognised_by_the_aerie_grammar_and_matches_the_document(doc):
     "R00:00:00SCIP_BEGIN",  # a time tag ends in whiteSpace
     "@METADATA key 1",  # the Key is a String
     '@METADATA "k" {"a" 1}',
+    # the grammar's tokens take precedence over identifier (@precedence { TimeAbsolute, TimeRelative, TimeEpoch,
+    # TimeComplete, TimeGroundEpoch, Boolean, identifier }): neither a Stem nor an Enum may read as a time tag or
+    # start with a Boolean (each line checked with the Lezer parser built from tests/data/seqn/sequence.grammar)
+    "R00:00:01 X C # c", "R00:00:01 X E1 2", "R00:00:01 C X", "R00:00:01 X R1 ", "R00:00:01 X E+1 2",
+    "R00:00:01 X G00:00:01 2", "R00:00:01 X A2026-001T00:00:00 1",
+    "R00:00:01 X true1", "R00:00:01 X false-a", "R00:00:01 trueX 1",
 ])
 def test_the_recogniser_rejects_what_the_grammar_rejects(bad):
     with pytest.raises(G.SeqNError):
         G.parse('@ID "x"\n' + bad + "\n")
+
+
+@pytest.mark.parametrize("good", ["R00:00:01 X C", "R00:00:01 X R1", "R00:00:01 X Cx", "R00:00:01 X E1X",
+                                  "R00:00:01 TRUE_X TRUE", "R00:00:01 X nullx", "R00:00:01 CONTACT ON"])
+def test_the_recogniser_keeps_what_the_grammar_keeps(good):  # each checked with the Lezer parser, as above
+    assert len(G.parse('@ID "x"\n' + good + "\n").commands) == 1
 
 
 def test_the_recogniser_rejects_metadata_after_the_commands():
