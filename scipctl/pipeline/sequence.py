@@ -407,10 +407,11 @@ def canonical_hash(obj) -> str:
 
 
 def time_tag(seconds: float) -> str:
-    """``Rhh:mm:ss`` (whole seconds, rounded up); ``RDDDThh:mm:ss`` from 100 h on (SeqN's two-digit hours)."""
+    """``Rhh:mm:ss`` (whole seconds, rounded up); ``RDDDThh:mm:ss`` from 24 h on: Aerie's SeqN editor flags a relative
+    tag whose hours exceed 23 as an unbalanced time (an error), and writes ``DDDThh:mm:ss`` itself."""
     s = int(math.ceil(max(0.0, seconds) - 1e-9))
-    hms = f"{(s % 86400) // 3600 if s >= 360000 else s // 3600:02d}:{(s % 3600) // 60:02d}:{s % 60:02d}"
-    return f"R{s // 86400:03d}T{hms}" if s >= 360000 else f"R{hms}"
+    hms = f"{(s % 86400) // 3600:02d}:{(s % 3600) // 60:02d}:{s % 60:02d}"
+    return f"R{s // 86400:03d}T{hms}" if s >= 86400 else f"R{hms}"
 
 
 def sequence_document(pred: Prediction, record: Designation, checks: list, commands: list, handoff: dict,

@@ -11,6 +11,7 @@ Covered, with the grammar's rule names::
     Commands      commandBlock: (Command | commentLine)+
     Command       TimeTag? Stem Args LineComment? newLine   (no per-command Metadata / Models: we emit none)
     Args          (whiteSpace arg)* whiteSpace? ; arg: Number | String | Boolean | Enum  (no RepeatArg)
+    Stem, Enum    identifier, but not where the tokenizer reads a time tag or Boolean first (@precedence)
     TimeTag       TimeAbsolute | TimeEpoch | TimeRelative | TimeComplete   (not the ground epoch 'G')
 
 Tokens are the grammar's ``@tokens`` as regular expressions. Not covered: ``@INPUT_PARAMS``, ``@LOCALS``,
@@ -32,6 +33,12 @@ TIME_TAG = re.compile(
     + r"|R(?:" + _DOY + "|" + _HMS + "|" + _SECOND + ")"  # TimeRelative (DOY before hh:mm:ss: longest match)
     + r"|E[+-]?(?:" + _DOY + "|" + _HMS + "|" + _SECOND + ")"  # TimeEpoch
     + r"|C)[ \t]+")  # TimeComplete; every time tag ends in whiteSpace
+# the ground epoch tag 'G' (not emitted): only so that a Stem or an Enum which would read as one is rejected
+_GROUND_EPOCH = r"G[+-]?(?:" + _DOY + "|" + _HMS + "|" + _SECOND + r")[ \t]+"
+# @precedence { TimeAbsolute, TimeRelative, TimeEpoch, TimeComplete, TimeGroundEpoch, Boolean, identifier }: where a
+# Stem or an Enum is expected, the tokenizer still reads a time tag (with its whiteSpace) or a leading 'true'/'false'
+# (even within a longer word: "trueX" is Boolean "true" then "X"), and the parse fails
+TOKEN_BEFORE_IDENTIFIER = re.compile(TIME_TAG.pattern + "|" + _GROUND_EPOCH + r"|true|false")
 IDENT = r"[A-Za-z][A-Za-z0-9_-]*"  # identifier
 STRING = r'"(?:[^"\\]|\\.)*"'  # String
 NUMBER = (r"[+-]?(?:\d[\d_]*(?:\.[\d_]*)?|\.\d[\d_]*)(?:[eE][+-]?[\d_]+)?(?![\w.])"
@@ -189,6 +196,8 @@ def _command(ln: str) -> Command:
         tag, i = m.group("tag"), m.end()
     elif ln[:1] in "AREGC" and re.match(r"[AREGC][\d+-]", ln):
         raise SeqNError("malformed time tag")
+    if TOKEN_BEFORE_IDENTIFIER.match(ln, i):
+        raise SeqNError("a time tag or Boolean where the Stem is expected (the grammar's token precedence)")
     m = re.compile(IDENT).match(ln, i)  # Stem
     if not m:
         raise SeqNError("stem expected")
@@ -206,6 +215,8 @@ def _command(ln: str) -> Command:
         a = ARG.match(ln, i)
         if not a:
             raise SeqNError(f"argument expected at {ln[i:]!r}")
+        if a.lastgroup == "enum" and TOKEN_BEFORE_IDENTIFIER.match(ln, i):
+            raise SeqNError(f"a time tag or Boolean where an Enum is written at {ln[i:]!r} (the grammar's token precedence)")
         args.append((a.lastgroup, a.group(0)))
         i = a.end()
     return Command(tag, stem, args, "")
