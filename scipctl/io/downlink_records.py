@@ -138,6 +138,8 @@ class Fields:
                 raise self.err(key, "missing")
             return default
         v = self.d[key]
+        if isinstance(v, (float, np.floating)) and math.isfinite(v) and float(v).is_integer():
+            v = int(v)  # 1.0: JSON has one number type, and JSON Schema's "integer" includes 1.0
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
             raise self.err(key, f"must be an integer, got {_type_name(v)} {v!r}"[:200])
         v = int(v)

@@ -1,0 +1,31 @@
+"""Record-level readings of values the contract allows but scipctl's own writer never produces."""
+
+import copy
+
+from scipctl.io.downlink import downlink_differences, read_downlink
+from tests.io.builders import META, make_small_downlink, plain_records, write_raw_mcap
+
+
+def _floats_for_ints(x):
+    if isinstance(x, dict):
+        return {k: _floats_for_ints(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_floats_for_ints(v) for v in x]
+    if isinstance(x, int) and not isinstance(x, bool):
+        return float(x)
+    return x
+
+
+def test_integers_written_as_json_floats_read_as_integers(tmp_path):
+    """JSON has one number type: a producer whose numbers are doubles writes ``"site": 1.0``, ``"width": 64.0``,
+    ``"cahvore_type": 3.0``, and JSON Schema's ``integer`` accepts them. They mean the integers."""
+    dl = make_small_downlink()
+    topics = copy.deepcopy(plain_records(dl))
+    plain = {t: [_floats_for_ints(r) for r in recs] for t, recs in topics.items()}
+    rec = plain["/downlink/image"][0]
+    assert isinstance(rec["position"]["site"], float) and isinstance(rec["width"], float)
+    write_raw_mcap(tmp_path / "f.mcap", META, plain)
+    write_raw_mcap(tmp_path / "i.mcap", META, topics)
+    got = read_downlink(tmp_path / "f.mcap")
+    assert downlink_differences(read_downlink(tmp_path / "i.mcap"), got) == []
+    assert all(type(im.site) is int and type(im.width) is int for im in got.images)
