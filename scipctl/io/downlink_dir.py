@@ -12,6 +12,7 @@ numbers (YAML 1.2 behaviour) rather than strings.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 from urllib.parse import quote
@@ -168,13 +169,21 @@ def read_dir(root: Path) -> Downlink:
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\-]*$")
 
 
+_MAX_NAME_BYTES = 200  # file systems allow 255 bytes per name; keep a margin
+
+
 def image_file_name(product_id: str) -> str:
-    """``<product_id>.png``; ids that are not plain file names are percent-encoded (injective)."""
+    """``<product_id>.png``; ids that are not plain file names are percent-encoded (injective). A name longer
+    than :data:`_MAX_NAME_BYTES` (the contract sets no length on ids, and percent-encoding triples non-ASCII
+    bytes) is cut and ends in ``%~`` + a SHA-256 of the id, which no percent-encoded name contains."""
     if _SAFE_NAME.match(product_id):
-        return product_id + ".png"
-    q = quote(product_id, safe="")
-    if q.startswith("."):
-        q = "%2E" + q[1:]
+        q = product_id
+    else:
+        q = quote(product_id, safe="")
+        if q.startswith("."):
+            q = "%2E" + q[1:]
+    if len(q) + 4 > _MAX_NAME_BYTES:  # q is ASCII
+        q = q[:120] + "%~" + hashlib.sha256(product_id.encode("utf-8", "surrogatepass")).hexdigest()[:32]
     return q + ".png"
 
 

@@ -37,3 +37,19 @@ def test_yaml_decimal_integers_with_leading_zeros(written):
         assert read_downlink(path.parent).sol == value
     path.write_text(re.sub(r"site: (\d+)", r"site: 00\1", text))
     assert downlink_differences(ref, read_downlink(path.parent)) == []
+
+
+def test_long_product_ids_fit_in_file_names(tmp_path):
+    """The contract sets no length on a product id. A 300-character id (fine in MCAP), or 100 accented letters
+    (a 205-byte name in the producer's own ``images/<product_id>.png``, which percent-encoding made 605 bytes),
+    could not be written: ingest failed with 'File name too long'."""
+    dl = make_small_downlink(n_positions=1, with_targets=False, with_truth=False)
+    ids = ["p" * 300, "é" * 100 + "-L", "é" * 100 + "-R"]
+    for im, pid in zip(dl.images, ids):
+        im.product_id = pid
+    write_downlink(dl, tmp_path / "d", container="dir")
+    names = [p.name for p in (tmp_path / "d" / "images").iterdir()]
+    assert len(names) == len(dl.images) and max(len(n.encode()) for n in names) <= 200
+    back = read_downlink(tmp_path / "d")
+    assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
+    assert [im.png for im in back.images] == [im.png for im in dl.images]
