@@ -29,3 +29,33 @@ def test_integers_written_as_json_floats_read_as_integers(tmp_path):
     got = read_downlink(tmp_path / "f.mcap")
     assert downlink_differences(read_downlink(tmp_path / "i.mcap"), got) == []
     assert all(type(im.site) is int and type(im.width) is int for im in got.images)
+
+
+def _with_escaped_surrogate(topics, topic, index, key):
+    """Raw JSON messages where ``key`` of message ``index`` is ``"nav\\udc80cam"`` (valid JSON syntax)."""
+    import json
+
+    raw = {t: [json.dumps(r).encode() for r in recs] for t, recs in topics.items()}
+    r = topics[topic][index]
+    raw[topic][index] = raw[topic][index].replace(json.dumps(r[key]).encode(), b'"nav\\udc80cam"', 1)
+    return raw
+
+
+def test_lone_surrogate_in_a_string_is_refused_not_a_crash(tmp_path):
+    """JSON can spell a lone surrogate (``"\\udc80"``), which is no Unicode text: such a product id was read,
+    and ingest then crashed writing the workspace (exit 3, UnicodeEncodeError). Now it is an input error that
+    names the record by position (its id cannot be printed) and the field."""
+    import pytest
+
+    from scipctl.model import InputError
+
+    topics = plain_records(make_small_downlink(n_positions=1))
+    cases = [("/downlink/image", 0, "product_id", "/downlink/image[0]", "product_id"),
+             ("/downlink/targets", 0, "kind", topics["/downlink/targets"][0]["id"], "kind"),
+             ("/truth/image", 1, "product_id", "/truth/image[1]", "product_id")]
+    for topic, index, key, product, field in cases:
+        write_raw_mcap(tmp_path / "s.mcap", META, _with_escaped_surrogate(topics, topic, index, key))
+        with pytest.raises(InputError) as ei:
+            read_downlink(tmp_path / "s.mcap")
+        assert (ei.value.product, ei.value.field) == (product, field), str(ei.value)
+        str(ei.value).encode("utf-8")  # printable as one UTF-8 line
