@@ -13,12 +13,12 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..model import Downlink, ImageProduct, InputError
+from ..model import SAME_POINTING_RAD, Downlink, ImageProduct, InputError
 from .images import png_size
 
 POSE_TOL_M = 1e-6  # products at one (site, drive) must agree on the pose to this (metres) ...
 POSE_TOL_RAD = 1e-6  # ... and this (radians)
-MAST_TOL_RAD = 1e-6  # mast angles this close count as the same pointing
+MAST_TOL_RAD = SAME_POINTING_RAD  # mast angles this close count as the same pointing (model.Downlink.stereo_pair)
 
 
 def _check_size(im: ImageProduct) -> None:

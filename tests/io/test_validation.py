@@ -266,6 +266,19 @@ def test_stereo_eyes_far_apart_in_time_are_a_pair(tmp_path):
     assert dl.stereo_pair(dl.product("navcam_left_1_0")).product_id == "navcam_right_1_0"
 
 
+def test_stereo_eyes_with_slightly_different_mast_readings_are_a_pair(tmp_path):
+    """The contract gives each product its own joint angles at acquisition; a producer's readings for the two
+    eyes may differ by encoder noise (here 2e-5 rad). They were not paired (exact to 1e-6 rad), so designate and
+    the handoff stopped with 'no right-eye navcam image'."""
+    def mutate(t):
+        m = rec(t, "navcam_right_1_0")["mast"]
+        m["pan_rad"] += 2e-5
+        m["tilt_rad"] -= 1e-5
+
+    dl = read_downlink(mcap_with(tmp_path, mutate))
+    assert dl.stereo_pair(dl.product("navcam_left_1_0")).product_id == "navcam_right_1_0"
+
+
 def test_stereo_eyes_of_different_size(tmp_path):
     def mutate(t):  # a camera the rover configuration does not know: only the pair rule applies
         for eye in ("left", "right"):
