@@ -19,6 +19,10 @@ from .core.kinematics import RoverConfig, RoverPose
 from .errors import InputError, one_line  # noqa: F401  (re-exported: many modules import them from here)
 
 FORMAT_VERSION = "1"
+# Mast angles of two products at one (site, drive) this close (each joint) are one pointing: a stereo pair's two
+# eyes. The contract gives every product its own joint angles at acquisition, so a producer's readings for the two
+# eyes may differ by encoder noise; a mosaic's next pointing is tenths of a radian away.
+SAME_POINTING_RAD = 1e-3
 
 
 @dataclass(frozen=True)
@@ -161,7 +165,8 @@ class Downlink:
             for im in self.images
             if im.camera == left.camera and im.eye == "right" and im.position == left.position
             and (left.mast is None or im.mast is None
-                 or (abs(im.mast.pan_rad - left.mast.pan_rad) < 1e-6 and abs(im.mast.tilt_rad - left.mast.tilt_rad) < 1e-6))
+                 or (abs(im.mast.pan_rad - left.mast.pan_rad) <= SAME_POINTING_RAD
+                     and abs(im.mast.tilt_rad - left.mast.tilt_rad) <= SAME_POINTING_RAD))
         ]
         if not cands:
             return None

@@ -114,7 +114,7 @@ def read_cmod(path_or_text: Union[str, os.PathLike], name: Optional[str] = None)
     if _looks_like_path(path_or_text):
         label = name or str(path_or_text)
         try:
-            text = Path(path_or_text).read_text(encoding="utf-8", errors="strict")
+            text = Path(path_or_text).read_text(encoding="utf-8-sig", errors="strict")
         except FileNotFoundError:
             raise InputError(label, "file", "no such file") from None
         except IsADirectoryError:

@@ -12,6 +12,7 @@ numbers (YAML 1.2 behaviour) rather than strings.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 from urllib.parse import quote
@@ -30,14 +31,29 @@ _Dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class _Loader(_Base):  # type: ignore[misc,valid-type]
-    """Safe YAML loader that also reads ``1e-5``-style floats as numbers."""
+    """Safe YAML loader that reads numbers as YAML 1.2's core schema does (docs/downlink-format.md, "Types"):
+    every 1.2 float (``1e-5``, ``-.5``, ``+.5``, ``.5e3``) is a number, and a decimal integer with leading
+    zeros (``sol: 0042``) is decimal, not YAML 1.1 octal (34; and ``0089`` a string)."""
 
 
+_DECIMAL_INT = re.compile(r"^[-+]?[0-9]+$")
+# resolvers added here come after PyYAML's own (1.1) for the same first character: they catch what 1.1 leaves a string
+_Loader.add_implicit_resolver("tag:yaml.org,2002:int", _DECIMAL_INT, list("-+0123456789"))  # 0089
 _Loader.add_implicit_resolver(
     "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
-    list("-+0123456789"),
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|\.[0-9]+(?:[eE][-+]?[0-9]+)?)$"),
+    list("-+.0123456789"),
 )
+
+
+def _construct_int(loader, node):
+    value = loader.construct_scalar(node)
+    if _DECIMAL_INT.match(value):
+        return int(value, 10)  # YAML 1.2: leading zeros are not octal
+    return yaml.SafeLoader.construct_yaml_int(loader, node)  # 0x1F, 1_000, 0b101, 0o17-less 1.1 forms
+
+
+_Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
 
 
 MAX_YAML_DEPTH = 100  # downlink.yaml nests 7 deep; libyaml's loader crashes the process at ~40000
@@ -153,13 +169,21 @@ def read_dir(root: Path) -> Downlink:
 _SAFE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+\-]*$")
 
 
+_MAX_NAME_BYTES = 200  # file systems allow 255 bytes per name; keep a margin
+
+
 def image_file_name(product_id: str) -> str:
-    """``<product_id>.png``; ids that are not plain file names are percent-encoded (injective)."""
+    """``<product_id>.png``; ids that are not plain file names are percent-encoded (injective). A name longer
+    than :data:`_MAX_NAME_BYTES` (the contract sets no length on ids, and percent-encoding triples non-ASCII
+    bytes) is cut and ends in ``%~`` + a SHA-256 of the id, which no percent-encoded name contains."""
     if _SAFE_NAME.match(product_id):
-        return product_id + ".png"
-    q = quote(product_id, safe="")
-    if q.startswith("."):
-        q = "%2E" + q[1:]
+        q = product_id
+    else:
+        q = quote(product_id, safe="")
+        if q.startswith("."):
+            q = "%2E" + q[1:]
+    if len(q) + 4 > _MAX_NAME_BYTES:  # q is ASCII
+        q = q[:120] + "%~" + hashlib.sha256(product_id.encode("utf-8", "surrogatepass")).hexdigest()[:32]
     return q + ".png"
 
 

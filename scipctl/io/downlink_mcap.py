@@ -16,6 +16,7 @@ import binascii
 import hashlib
 import io
 import json
+import re
 from pathlib import Path
 
 from ..model import Downlink, InputError
@@ -178,13 +179,18 @@ def _decode_json(name: str, topic: str, index: int, encoding: str, data: bytes):
         raise InputError(name, f"{topic}[{index}]", f"message cannot be read as JSON ({str(e)[:120]})") from None
 
 
+_B64_SPACE = re.compile(r"[ \t\r\n]+")
+
+
 def _image_bytes(d, label: str) -> bytes:
     fs = P.Fields(d, label, "")
     img = fs.map_("image")
     fmt = img.str_("format")
     if fmt.lower() != "png":
         raise img.err("format", f"must be 'png', got {fmt!r}")
-    data = img.str_("data")
+    # MIME-style base64 (RFC 2045: lines of 76, as Python's encodebytes, OpenSSL and Java's MIME encoder write
+    # it) is base64 too: ASCII whitespace is dropped; any other character outside the alphabet is an error
+    data = _B64_SPACE.sub("", img.str_("data"))
     try:
         return base64.b64decode(data, validate=True)
     except (binascii.Error, ValueError) as e:

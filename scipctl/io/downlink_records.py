@@ -112,6 +112,8 @@ class Fields:
         v = self.d[key]
         if not isinstance(v, str):
             raise self.err(key, f"must be a string, got {_type_name(v)} {v!r}"[:200])
+        if not _is_text(v):
+            raise self.err(key, f"must be Unicode text, got a lone surrogate in {v!r}"[:200])
         return v
 
     def float_(self, key: str, required: bool = True, default=None, min_value=None) -> Optional[float]:
@@ -138,6 +140,8 @@ class Fields:
                 raise self.err(key, "missing")
             return default
         v = self.d[key]
+        if isinstance(v, (float, np.floating)) and math.isfinite(v) and float(v).is_integer():
+            v = int(v)  # 1.0: JSON has one number type, and JSON Schema's "integer" includes 1.0
         if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
             raise self.err(key, f"must be an integer, got {_type_name(v)} {v!r}"[:200])
         v = int(v)
@@ -182,6 +186,15 @@ class Fields:
         if not isinstance(v, list):
             raise self.err(key, f"must be a list, got {_type_name(v)}")
         return v
+
+
+def _is_text(s: str) -> bool:
+    """False for a string no UTF-8 file can hold: a lone surrogate, which JSON's ``"\\udc80"`` escape gives."""
+    try:
+        s.encode("utf-8")
+    except UnicodeEncodeError:
+        return False
+    return True
 
 
 def _type_name(v) -> str:
@@ -288,8 +301,8 @@ def rover_config_from_plain(d, resolve_file: ModelFileResolver = None, product: 
     cams_fs = fs.map_("cameras")
     cameras = {}
     for cam_name in cams_fs.d:
-        if not isinstance(cam_name, str):
-            raise cams_fs.err(str(cam_name), "camera names must be strings")
+        if not isinstance(cam_name, str) or not _is_text(cam_name):
+            raise cams_fs.err(ascii(cam_name), "camera names must be strings (Unicode text)")
         cf = cams_fs.map_(cam_name)
         mount = cf.str_("mount")
         if mount not in ("mast", "body"):
@@ -322,7 +335,7 @@ def rover_config_to_plain(rc: RoverConfig) -> dict:
 
 def product_label(d, index: int, where: str) -> str:
     """A name for an image record in error messages: its product_id if it has a usable one."""
-    if isinstance(d, dict) and isinstance(d.get("product_id"), str) and d["product_id"]:
+    if isinstance(d, dict) and isinstance(d.get("product_id"), str) and d["product_id"] and _is_text(d["product_id"]):
         return d["product_id"]
     return f"{where}[{index}]"
 

@@ -55,6 +55,9 @@ def decode_png(data: bytes, product_id: str) -> np.ndarray:
     import cv2
 
     png_size(data, product_id)  # damaged streams never reach libpng (which would print to stderr)
+    bit_depth, colour_type = data[24], data[25]  # IHDR, first (checked by png_size)
+    if colour_type == 0 and bit_depth not in (8, 16):  # OpenCV would scale 1/2/4-bit samples to 8 bits, silently
+        raise InputError(product_id, "image", f"expected 8- or 16-bit samples, got a {bit_depth}-bit greyscale PNG")
     arr = np.frombuffer(bytes(data), dtype=np.uint8)
     img = cv2.imdecode(arr, cv2.IMREAD_UNCHANGED)
     if img is None:

@@ -13,13 +13,12 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..model import Downlink, ImageProduct, InputError
+from ..model import SAME_POINTING_RAD, Downlink, ImageProduct, InputError
 from .images import png_size
 
 POSE_TOL_M = 1e-6  # products at one (site, drive) must agree on the pose to this (metres) ...
 POSE_TOL_RAD = 1e-6  # ... and this (radians)
-STEREO_MAX_DT_S = 5.0  # left and right eye of a stereo pair must be this close in time
-MAST_TOL_RAD = 1e-6  # mast angles this close count as the same pointing
+MAST_TOL_RAD = SAME_POINTING_RAD  # mast angles this close count as the same pointing (model.Downlink.stereo_pair)
 
 
 def _check_size(im: ImageProduct) -> None:
@@ -98,11 +97,9 @@ def validate_downlink(dl: Downlink, check_pixels: bool = True) -> None:
                  and im.position == left.position and _same_pointing(im, left)]
         if not cands:
             continue
+        # no limit on the time between the eyes: at one (site, drive) the rover has not moved (the contract), and
+        # with the same mast angles the pair sees the scene from the same place however long apart it was taken
         right = min(cands, key=lambda im: abs(im.time_s - left.time_s))
-        if abs(right.time_s - left.time_s) > STEREO_MAX_DT_S:
-            raise InputError(right.product_id, "time_s",
-                             f"stereo partner of {left.product_id} taken {abs(right.time_s - left.time_s):.3g} s apart "
-                             f"(more than {STEREO_MAX_DT_S:g} s)")
         if (right.width, right.height) != (left.width, left.height):
             raise InputError(right.product_id, "width",
                              f"{right.width}x{right.height} differs from its stereo partner {left.product_id} "

@@ -224,3 +224,13 @@ def test_mrcal_reads_what_we_write(tmp_path):
         ours = m.project(P)
         err = np.abs(np.array(got["uv"]) - ours).max()
         assert err < 1e-5, f"{name}: mrcal and scipctl projections differ by {err:.3g} px"
+
+
+def test_cmod_file_with_a_utf8_byte_order_mark_and_crlf(tmp_path):
+    """A cmod file saved by a Windows editor (UTF-8 BOM, CRLF lines) is the same text file; the BOM made the
+    first line unparseable ('cannot parse ... expected key = value')."""
+    model = cahvor()
+    p = tmp_path / "m.cahvor"
+    p.write_bytes(b"\xef\xbb\xbf" + format_cmod(model, 64, 48, comment="saved on Windows").replace("\n", "\r\n").encode())
+    got, dims = read_cmod(p)
+    assert _bits_equal(got, model) and dims == (64, 48)

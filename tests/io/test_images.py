@@ -68,3 +68,29 @@ def test_png_size_trusts_a_header_whose_crc_matches():
 def test_not_png_data(data):
     with pytest.raises(InputError, match="not PNG data"):
         png_size(data, "p")
+
+
+def _grey_png(bit_depth: int, rows: list) -> bytes:
+    """A greyscale PNG of ``bit_depth`` built by hand (OpenCV writes only 8 and 16 bits); rows of packed bytes."""
+    def chunk(t, d):
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
+
+    width = len(rows[0]) * 8 // bit_depth
+    raw = b"".join(b"\x00" + bytes(r) for r in rows)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, len(rows), bit_depth, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+@pytest.mark.parametrize("bit_depth", [1, 2, 4])
+def test_low_bit_depth_greyscale_is_refused(bit_depth):
+    """The contract's image is 'PNG, single channel, 8- or 16-bit'. A 1/2/4-bit greyscale PNG was decoded by
+    OpenCV into 8-bit samples scaled to 0-255 and accepted as if it were an 8-bit image."""
+    data = _grey_png(bit_depth, [[0x5A, 0xC3]] * 4)
+    assert png_size(data, "p") == (16 // bit_depth, 4)
+    with pytest.raises(InputError) as ei:
+        decode_png(data, "p")
+    assert (ei.value.product, ei.value.field) == ("p", "image") and f"{bit_depth}-bit" in ei.value.message
+
+
+def test_hand_built_8_bit_greyscale_is_read():
+    assert decode_png(_grey_png(8, [[1, 2, 3]] * 2), "p").tolist() == [[1, 2, 3]] * 2

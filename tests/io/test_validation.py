@@ -257,9 +257,26 @@ def test_same_position_different_orientation(tmp_path):
     expect_error(mcap_with(tmp_path, mutate), "navcam_right_1_12", "pose", "deg")
 
 
-def test_stereo_eyes_far_apart_in_time(tmp_path):
+def test_stereo_eyes_far_apart_in_time_are_a_pair(tmp_path):
+    """The contract sets no time between the eyes: at one (site, drive) the rover has not moved, so a right eye
+    taken 30 s after its left (same mast angles) is its stereo partner. scipctl refused such downlinks
+    ('stereo partner ... taken 30 s apart (more than 5 s)')."""
     path = mcap_with(tmp_path, _set("navcam_right_1_0", "time_s", 1004.0 + 30.0))
-    expect_error(path, "navcam_right_1_0", "time_s", "stereo partner of navcam_left_1_0")
+    dl = read_downlink(path)
+    assert dl.stereo_pair(dl.product("navcam_left_1_0")).product_id == "navcam_right_1_0"
+
+
+def test_stereo_eyes_with_slightly_different_mast_readings_are_a_pair(tmp_path):
+    """The contract gives each product its own joint angles at acquisition; a producer's readings for the two
+    eyes may differ by encoder noise (here 2e-5 rad). They were not paired (exact to 1e-6 rad), so designate and
+    the handoff stopped with 'no right-eye navcam image'."""
+    def mutate(t):
+        m = rec(t, "navcam_right_1_0")["mast"]
+        m["pan_rad"] += 2e-5
+        m["tilt_rad"] -= 1e-5
+
+    dl = read_downlink(mcap_with(tmp_path, mutate))
+    assert dl.stereo_pair(dl.product("navcam_left_1_0")).product_id == "navcam_right_1_0"
 
 
 def test_stereo_eyes_of_different_size(tmp_path):
