@@ -551,15 +551,16 @@ SEQJSON_ARG_TYPE = {"enum": "symbol", "string": "string", "bool": "boolean", "in
 def format_seqjson(doc: dict) -> str:
     """SeqJSON as NASA AMMOS Aerie/PlanDev imports it (the ``@nasa-jpl/seq-json-schema`` schema): ``id``,
     ``metadata`` (the SeqN's ``@METADATA`` entries) and one ``command`` step per command with its typed
-    ``args``, a ``COMMAND_RELATIVE`` time tag (``hh:mm:ss``, the SeqN tag without its ``R``), the comment as
-    ``description`` and the stop in the step's ``metadata``."""
+    ``args``, a ``COMMAND_RELATIVE`` time tag (the SeqN tag without its ``R``), the comment as ``description``
+    (one line, as in the SeqN: Aerie writes a step's description back as the command's ``#`` comment) and the
+    stop in the step's ``metadata``."""
     steps = []
     for c in doc["commands"]:
         step = {"type": "command", "stem": c["stem"], "time": {"type": "COMMAND_RELATIVE", "tag": c["time_tag"][1:]},
                 "args": [{"name": a["name"], "type": SEQJSON_ARG_TYPE[a["type"]], "value": a["value"]}
                          for a in c["args"]]}
         if c["comment"]:
-            step["description"] = c["comment"]
+            step["description"] = one_line(c["comment"])
         if c["stop"] is not None:
             step["metadata"] = {"stop": c["stop"]}
         steps.append(step)

@@ -58,6 +58,18 @@ def test_seqjson_steps_carry_the_commands(doc):
     assert seq["metadata"]["provenance"] == doc["provenance"]
 
 
+def test_a_comment_with_a_line_break_is_one_line_in_both_forms(doc):
+    # a comment carries names read from the input (a method name from handoff.json): SeqN wrote it on one line,
+    # SeqJSON kept the break, which Aerie's conversion of the step back to SeqN writes as a broken command line
+    d = copy.deepcopy(doc)
+    d["commands"][0]["comment"] = "handoff by\nscip"
+    seq = json.loads(Q.format_seqjson(d))
+    seqn = G.parse(Q.format_seqn(d))
+    assert "\n" not in seq["steps"][0]["description"]
+    assert seq["steps"][0]["description"] == seqn.commands[0].comment
+    assert _errors(seq) == []
+
+
 def test_seqn_is_recognised_by_the_aerie_grammar_and_matches_the_document(doc):
     text = Q.format_seqn(doc)
     seqn = G.parse(text)
