@@ -162,10 +162,21 @@ class ChainParams:
     # "handoff" (scip's handoff of the chain's navcam pixel). Measured on 56 chains of 10 held-out families: within
     # 4 px 25 -> 31 with the closure, no family worse (docs/stereo-and-tracking.md, "Closure as the answer")
     answer: str = DEFAULT_CHAIN_ANSWER
+    # the closure model's domain: a closure whose reference lies more drives than this from the designation is
+    # never GO. The model was fitted on the paper's approaches (its reference at most two drives away: the 4.5 m
+    # pancam track, or the navcam at the next stop); its evidence is the reference step's own p, blind to the drift
+    # the tracks before it add up. On traverse-shaped approaches (the shape `sequence` plans; reference four drives
+    # away) 2 of 10 GO chains were wrong, one 20 px off at p 0.95 (docs/stereo-and-tracking.md, "Traverse-shaped
+    # approaches")
+    closure_go_max_drives: int = 2
 
     def check(self) -> "ChainParams":
         """Raise ValueError naming the first bad field; return self."""
         _per_camera("template_half_px", self.template_half_px, self.other_template_half_px, 1, integer=True)
+        if isinstance(self.closure_go_max_drives, bool) or not isinstance(self.closure_go_max_drives, int) \
+                or self.closure_go_max_drives < 0:
+            raise ValueError(f"ChainParams.closure_go_max_drives: must be an integer >= 0, got "
+                             f"{self.closure_go_max_drives!r}")
         _per_camera("search_radius_px", self.search_radius_px, self.other_search_radius_px, 0.0)
         _per_camera("context_half_px", self.context_half_px, self.other_context_half_px, 1, integer=True)
         self.point_stereo.check()
@@ -639,7 +650,9 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
     replaced by a step at the closure's pixel (point stereo there, the error against the mark), ``extra["answer"]``
     ``"closure"`` and the handoff's own answer kept under ``extra["handoff"]``; its ``p_success`` (and
     ``extra["go_min_p"]``) from the closure trust model (``model``; None: the packaged one; no model: None and
-    NO-GO). An unconfirmed or failed closure leaves the handoff's answer (``extra["answer"]`` ``"handoff"``)."""
+    NO-GO); never GO when its reference is more than ``params.closure_go_max_drives`` drives from the designation
+    (:func:`reference_drives`; ``reason`` says so). An unconfirmed or failed closure leaves the handoff's answer
+    (``extra["answer"]`` ``"handoff"``)."""
     from .chain_closure import closure_evidence
 
     H = steps[final]
@@ -668,7 +681,21 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
     else:
         p = float(model.probability([closure_evidence(steps, cl)])[0])
         new.p_success, new.go = p, bool(ok and p >= model.go_min_p)
+        drives = reference_drives(steps, cl.get("reference_step"))
+        if new.go and (drives is None or drives > params.closure_go_max_drives):
+            new.go = False
+            note = (f"the closure's reference is {drives} drives from the designation, beyond the closure model's "
+                    f"{params.closure_go_max_drives} (its p does not see the drift of the tracks between)")
+            new.reason = f"{new.reason}; {note}" if new.reason else note
     steps[final] = new
+
+
+def reference_drives(steps: list, reference_step) -> Optional[int]:
+    """How many drives separate the designation (``steps[0]``) from ``steps[reference_step]``: the distinct stops
+    (``position``) from the first step to it, less one; None when ``reference_step`` is not a step index."""
+    if not isinstance(reference_step, int) or not 0 <= reference_step < len(steps):
+        return None
+    return len({tuple(s.position) for s in steps[: reference_step + 1]}) - 1
 
 
 def _mark_after_unverified(steps: list) -> None:

@@ -519,9 +519,59 @@ def test_run_chain_answers_with_a_confirmed_closure(dl, chains, closures):
             assert fin.p_success == pytest.approx(base.p_success, abs=1e-6)
 
 
+def test_a_closure_farther_from_the_designation_than_the_model_saw_is_never_go(dl):
+    """ChainParams.closure_go_max_drives: the closure model was fitted on paper approaches, whose reference is at
+    most two drives from the designation; a reference farther away is never GO (on traverse-shaped approaches 2 of
+    10 GO chains were wrong, one 20 px off at p 0.95). This sol's closures (their reference one or two drives away)
+    are inside the default limit; with the limit lowered to 0 they fall outside it. The packaged closure model with
+    its GO threshold at 1e-9 makes every stereo-backed closure GO, so that the rule is what decides: NO-GO with the
+    reason and advice, the answer and its p unchanged, the chain NO-GO."""
+    import dataclasses
+
+    from scipctl.io.closure_trust_model import load_packaged_closure_trust_model
+    from scipctl.pipeline.chain import reference_drives
+    from scipctl.pipeline.chain_trust import chain_verdict
+    from tests.pipeline.chain_expected import EXPECTED_FINAL_PX
+
+    always = dataclasses.replace(load_packaged_closure_trust_model(), go_min_p=1e-9)
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    seen = 0
+    for tid in EXPECTED_FINAL_PX[_stem(dl)]:
+        mk = dl.target(tid).mark_in(start.product_id)
+        steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, closure_model=always)
+        fin = steps[-1]
+        if fin.extra.get("answer") != "closure" or not fin.ok:
+            continue
+        assert reference_drives(steps, fin.extra["closure"]["reference_step"]) in (1, 2)  # the paper's approach
+        assert fin.go and "drives from the designation" not in fin.reason
+        low = run_chain(dl, start, [mk.u, mk.v], target_id=tid, closure_model=always,
+                        params=ChainParams(closure_go_max_drives=0))
+        f0 = low[-1]
+        assert f0.extra["answer"] == "closure" and f0.tracked_uv == fin.tracked_uv and f0.p_success == fin.p_success
+        assert not f0.go and f0.advice is not None and "drives from the designation" in f0.reason
+        assert not chain_verdict(low).go
+        seen += 1
+    assert seen >= 1
+
+
+def test_reference_drives_counts_the_stops_between():
+    from scipctl.pipeline.chain import ChainStep, reference_drives
+
+    def st(pos):
+        return ChainStep(tuple(pos), "pancam", "p", "track", None, None, None, None, None, None, None, None, None,
+                         True)
+
+    steps = [st((1, 0)), st((1, 1)), st((1, 1)), st((1, 2)), st((1, 3))]  # a track and a handoff at one stop
+    assert [reference_drives(steps, i) for i in range(5)] == [0, 1, 1, 2, 3]
+    assert reference_drives(steps, None) is None and reference_drives(steps, 5) is None
+
+
 def test_chain_params_refuse_an_unknown_answer():
     with pytest.raises(ValueError, match="ChainParams.answer"):
         ChainParams(answer="scip").check()
+    for bad in (-1, 1.5, True):
+        with pytest.raises(ValueError, match="closure_go_max_drives"):
+            ChainParams(closure_go_max_drives=bad).check()
 
 
 @pytest.mark.parametrize("kw, match", [
