@@ -78,13 +78,10 @@ class CampaignStore:
 
     def write(self, result: DownlinkResult) -> Path:
         """The records file, all or nothing (temporary file, then rename)."""
-        from ..io.atomic import atomic_write_text
+        from ..io.atomic import write_output_text
 
         path = self.records_path(result.job)
-        try:
-            atomic_write_text(path, result.to_jsonl())
-        except OSError as e:  # a full disk, a folder in the way: not a bug (exit 3), and named by the records file
-            raise InputError(str(path), "-o/--out", f"cannot write the records: {e.strerror or e}") from None
+        write_output_text(path, result.to_jsonl(), "-o/--out")  # a full disk, a folder in the way: exit 2, named
         return path
 
     def read(self, job_id: str) -> Optional[DownlinkResult]:
@@ -108,12 +105,10 @@ class CampaignStore:
         return doc
 
     def save_manifest(self, doc: dict) -> None:
-        from ..io.atomic import atomic_write_text
+        from ..io.atomic import write_output_text
 
-        try:
-            atomic_write_text(self.manifest_path, json.dumps(doc, indent=1, sort_keys=True, default=json_default) + "\n")
-        except OSError as e:
-            raise InputError(str(self.manifest_path), "-o/--out", f"cannot write the manifest: {e.strerror or e}") from None
+        write_output_text(self.manifest_path, json.dumps(doc, indent=1, sort_keys=True, default=json_default) + "\n",
+                          "-o/--out")
 
 
 def manifest_entry(job: DownlinkJob, key: str, status: str, result: Optional[DownlinkResult] = None) -> dict:

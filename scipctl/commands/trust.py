@@ -50,9 +50,10 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     srcs = distinct_sources(srcs)  # a downlink named twice would give its rows twice (weighted twice in the fit)
     for s in srcs:  # -o SRC (or its .sim.json) replaced the downlink with the table (exit 0)
         check_not_input(out, s, products_root=products_root)
-        if out.resolve() == _sim_record_path(Path(s)).resolve():
-            raise InputError(str(out), "-o", f"would overwrite the input {_sim_record_path(Path(s))} (the simulator's "
-                             "record of a downlink); give a file outside the inputs")
+        sim = _sim_record_path(Path(s))
+        if out.resolve() == sim.resolve():
+            raise InputError(str(out), "-o", f"would overwrite the input {sim} (the simulator's record of a downlink); "
+                             "give a file outside the inputs")
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
     rows = []
     con = stderr_console()
