@@ -25,6 +25,12 @@ FORMAT_VERSION = "1"
 SAME_POINTING_RAD = 1e-3
 
 
+def same_pointing(a, b) -> bool:
+    """Two products' mast angles (``ImageProduct.mast``, not None) are one pointing: each joint within
+    :data:`SAME_POINTING_RAD`."""
+    return abs(a.pan_rad - b.pan_rad) <= SAME_POINTING_RAD and abs(a.tilt_rad - b.tilt_rad) <= SAME_POINTING_RAD
+
+
 @dataclass(frozen=True)
 class MastAngles:
     pan_rad: float
@@ -164,9 +170,7 @@ class Downlink:
             im
             for im in self.images
             if im.camera == left.camera and im.eye == "right" and im.position == left.position
-            and (left.mast is None or im.mast is None
-                 or (abs(im.mast.pan_rad - left.mast.pan_rad) <= SAME_POINTING_RAD
-                     and abs(im.mast.tilt_rad - left.mast.tilt_rad) <= SAME_POINTING_RAD))
+            and (left.mast is None or im.mast is None or same_pointing(im.mast, left.mast))
         ]
         if not cands:
             return None

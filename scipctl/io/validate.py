@@ -13,12 +13,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from ..model import SAME_POINTING_RAD, Downlink, ImageProduct, InputError
+from ..model import Downlink, ImageProduct, InputError, same_pointing
 from .images import png_size
 
 POSE_TOL_M = 1e-6  # products at one (site, drive) must agree on the pose to this (metres) ...
 POSE_TOL_RAD = 1e-6  # ... and this (radians)
-MAST_TOL_RAD = SAME_POINTING_RAD  # mast angles this close count as the same pointing (model.Downlink.stereo_pair)
 
 
 def _check_size(im: ImageProduct) -> None:
@@ -50,7 +49,7 @@ def _rotation_angle(Ra: np.ndarray, Rb: np.ndarray) -> float:
 def _same_pointing(a: ImageProduct, b: ImageProduct) -> bool:
     if a.mast is None or b.mast is None:
         return a.mast is None and b.mast is None
-    return abs(a.mast.pan_rad - b.mast.pan_rad) <= MAST_TOL_RAD and abs(a.mast.tilt_rad - b.mast.tilt_rad) <= MAST_TOL_RAD
+    return same_pointing(a.mast, b.mast)  # model.SAME_POINTING_RAD, as Downlink.stereo_pair pairs the eyes
 
 
 def validate_downlink(dl: Downlink, check_pixels: bool = True) -> None:
