@@ -91,9 +91,16 @@ class ChainParams:
     # within 4 px, its median better on one population and worse on the other), for a dense stereo pair per step
     # (0.15-0.20 CPU s each); the closure check never uses it (it confirmed more wrong closures)
     relief_max_parallax_px: Optional[float] = None
+    # (also the bound within which template_surface keeps the plane: the same stereo, the same error)
     relief_disparity_error_px: float = 0.45
     # ... unless fewer than this part of the template is kept (then every pixel counts)
     relief_min_kept: float = 0.25
+    # the tracking steps' NCC templates drawn through the surface the reference image's dense stereo measured,
+    # where it stands off the target's plane by more than relief_disparity_error_px (core/surface_raycast.py,
+    # plane_warp.render_through_surface), instead of through the plane alone; the feature views, the NCC fallback,
+    # the handoffs and the closure keep the plane. False (the default): the plane (docs/stereo-and-tracking.md,
+    # "A template through the measured surface")
+    template_surface: bool = False
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
     # image's keypoints, placed in 3-D by its stereo, matched to the new image's; PnP RANSAC within vo_threshold_px,
@@ -231,6 +238,8 @@ class ChainParams:
         q = self.vo_ratio
         if not (isinstance(q, (int, float)) and not isinstance(q, bool) and 0 < q <= 1):
             raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
+        if not isinstance(self.template_surface, bool):
+            raise ValueError(f"ChainParams.template_surface: must be true or false, got {self.template_surface!r}")
         if not isinstance(self.closure_vo, bool):
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
         if not isinstance(self.vo_handoff, bool):
@@ -506,8 +515,9 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     # (a handoff here is across a drive: the block's condition) between two cameras whose pixels
                     # may differ on the ground by a factor of 3 (Mars 2020): keypoints at matched resolutions
                     vo = vo_correction(dl, prev, prod, prev_range, feats, params, prev_stereo, new_range_m=rng_new)
+                surface = prev_stereo if (params.template_surface and kind == "track") else None
                 tr, finfo = feature_track(prev, prod, X_site, planes, n_view, pred, scale, half, feats, params,
-                                          new_stereo, vo=vo)
+                                          new_stereo, vo=vo, surface=surface)
                 sig = params.texture_retry_sigma_px
                 if sig is not None and finfo.get("feature_status") != "confirmed":
                     # nothing confirmed: the two views may differ in their lighting (another sun); the same step on
@@ -515,7 +525,7 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
                     # previous image's blur covers the same ground as the new one's; otherwise both blur by sig px
                     tr2, finfo2 = feature_track(texture_view(prev, max(sig / max(scale, 1.0), 1.0)),
                                                 texture_view(prod, sig), X_site, planes, n_view, pred, scale, half,
-                                                feats, params, new_stereo)
+                                                feats, params, new_stereo, surface=surface)
                     if finfo2.get("feature_status") == "confirmed":
                         tr, finfo = tr2, dict(finfo2, texture_retry=finfo.get("feature_status"))
                     else:

@@ -13,7 +13,8 @@ from ..jsonutil import finite_or_none as _f
 from ..model import ImageProduct
 from ..core.matched_blur import blurred_crop, footprint_cov, gaussian_kernel
 from ..core.windows import filtered_crop, median_image
-from .plane_warp import plane_points_site, plane_warped_view, prev_pixels_through_plane, render_through_plane
+from .plane_warp import (plane_points_site, plane_warped_view, prev_pixels_through_plane, render_through_plane,
+                         render_through_surface)
 
 
 # ChainParams.ncc_median_find: how far (new pixels) the unfiltered NCC may move the median-filtered NCC's peak
@@ -25,7 +26,7 @@ VO_SCALE_MATCH_MIN = 1.5
 
 
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
-                  half: int, feats: dict, params, new_stereo=None, vo=None):
+                  half: int, feats: dict, params, new_stereo=None, vo=None, surface=None):
     """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
 
     For each plane normal in ``view_normals`` (site frame, planes through
@@ -52,7 +53,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     keypoints). ``vo``: a :class:`~scipctl.core.visual_odometry.CameraCorrection` of ``prod`` (whole-image visual
     odometry, :func:`vo_correction`) or None: when given, it is one more candidate after the features', its
     coarse position the target seen through it and its ``G`` the plane's homography under it, NCC-refined and
-    confirmed like the others. ``info`` records the path, the winner's inlier counts and the coarse position.
+    confirmed like the others. ``surface``: ``prev``'s
+    :class:`~scipctl.core.dense_stereo.DenseStereo` (its rover frame) or None: when given, the NCC templates are drawn
+    through the surface it measured where that stands off the plane by more than ``params.relief_disparity_error_px``
+    (:func:`~scipctl.pipeline.plane_warp.render_through_surface`; the feature views stay the plane's). ``info`` records the path, the winner's inlier counts and the coarse position.
     """
     from ..core.features import detect_features, knn_matches, locate_by_features
     from ..core.relief_mask import relief_keep
@@ -83,8 +87,12 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         yh = np.c_[xs, np.ones(len(xs))] @ Gi.T
         with np.errstate(divide="ignore", invalid="ignore"):
             ys = yh[:, :2] / yh[:, 2:3]
-        tpl = render_through_plane(prev, prod, X_site, n_site, ys.reshape(2 * half + 1, 2 * half + 1, 2),
-                                   params.render_antialias)
+        grid = ys.reshape(2 * half + 1, 2 * half + 1, 2)
+        if surface is None:
+            tpl = render_through_plane(prev, prod, X_site, n_site, grid, params.render_antialias)
+        else:
+            tpl = render_through_surface(prev, prod, X_site, n_site, surface, grid, params.relief_disparity_error_px,
+                                         params.render_antialias)
         if np.isfinite(tpl).mean() < 0.9:
             return
         keep, kept = None, None

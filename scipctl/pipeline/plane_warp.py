@@ -102,6 +102,40 @@ def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site,
     return bilinear_sample(prev.pixels_float(), uv_prev).reshape(uv.shape[:-1])
 
 
+def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_site, stereo, uv,
+                           disparity_error_px: float, antialias: bool = False) -> np.ndarray:
+    """``prev``'s image seen at ``prod``'s pixels ``uv`` (h, w, 2) through the surface ``prev``'s dense stereo
+    measured, where it stands off the plane (X_site, n_site) by more than ``disparity_error_px`` (its own pixels):
+    :func:`render_through_plane` with each ray's point from
+    :func:`~scipctl.core.surface_raycast.surface_points` (rays of ``prod``'s camera at its pose estimate, in
+    ``prev``'s rover frame; the reference rays, which set the stereo's level, are the grid's central box, a quarter of its width).
+    ``stereo``: :func:`near_dense_stereo` of ``prev`` (its models in ``prev``'s rover frame). Returns float32
+    (h, w) with NaN where ``prev`` did not see it.
+    """
+    from ..core.expected import antialiased_sample, bilinear_sample, map_jacobian
+    from ..core.surface_raycast import surface_points
+
+    uv = np.asarray(uv, float)
+    if uv.ndim != 3 or uv.shape[-1] != 2:
+        raise ValueError(f"uv: expected a grid of pixels (h, w, 2), got shape {uv.shape}")
+    h, w = uv.shape[:2]
+    flat = uv.reshape(-1, 2)
+    T_roverprev_rovernew = prev.pose.T_site_rover.inverse() @ prod.pose.T_site_rover
+    o, d = prod.camera_model.unproject(flat)
+    o_prev, d_prev = T_roverprev_rovernew.apply(o), T_roverprev_rovernew.rotate(d)
+    P_plane = prev.pose.T_site_rover.inverse().apply(plane_points_site(prod, X_site, n_site, flat))
+    t_plane = np.einsum("ij,ij->i", P_plane - o_prev, d_prev)
+    ii, jj = np.meshgrid(np.arange(h) - (h - 1) / 2, np.arange(w) - (w - 1) / 2, indexing="ij")
+    reference = (np.maximum(np.abs(ii), np.abs(jj)) <= max(1, min(h, w) // 8)).reshape(-1)
+    P = surface_points(o_prev, d_prev, t_plane, stereo, reference, disparity_error_px)
+    q = prev.camera_model.project(P).reshape(uv.shape)
+    if antialias and min(h, w) >= 3:
+        A = map_jacobian(q)
+        if A is not None:
+            return antialiased_sample(prev.pixels_float(), q, A)
+    return bilinear_sample(prev.pixels_float(), q)
+
+
 def prev_pixels_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
     """Where ``prod``'s pixels ``uv`` (N, 2) fall in ``prev`` through the plane (X_site, n_site), site frame: each
     ray (``prod``'s camera at its pose estimate) meets the plane (:func:`plane_points_site`) and the point is
