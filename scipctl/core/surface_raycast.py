@@ -9,12 +9,12 @@ measures that relief. For each ray of the new camera:
 - the stereo's disparities are first shifted by their median disagreement with the plane at ``reference`` rays
   (the template's centre: the target's own surface, whose level the point stereo set; the dense stereo is a
   coarser measurement of the same surface and may sit a fraction of a pixel off);
-- where the plane's point agrees with the measured disparity there within ``disparity_error_px`` (the stereo's
-  error bound), or the stereo measured nothing there, the plane's point is kept (the plane is the noiseless model
-  of a surface the stereo cannot tell from it);
-- elsewhere the ray is marched from ``(1 - span)`` to ``(1 + span)`` times the distance to the plane's point in
-  ``samples`` steps and the first crossing from in front of the measured surface to behind it (the surface the
-  new camera sees first) is found, linearly between the two samples; no crossing: the plane's point.
+- the ray is marched from ``(1 - span)`` to ``(1 + span)`` times the distance to the plane's point in ``samples``
+  steps and the first crossing from in front of the measured surface to behind it (the surface the new camera
+  sees first) is found, linearly between the two samples;
+- where that crossing lies within ``disparity_error_px`` (the stereo's error bound) of the plane's point, as the
+  reference camera sees them, or there is none (nothing measured, or the surface outside the span), the plane's
+  point is kept: the plane is the noiseless model of a surface the stereo cannot tell from it.
 
 Everything here is in the stereo models' frame (the previous image's rover frame).
 """
@@ -76,30 +76,27 @@ def surface_points(origins_m, directions, t_plane_m, stereo, reference, disparit
         return meas, own
 
     P_plane = o[hit] + t0[hit, None] * d[hit]
-    meas, own = disparities(P_plane)
-    gap = meas - own
+    meas, own_plane = disparities(P_plane)
+    gap = meas - own_plane
     ref_gap = gap[ref[hit] & np.isfinite(gap)]
     offset = float(np.median(ref_gap)) if len(ref_gap) else 0.0
-    gap = gap - offset
+    oo, dd, tt = o[hit], d[hit], t0[hit]
+    ts = tt[:, None] * np.linspace(1.0 - span, 1.0 + span, int(samples))[None, :]
+    P = (oo[:, None, :] + ts[..., None] * dd[:, None, :]).reshape(-1, 3)
+    m, w = disparities(P)
+    g = (m - offset - w).reshape(ts.shape)  # < 0: in front of the measured surface, >= 0: at or behind it
+    with np.errstate(invalid="ignore"):
+        cross = (g[:, :-1] < 0) & (g[:, 1:] >= 0)
+    rows = np.nonzero(cross.any(axis=1))[0]
     result = P_plane.copy()
-    off_plane = np.abs(gap) > disparity_error_px  # NaN (nothing measured): False, the plane
-    if off_plane.any():
-        oo, dd, tt = o[hit][off_plane], d[hit][off_plane], t0[hit][off_plane]
-        ts = tt[:, None] * np.linspace(1.0 - span, 1.0 + span, int(samples))[None, :]
-        P = (oo[:, None, :] + ts[..., None] * dd[:, None, :]).reshape(-1, 3)
-        m, w = disparities(P)
-        g = (m - offset - w).reshape(ts.shape)  # < 0: in front of the measured surface, >= 0: at or behind it
-        with np.errstate(invalid="ignore"):
-            cross = (g[:, :-1] < 0) & (g[:, 1:] >= 0)
-        found = cross.any(axis=1)
-        k = cross.argmax(axis=1)
-        rows = np.nonzero(found)[0]
-        if len(rows):
-            kk = k[rows]
-            g0, g1 = g[rows, kk], g[rows, kk + 1]
-            a = g0 / (g0 - g1)
-            t = ts[rows, kk] + a * (ts[rows, kk + 1] - ts[rows, kk])
-            idx = np.nonzero(off_plane)[0][rows]
-            result[idx] = oo[rows] + t[:, None] * dd[rows]
+    if len(rows):
+        k = cross.argmax(axis=1)[rows]
+        g0, g1 = g[rows, k], g[rows, k + 1]
+        t = ts[rows, k] + g0 / (g0 - g1) * (ts[rows, k + 1] - ts[rows, k])
+        P_hit = oo[rows] + t[:, None] * dd[rows]
+        # the first surface met is the plane, as far as the stereo can tell: the plane's (noiseless) point
+        _, own_hit = disparities(P_hit)
+        off_plane = ~(np.abs(own_hit - own_plane[rows]) <= disparity_error_px)
+        result[rows[off_plane]] = P_hit[off_plane]
     out[hit] = result
     return out
