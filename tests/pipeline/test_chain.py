@@ -624,6 +624,13 @@ def test_chain_params_refuse_bad_relief_settings(field, bad):
     assert ChainParams(relief_max_parallax_px=None).check()
 
 
+@pytest.mark.parametrize("bad", ["yes", 1, None])
+def test_chain_params_refuse_a_template_surface_that_is_not_a_flag(bad):
+    with pytest.raises(ValueError, match="ChainParams.template_surface"):
+        ChainParams(template_surface=bad).check()
+    assert ChainParams(template_surface=True).check()
+
+
 def test_the_relief_mask_is_an_option_that_changes_only_the_tracking_steps(dl, chains):
     """ChainParams.relief_max_parallax_px (off by default: every template pixel counts, and nothing is recorded):
     set, each feature-guided tracking step records the part of its winning template the relief mask kept
