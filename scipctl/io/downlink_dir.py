@@ -6,8 +6,9 @@ whose ``image`` is a path relative to the directory), optional ``targets``
 and ``truth: {images, targets}``. Wherever a ``camera_model`` may stand, a
 ``camera_model_file`` (JPL cmod text file) may stand instead; its path is
 relative to the YAML file that names it. YAML anchors/aliases are plain YAML.
-Besides YAML 1.1 floats, exponent-only floats such as ``1e-5`` are read as
-numbers (YAML 1.2 behaviour) rather than strings.
+Numbers and booleans are read as YAML 1.2's core schema reads them: ``1e-5``
+and ``-.5`` are numbers, ``0042`` is 42, and ``yes``/``no``/``on``/``off`` are
+strings (only ``true``/``false`` are booleans).
 """
 
 from __future__ import annotations
@@ -31,10 +32,18 @@ _Dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class _Loader(_Base):  # type: ignore[misc,valid-type]
-    """Safe YAML loader that reads numbers as YAML 1.2's core schema does (docs/downlink-format.md, "Types"):
-    every 1.2 float (``1e-5``, ``-.5``, ``+.5``, ``.5e3``) is a number, and a decimal integer with leading
-    zeros (``sol: 0042``) is decimal, not YAML 1.1 octal (34; and ``0089`` a string)."""
+    """Safe YAML loader that reads numbers and booleans as YAML 1.2's core schema does (docs/downlink-format.md,
+    "Types"): every 1.2 float (``1e-5``, ``-.5``, ``+.5``, ``.5e3``) is a number, a decimal integer with leading
+    zeros (``sol: 0042``) is decimal, not YAML 1.1 octal (34; and ``0089`` a string), and only ``true``/``false``
+    (``True``, ``TRUE``, ``False``, ``FALSE``) are booleans: ``yes``/``no``/``on``/``off`` are strings."""
 
+
+_BOOL = "tag:yaml.org,2002:bool"
+_Loader.yaml_implicit_resolvers = {  # a copy, without PyYAML's 1.1 boolean words (the class's own from here on)
+    ch: [(tag, rx) for tag, rx in resolvers if tag != _BOOL]
+    for ch, resolvers in _Base.yaml_implicit_resolvers.items()
+}
+_Loader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
 
 _DECIMAL_INT = re.compile(r"^[-+]?[0-9]+$")
 # resolvers added here come after PyYAML's own (1.1) for the same first character: they catch what 1.1 leaves a string
@@ -54,6 +63,9 @@ def _construct_int(loader, node):
 
 
 _Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+
+#: the project's one YAML loader: downlink.yaml, an external rover configuration, rules files (io/rules_file.py)
+YamlLoader = _Loader
 
 
 MAX_YAML_DEPTH = 100  # downlink.yaml nests 7 deep; libyaml's loader crashes the process at ~40000

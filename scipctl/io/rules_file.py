@@ -5,8 +5,10 @@ keys whose values have the kind the caller's spec names. Turning the values into
 (and their range checks) is ``scipctl.pipeline.rules``. Every error is an :class:`InputError` naming the file
 and the key (``section.key``): one line, CLI exit 2.
 
-Kinds: ``number`` (int or float, finite, not bool), ``number?`` (a number or null), ``int``, ``numbers``
-(a list of numbers), ``camera_numbers`` / ``camera_ints`` (a mapping camera name -> number / int).
+YAML is read as ``downlink.yaml`` is (:data:`.downlink_dir.YamlLoader`: YAML 1.2 numbers and booleans, so
+``1e-3`` is a number, ``0010`` is 10, ``off`` is a string). Kinds: ``number`` (int or float, finite, not bool),
+``number?`` (a number or null), ``int``, ``numbers`` (a list of numbers), ``camera_numbers`` / ``camera_ints``
+(a mapping camera name -> number / int).
 """
 
 from __future__ import annotations
@@ -48,13 +50,15 @@ def read_rules_file(path, spec: dict, label: str | None = None) -> RulesFileCont
     """
     import yaml
 
+    from .downlink_dir import YamlLoader  # YAML 1.2 numbers and booleans, as downlink.yaml is read
+
     name = label or str(path)
     try:
         raw = Path(path).read_bytes()
     except OSError as e:
         raise InputError(name, "rules file", f"cannot read: {e.strerror or e}") from None
     try:
-        doc = yaml.safe_load(raw.decode("utf-8"))
+        doc = yaml.load(raw.decode("utf-8"), Loader=YamlLoader)
     except (UnicodeDecodeError, yaml.YAMLError) as e:
         where = getattr(e, "problem_mark", None)
         at = f" at line {where.line + 1}" if where is not None else ""

@@ -1,5 +1,6 @@
 """Container B (downlink.yaml) as other producers may write it: YAML the contract allows but scipctl's writer never emits."""
 
+import dataclasses
 import re
 
 import pytest
@@ -53,3 +54,56 @@ def test_long_product_ids_fit_in_file_names(tmp_path):
     back = read_downlink(tmp_path / "d")
     assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
     assert [im.png for im in back.images] == [im.png for im in dl.images]
+
+
+# the words PyYAML's YAML 1.1 resolver reads as booleans when bare; YAML 1.2 (core schema) reads them as strings
+_YAML11_BOOL_WORDS = ("yes", "Yes", "YES", "no", "No", "NO", "on", "On", "ON", "off", "Off", "OFF")
+
+
+def test_yaml_1_1_boolean_words_are_strings(tmp_path):
+    """A product id ``on``, a target id ``no``, a camera ``off`` written bare in ``downlink.yaml`` are strings
+    (YAML 1.2 core schema: only true/false are booleans). PyYAML's 1.1 rules read them as True/False, so such a
+    downlink was an error (``targets[0]: id: must be a string, got boolean False``) and a camera named ``on`` in
+    the rover configuration a key True (``cameras.True: camera names must be strings``)."""
+    dl = make_small_downlink(n_positions=1)
+    words = iter(_YAML11_BOOL_WORDS)
+    renamed = {}
+    for im in dl.images[:4]:
+        renamed[im.product_id] = im.product_id = next(words)
+    for tm in dl.targets:
+        tm.marks = [dataclasses.replace(m, product_id=renamed.get(m.product_id, m.product_id)) for m in tm.marks]
+    dl.truth_images = [dataclasses.replace(t, product_id=renamed.get(t.product_id, t.product_id)) for t in dl.truth_images]
+    dl.targets[0].id, dl.targets[0].kind, dl.targets[0].description = next(words), next(words), next(words)
+    dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=dl.targets[0].id)
+    dl.mission = next(words)
+    dl.rover_config = dataclasses.replace(dl.rover_config, name=next(words), cameras=dict(dl.rover_config.cameras))
+    dl.rover_config.cameras[next(words)] = dl.rover_config.cameras["pancam"]  # a camera name as a mapping key
+    dl.images[-1].camera, dl.images[-1].mast = next(words), None  # a camera the rover configuration does not know
+    source = next(words)
+    for im in dl.images:  # one position: one pose
+        im.pose = dataclasses.replace(im.pose, source=source)
+    write_downlink(dl, tmp_path / "d", container="dir")
+    path = tmp_path / "d" / "downlink.yaml"
+    text, n = re.subn(r"'(%s)'" % "|".join(_YAML11_BOOL_WORDS), r"\1", path.read_text())  # the writer quotes them
+    assert n >= len(_YAML11_BOOL_WORDS)
+    path.write_text(text)
+    back = read_downlink(tmp_path / "d")
+    assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
+    t = back.targets[0]
+    assert [im.product_id for im in back.images[:4]] + [t.id, t.kind, t.description, back.mission, back.rover_config.name,
+            list(back.rover_config.cameras)[-1], back.images[-1].camera, back.images[-1].pose.source] == list(_YAML11_BOOL_WORDS)
+
+
+def test_yaml_1_2_booleans_stay_booleans(written):
+    """Only ``true``/``false`` (and ``True``, ``TRUE``, ``False``, ``FALSE``) are booleans: where the contract
+    wants a string, one is still an error, never a silent misreading."""
+    from scipctl.io.downlink_dir import load_yaml
+    from scipctl.model import InputError
+
+    _, path = written
+    (path.parent / "b.yaml").write_text("[true, True, TRUE, false, False, FALSE, tRUE, y, n, yes, off, null, ~]\n")
+    assert load_yaml(path.parent / "b.yaml", "b") == [True] * 3 + [False] * 3 + ["tRUE", "y", "n", "yes", "off", None, None]
+    text = path.read_text()
+    path.write_text(re.sub(r"(?m)^mission: .*$", "mission: true", text))
+    with pytest.raises(InputError, match="mission: must be a string, got boolean True"):
+        read_downlink(path.parent)

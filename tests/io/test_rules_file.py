@@ -56,3 +56,16 @@ def test_a_missing_file_is_an_input_error(tmp_path):
 
 def test_the_default_file_ships_inside_the_package():
     assert DEFAULT_RULES_PATH.is_file() and DEFAULT_RULES_PATH.parent.parent.name == "scipctl"
+
+
+def test_yaml_is_read_as_downlink_yaml_is_yaml_1_2(tmp_path):
+    """The rules file goes through the project's YAML loader (scipctl/io/downlink_dir.py), as downlink.yaml does:
+    YAML 1.2 numbers and booleans. PyYAML's 1.1 rules made ``1e-3`` a string (an error), ``n: 0010`` octal 8
+    (silently) and ``off`` the boolean False (an error quoting ``False``, not what the file says)."""
+    assert _read(tmp_path, "limits:\n  a_m: 1e-3\n  xs: [-.5, .5e1]\n  n: 0010\n").values == {
+        "limits": {"a_m": 1e-3, "xs": (-0.5, 5.0), "n": 10}}
+    for word in ("off", "on", "no", "yes"):
+        with pytest.raises(InputError, match=f"must be a finite number, got '{word}'"):
+            _read(tmp_path, f"limits:\n  a_m: {word}\n")
+    with pytest.raises(InputError, match="must be a finite number, got True"):  # true is still a boolean
+        _read(tmp_path, "limits:\n  a_m: true\n")
