@@ -28,7 +28,7 @@ YAML_NAME = "downlink.yaml"
 IMAGES_DIR = "images"
 
 _Base = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
-_Dumper = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
+_DumperBase = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class _Loader(_Base):  # type: ignore[misc,valid-type]
@@ -106,7 +106,33 @@ def load_yaml(path: Path, label: str):
         raise InputError(label, "yaml", f"malformed YAML: {str(e)[:120]}") from None
 
 
+_STR = "tag:yaml.org,2002:str"
+
+
+class _Resolver12(yaml.resolver.BaseResolver):
+    """:data:`YamlLoader`'s implicit resolvers alone: the tag scipctl's reader gives a plain (unquoted) scalar."""
+
+    yaml_implicit_resolvers = _Loader.yaml_implicit_resolvers
+
+
+_READ_12 = _Resolver12()
+
+
+class _Dumper(_DumperBase):  # type: ignore[misc,valid-type]
+    """PyYAML's safe dumper, except that a scalar is written plain only if YAML 1.1 readers (PyYAML's own resolvers,
+    e.g. ``yaml.safe_load``) and :data:`YamlLoader` (YAML 1.2) give it the same type; otherwise the emitter quotes
+    it, as it quotes the string ``'yes'``. PyYAML's dumper asks only its 1.1 resolvers, so it left the strings
+    ``1e3``, ``0089``, ``-.5``, ``+.5``, ``.5e3`` bare, which YamlLoader reads as numbers."""
+
+    def resolve(self, kind, value, implicit):
+        tag = super().resolve(kind, value, implicit)
+        if kind is yaml.ScalarNode and implicit[0] and _READ_12.resolve(kind, value, implicit) != tag:
+            return "tag:scipctl:read-differently"  # no node has this tag: never plain
+        return tag
+
+
 def dump_yaml(obj) -> str:
+    """YAML text that :data:`YamlLoader` and YAML 1.1 readers both read back as ``obj``."""
     return yaml.dump(obj, Dumper=_Dumper, sort_keys=False, default_flow_style=None, width=4096, allow_unicode=True)
 
 

@@ -107,3 +107,47 @@ def test_yaml_1_2_booleans_stay_booleans(written):
     path.write_text(re.sub(r"(?m)^mission: .*$", "mission: true", text))
     with pytest.raises(InputError, match="mission: must be a string, got boolean True"):
         read_downlink(path.parent)
+
+
+# strings a plain (unquoted) scalar would not give back: YAML 1.2 numbers PyYAML's 1.1 rules leave strings (so its
+# dumper left them bare), 1.1 booleans/nulls/numbers/dates/sexagesimals, special floats; and words that stay bare
+_TRICKY_STRINGS = ("1e3", "0089", "-.5", "+.5", ".5e3", "0042", "1E-5", "+12", "-0", "yes", "No", "on", "off", "true",
+                   "FALSE", "null", "~", "1_000", "0x1F", "0o17", "0b101", ".inf", "-.inf", ".nan", "12:30",
+                   "2001-12-14", "2001-12-14 21:59:43.10", "=", "<<", "navcam_left", "rock 1", "e3", "1e", "1.2.3")
+
+
+@pytest.mark.parametrize("word", _TRICKY_STRINGS)
+def test_every_string_written_reads_back_a_string(tmp_path, word):
+    """Whatever a string field holds, the folder scipctl writes reads back equal, with scipctl's YAML 1.2 loader and
+    with a YAML 1.1 reader (``yaml.safe_load``). The writer (PyYAML's 1.1 dumper) left ``1e3``, ``0089``, ``-.5``,
+    ``+.5``, ``.5e3`` bare, which YAML 1.2 reads as numbers: a product id ``1e3`` written and read back gave
+    ``images[0]: product_id: must be a string, got float 1000.0``."""
+    import yaml
+
+    from scipctl.io.downlink_dir import load_yaml
+
+    dl = make_small_downlink(n_positions=1)
+    old = dl.images[0].product_id
+    dl.images[0].product_id = word
+    for tm in dl.targets:
+        tm.marks = [dataclasses.replace(m, product_id=word if m.product_id == old else m.product_id) for m in tm.marks]
+    dl.truth_images = [dataclasses.replace(t, product_id=word if t.product_id == old else t.product_id)
+                       for t in dl.truth_images]
+    dl.targets[0].id = dl.targets[0].kind = dl.targets[0].description = word
+    dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=word)
+    dl.mission = word
+    dl.rover_config = dataclasses.replace(dl.rover_config, name=word, cameras=dict(dl.rover_config.cameras))
+    dl.rover_config.cameras[word] = dl.rover_config.cameras["hazcam"]  # a camera name as a mapping key
+    dl.images[-1].camera, dl.images[-1].mast = word, None
+    for im in dl.images:  # one position: one pose
+        im.pose = dataclasses.replace(im.pose, source=word)
+    write_downlink(dl, tmp_path / "d", container="dir")
+    path = tmp_path / "d" / "downlink.yaml"
+    back = read_downlink(tmp_path / "d")
+    assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
+    doc11, doc12 = yaml.safe_load(path.read_text()), load_yaml(path, "d")
+    assert doc11 == doc12  # YAML 1.1 and scipctl's YAML 1.2 read the whole file alike
+    assert [doc11["mission"], doc11["rover_config"]["name"], list(doc11["rover_config"]["cameras"])[-1],
+            doc11["images"][0]["product_id"], doc11["images"][-1]["camera"], doc11["images"][0]["pose"]["source"],
+            doc11["targets"][0]["id"], doc11["targets"][0]["kind"], doc11["targets"][0]["description"],
+            doc11["truth"]["images"][0]["product_id"], doc11["truth"]["targets"][0]["id"]] == [word] * 11
