@@ -71,7 +71,7 @@ YamlLoader = _Loader
 MAX_YAML_DEPTH = 100  # downlink.yaml nests 7 deep; libyaml's loader crashes the process at ~40000
 
 
-def _check_depth(text: str, label: str) -> None:
+def _check_depth(text: str, label: str, field: str = "yaml") -> None:
     """InputError if collections nest more than :data:`MAX_YAML_DEPTH` deep (checked on the parser's events,
     which need no recursion, before the recursive loader sees the text)."""
     depth = 0
@@ -80,7 +80,7 @@ def _check_depth(text: str, label: str) -> None:
             depth += 1
             if depth > MAX_YAML_DEPTH:
                 mark = ev.start_mark
-                raise InputError(label, "yaml", f"collections nested more than {MAX_YAML_DEPTH} deep "
+                raise InputError(label, field, f"collections nested more than {MAX_YAML_DEPTH} deep "
                                                 f"at line {mark.line + 1}, column {mark.column + 1}")
         elif isinstance(ev, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
             depth -= 1
@@ -94,16 +94,23 @@ def load_yaml(path: Path, label: str):
         raise InputError(label, "file", f"no such file: {path}") from None
     except (OSError, ValueError) as e:  # ValueError: not UTF-8, or a NUL in the path
         raise InputError(label, "file", f"cannot read {path}: {getattr(e, 'strerror', None) or e}") from None
+    return parse_yaml(text, label)
+
+
+def parse_yaml(text: str, label: str, field: str = "yaml"):
+    """``text`` read with :data:`YamlLoader`: every YAML file scipctl reads (downlink.yaml, an external rover
+    configuration, rules files) goes through here. :class:`InputError` ``(label, field, ...)`` for malformed YAML,
+    collections nested more than :data:`MAX_YAML_DEPTH` deep, or a scalar Python cannot build."""
     try:
-        _check_depth(text, label)
+        _check_depth(text, label, field)
         return yaml.load(text, Loader=_Loader)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
-        raise InputError(label, "yaml", f"malformed YAML{where}: {problem}") from None
+        raise InputError(label, field, f"malformed YAML{where}: {problem}") from None
     except (ValueError, RecursionError) as e:  # a scalar the constructors refuse: 2001-13-01, a 5000-digit integer
-        raise InputError(label, "yaml", f"malformed YAML: {str(e)[:120]}") from None
+        raise InputError(label, field, f"malformed YAML: {str(e)[:120]}") from None
 
 
 _STR = "tag:yaml.org,2002:str"

@@ -5,8 +5,9 @@ keys whose values have the kind the caller's spec names. Turning the values into
 (and their range checks) is ``scipctl.pipeline.rules``. Every error is an :class:`InputError` naming the file
 and the key (``section.key``): one line, CLI exit 2.
 
-YAML is read as ``downlink.yaml`` is (:data:`.downlink_dir.YamlLoader`: YAML 1.2 numbers and booleans, so
-``1e-3`` is a number, ``0010`` is 10, ``off`` is a string). Kinds: ``number`` (int or float, finite, not bool),
+YAML is read as ``downlink.yaml`` is (:func:`.downlink_dir.parse_yaml`: YAML 1.2 numbers and booleans, so
+``1e-3`` is a number, ``0010`` is 10, ``off`` is a string; the same depth limit, and a value Python cannot build,
+``2001-13-01`` or a 5000-digit integer, is an error naming the file). Kinds: ``number`` (int or float, finite, not bool),
 ``number?`` (a number or null), ``int``, ``numbers`` (a list of numbers), ``camera_numbers`` / ``camera_ints``
 (a mapping camera name -> number / int).
 """
@@ -48,9 +49,7 @@ def read_rules_file(path, spec: dict, label: str | None = None) -> RulesFileCont
     A top-level ``version: 1`` is allowed (and no other version). :class:`InputError` naming the file and the
     key for an unreadable file, bad YAML, an unknown section or key, or a value of the wrong kind.
     """
-    import yaml
-
-    from .downlink_dir import YamlLoader  # YAML 1.2 numbers and booleans, as downlink.yaml is read
+    from .downlink_dir import parse_yaml  # YamlLoader, depth limit and errors, as downlink.yaml is read
 
     name = label or str(path)
     try:
@@ -58,11 +57,10 @@ def read_rules_file(path, spec: dict, label: str | None = None) -> RulesFileCont
     except OSError as e:
         raise InputError(name, "rules file", f"cannot read: {e.strerror or e}") from None
     try:
-        doc = yaml.load(raw.decode("utf-8"), Loader=YamlLoader)
-    except (UnicodeDecodeError, yaml.YAMLError) as e:
-        where = getattr(e, "problem_mark", None)
-        at = f" at line {where.line + 1}" if where is not None else ""
-        raise InputError(name, "rules file", f"not valid YAML{at}: {getattr(e, 'problem', None) or e}") from None
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise InputError(name, "rules file", f"not UTF-8 text: {e}") from None
+    doc = parse_yaml(text, name, "rules file")
     if doc is None:
         doc = {}
     if not isinstance(doc, dict):

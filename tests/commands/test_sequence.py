@@ -203,6 +203,17 @@ def test_a_bad_rules_file_is_one_line_and_exit_2(tmp_path):
     assert r.exit_code == 2 and r.stderr.count("\n") == 1 and "--min-p-success" in r.stderr
 
 
+@pytest.mark.parametrize("value", ["2001-13-01", "9" * 5000, "[" * 5000 + "]" * 5000],
+                         ids=["month-13", "5000-digit-integer", "5000-deep-list"])
+def test_a_rules_value_python_cannot_build_is_one_line_and_exit_2(tmp_path, value):
+    """``max_drive_m: 2001-13-01`` was ``internal error (ValueError): month must be in 1..12``, exit 3."""
+    rules = tmp_path / "bad.yaml"
+    rules.write_text(f"flight_rules:\n  max_drive_m: {value}\n")
+    r = runner.invoke(app, ["sequence", "whatever.mcap", "--target", "t1", "--rules", str(rules)])
+    assert r.exit_code == 2 and r.stderr.count("\n") == 1 and str(rules) in r.stderr, r.stderr[-300:]
+    assert "internal error" not in r.stderr
+
+
 def test_rules_not_given_are_chosen_from_the_downlinks_rover_and_a_builtin_by_name(tmp_path, slab_dir):
     from scipctl.io.provenance import sha256_file
     from scipctl.io.rules_file import BUILTIN_RULES

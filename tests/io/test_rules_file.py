@@ -69,3 +69,33 @@ def test_yaml_is_read_as_downlink_yaml_is_yaml_1_2(tmp_path):
             _read(tmp_path, f"limits:\n  a_m: {word}\n")
     with pytest.raises(InputError, match="must be a finite number, got True"):  # true is still a boolean
         _read(tmp_path, "limits:\n  a_m: true\n")
+
+
+@pytest.mark.parametrize("value", ["2001-13-01", "9" * 5000, "[" * 5000 + "]" * 5000],
+                         ids=["month-13", "5000-digit-integer", "5000-deep-list"])
+def test_yaml_python_cannot_build_is_an_input_error(tmp_path, value):
+    """A value PyYAML parses but Python cannot build, or nesting the recursive loader cannot follow, is an error
+    naming the file, as in downlink.yaml (one loader, one rule: downlink_dir.parse_yaml). Only YAMLError was caught,
+    so ``max_drive_m: 2001-13-01`` escaped as ``internal error (ValueError): month must be in 1..12`` (exit 3), a
+    5000-digit integer as ValueError and a 5000-deep list as RecursionError."""
+    with pytest.raises(InputError) as e:
+        _read(tmp_path, f"limits:\n  a_m: {value}\n")
+    assert e.value.product == str(tmp_path / "r.yaml") and "\n" not in str(e.value)
+    if value.startswith("["):  # refused before the loader recursed (as downlink.yaml: libyaml crashed at ~40000)
+        assert e.value.field == "rules file" and "nested more than 100 deep" in e.value.message
+
+
+def test_yaml_nested_deep_enough_to_crash_libyaml(tmp_path):
+    """100000 open brackets in a rules file were a segmentation fault (``scipctl sequence --rules``: exit 139), so
+    this runs in a child process."""
+    import subprocess
+    import sys
+
+    (tmp_path / "r.yaml").write_text("limits:\n  a_m: " + "[" * 100000)
+    code = ("import sys; from scipctl.io.rules_file import read_rules_file; from scipctl.errors import InputError\n"
+            "try:\n    read_rules_file(sys.argv[1], {'limits': {'a_m': 'number'}})\nexcept InputError as e:\n"
+            "    print(e)")
+    r = subprocess.run([sys.executable, "-c", code, str(tmp_path / "r.yaml")], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 0, r.stderr[-500:]
+    assert r.stdout == f"{tmp_path / 'r.yaml'}: rules file: collections nested more than 100 deep at line 2, column 106\n"
