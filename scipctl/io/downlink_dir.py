@@ -8,7 +8,7 @@ and ``truth: {images, targets}``. Wherever a ``camera_model`` may stand, a
 relative to the YAML file that names it. YAML anchors/aliases are plain YAML.
 Numbers and booleans are read as YAML 1.2's core schema reads them: ``1e-5``
 and ``-.5`` are numbers, ``0042`` is 42, and ``yes``/``no``/``on``/``off`` are
-strings (only ``true``/``false`` are booleans).
+strings (only ``true``/``false`` are booleans); dates (``2001-12-14``) are strings.
 """
 
 from __future__ import annotations
@@ -34,13 +34,16 @@ _DumperBase = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 class _Loader(_Base):  # type: ignore[misc,valid-type]
     """Safe YAML loader that reads numbers and booleans as YAML 1.2's core schema does (docs/downlink-format.md,
     "Types"): every 1.2 float (``1e-5``, ``-.5``, ``+.5``, ``.5e3``) is a number, a decimal integer with leading
-    zeros (``sol: 0042``) is decimal, not YAML 1.1 octal (34; and ``0089`` a string), and only ``true``/``false``
-    (``True``, ``TRUE``, ``False``, ``FALSE``) are booleans: ``yes``/``no``/``on``/``off`` are strings."""
+    zeros (``sol: 0042``) is decimal, not YAML 1.1 octal (34; and ``0089`` a string), only ``true``/``false``
+    (``True``, ``TRUE``, ``False``, ``FALSE``) are booleans: ``yes``/``no``/``on``/``off`` are strings, and a date
+    (``2001-12-14``) is a string, not YAML 1.1's timestamp."""
 
 
 _BOOL = "tag:yaml.org,2002:bool"
-_Loader.yaml_implicit_resolvers = {  # a copy, without PyYAML's 1.1 boolean words (the class's own from here on)
-    ch: [(tag, rx) for tag, rx in resolvers if tag != _BOOL]
+_TIMESTAMP = "tag:yaml.org,2002:timestamp"  # YAML 1.2's core schema has none, and the contract no date field
+# a copy (the class's own from here on) without PyYAML's 1.1 boolean words and dates
+_Loader.yaml_implicit_resolvers = {
+    ch: [(tag, rx) for tag, rx in resolvers if tag not in (_BOOL, _TIMESTAMP)]
     for ch, resolvers in _Base.yaml_implicit_resolvers.items()
 }
 _Loader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
@@ -109,7 +112,7 @@ def parse_yaml(text: str, label: str, field: str = "yaml"):
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
         problem = getattr(e, "problem", None) or str(e).splitlines()[0]
         raise InputError(label, field, f"malformed YAML{where}: {problem}") from None
-    except (ValueError, RecursionError) as e:  # a scalar the constructors refuse: 2001-13-01, a 5000-digit integer
+    except (ValueError, RecursionError) as e:  # a scalar the constructors refuse: a 5000-digit integer
         raise InputError(label, field, f"malformed YAML: {str(e)[:120]}") from None
 
 

@@ -151,3 +151,36 @@ def test_every_string_written_reads_back_a_string(tmp_path, word):
             doc11["images"][0]["product_id"], doc11["images"][-1]["camera"], doc11["images"][0]["pose"]["source"],
             doc11["targets"][0]["id"], doc11["targets"][0]["kind"], doc11["targets"][0]["description"],
             doc11["truth"]["images"][0]["product_id"], doc11["truth"]["targets"][0]["id"]] == [word] * 11
+
+
+_DATES = ("2001-12-14", "2001-12-14t21:59:43.10-05:00", "2001-12-14 21:59:43.10", "2002-12-14", "2003-1-2",
+          "2004-02-29 1:02:03", "2005-06-07T08:09:10Z")
+
+
+def test_yaml_dates_are_strings(tmp_path):
+    """YAML 1.2's core schema has no timestamp type and the contract no date field (``time_s`` is seconds, a
+    float): a product id, target id, description or mission written as a bare date is that string. PyYAML's 1.1
+    resolver made it a date, and the downlink an error: ``images[0]: product_id: must be a string, got date
+    datetime.date(2001, 12, 14)``; a date Python cannot build (``2001-13-01``) was malformed YAML."""
+    from scipctl.io.downlink_dir import load_yaml
+
+    dl = make_small_downlink(n_positions=1)
+    words = iter(_DATES)
+    renamed = {}
+    for im in dl.images[:2]:
+        renamed[im.product_id] = im.product_id = next(words)
+    for tm in dl.targets:
+        tm.marks = [dataclasses.replace(m, product_id=renamed.get(m.product_id, m.product_id)) for m in tm.marks]
+    dl.truth_images = [dataclasses.replace(t, product_id=renamed.get(t.product_id, t.product_id)) for t in dl.truth_images]
+    dl.targets[0].id, dl.targets[0].kind, dl.targets[0].description = next(words), next(words), next(words)
+    dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=dl.targets[0].id)
+    dl.mission = next(words)
+    write_downlink(dl, tmp_path / "d", container="dir")
+    path = tmp_path / "d" / "downlink.yaml"
+    text, n = re.subn(r"'(%s)'" % "|".join(map(re.escape, _DATES)), r"\1", path.read_text())  # the writer quotes them
+    assert n >= len(_DATES)
+    path.write_text(text)
+    back = read_downlink(tmp_path / "d")
+    assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
+    (tmp_path / "b.yaml").write_text("[2001-13-01, 2001-12-14, {2002-12-14: 2001-12-14 21:59:43.10}]\n")
+    assert load_yaml(tmp_path / "b.yaml", "b") == ["2001-13-01", "2001-12-14", {"2002-12-14": "2001-12-14 21:59:43.10"}]

@@ -77,7 +77,8 @@ def test_yaml_python_cannot_build_is_an_input_error(tmp_path, value):
     """A value PyYAML parses but Python cannot build, or nesting the recursive loader cannot follow, is an error
     naming the file, as in downlink.yaml (one loader, one rule: downlink_dir.parse_yaml). Only YAMLError was caught,
     so ``max_drive_m: 2001-13-01`` escaped as ``internal error (ValueError): month must be in 1..12`` (exit 3), a
-    5000-digit integer as ValueError and a 5000-deep list as RecursionError."""
+    5000-digit integer as ValueError and a 5000-deep list as RecursionError. (Dates are strings now: 2001-13-01
+    is a value of the wrong kind.)"""
     with pytest.raises(InputError) as e:
         _read(tmp_path, f"limits:\n  a_m: {value}\n")
     assert e.value.product == str(tmp_path / "r.yaml") and "\n" not in str(e.value)

@@ -542,9 +542,10 @@ def test_dir_malformed_yaml(dir_dl):
     expect_error(root, str(root / "downlink.yaml"), "yaml", "malformed YAML at line")
 
 
-@pytest.mark.parametrize("value", ["2001-13-01", "9" * 5000], ids=["month-13", "5000-digit-integer"])
+@pytest.mark.parametrize("value", ["9" * 5000], ids=["5000-digit-integer"])
 def test_dir_yaml_scalar_python_cannot_construct(dir_dl, value):
-    """A date or integer PyYAML's constructors refuse is malformed YAML, not a ValueError."""
+    """An integer PyYAML's constructors refuse is malformed YAML, not a ValueError. (A date Python cannot build,
+    ``2001-13-01``, was one too; dates are strings now: test_downlink_dir.py::test_yaml_dates_are_strings.)"""
     root, doc = dir_dl
     text = (root / "downlink.yaml").read_text()
     (root / "downlink.yaml").write_text(text.replace("sol: 42", f"sol: {value}", 1))
