@@ -659,6 +659,39 @@ def test_the_relief_mask_is_an_option_that_changes_only_the_tracking_steps(dl, c
     assert seen >= 3
 
 
+def test_the_surface_template_is_an_option_of_the_tracking_steps_only(dl, chains, monkeypatch):
+    """ChainParams.template_surface (off by default): set, the feature step of each tracking step (same camera,
+    next stop) gets its reference image's dense stereo to draw the NCC templates through (plane_warp
+    .render_through_surface); a handoff across a drive never does; the designation is untouched and the same steps
+    are found."""
+    if _stem(dl) != "paper-s1-straight":
+        pytest.skip("one sol is enough (a whole chain, ~10 s)")
+    import scipctl.pipeline.chain as chain_module
+
+    assert ChainParams().template_surface is False
+    real = chain_module.feature_track
+    calls = []
+
+    def spy(prev, prod, *args, surface=None, **kw):
+        calls.append((prev.camera, prod.camera, prev.position != prod.position, surface is not None))
+        return real(prev, prod, *args, surface=surface, **kw)
+
+    monkeypatch.setattr(chain_module, "feature_track", spy)
+    base = chains["t1"]
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target("t1").mark_in(start.product_id)
+    steps = run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(answer="handoff",
+                                                                                  template_surface=True))
+    assert [(s.camera, s.kind) for s in steps] == [(s.camera, s.kind) for s in base]
+    assert steps[0].tracked_uv == base[0].tracked_uv
+    tracks = [c for c in calls if c[0] == c[1]]
+    assert len(tracks) >= 3 and all(c[2] and c[3] for c in tracks)  # every tracking step, with its stereo
+    assert all(not c[3] for c in calls if c[0] != c[1])  # a handoff: the plane
+    calls.clear()
+    run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(answer="handoff"))
+    assert calls and not any(c[3] for c in calls)  # off: never
+
+
 def test_the_texture_retry_replaces_only_a_step_that_confirmed_nothing(monkeypatch):
     """ChainParams.texture_retry_sigma_px: where the feature step confirms nothing, it runs once more on both images'
     texture_view (the previous one filtered over the same ground: sigma / scale), and a confirmed retry is the
