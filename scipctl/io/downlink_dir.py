@@ -6,9 +6,11 @@ whose ``image`` is a path relative to the directory), optional ``targets``
 and ``truth: {images, targets}``. Wherever a ``camera_model`` may stand, a
 ``camera_model_file`` (JPL cmod text file) may stand instead; its path is
 relative to the YAML file that names it. YAML anchors/aliases are plain YAML.
-Numbers and booleans are read as YAML 1.2's core schema reads them: ``1e-5``
-and ``-.5`` are numbers, ``0042`` is 42, and ``yes``/``no``/``on``/``off`` are
-strings (only ``true``/``false`` are booleans); dates (``2001-12-14``) are strings.
+Plain scalars are read as YAML 1.2's core schema reads them (:data:`YamlLoader`):
+``1e-5`` and ``-.5`` are numbers, ``0042`` is 42, ``0o17`` is 15, and
+``yes``/``no``/``on``/``off`` are strings (only ``true``/``false`` are booleans),
+as are dates (``2001-12-14``), ``12:30``, ``1_000`` and ``0b101``. The one YAML 1.1
+reading kept on purpose is the merge key ``<<``.
 """
 
 from __future__ import annotations
@@ -32,40 +34,52 @@ _DumperBase = getattr(yaml, "CSafeDumper", yaml.SafeDumper)
 
 
 class _Loader(_Base):  # type: ignore[misc,valid-type]
-    """Safe YAML loader that reads numbers and booleans as YAML 1.2's core schema does (docs/downlink-format.md,
-    "Types"): every 1.2 float (``1e-5``, ``-.5``, ``+.5``, ``.5e3``) is a number, a decimal integer with leading
-    zeros (``sol: 0042``) is decimal, not YAML 1.1 octal (34; and ``0089`` a string), only ``true``/``false``
-    (``True``, ``TRUE``, ``False``, ``FALSE``) are booleans: ``yes``/``no``/``on``/``off`` are strings, and a date
-    (``2001-12-14``) is a string, not YAML 1.1's timestamp."""
+    """Safe YAML loader that resolves plain scalars exactly as YAML 1.2's core schema does (docs/downlink-format.md,
+    "Types are strict"; https://yaml.org/spec/1.2.2/#1032-tag-resolution), not by PyYAML's YAML 1.1 rules:
+    null ``null``/``Null``/``NULL``/``~``/empty; booleans only ``true``/``false`` (``True``, ``TRUE``, ``False``,
+    ``FALSE``: ``yes``/``no``/``on``/``off`` are strings); integers ``[-+]?[0-9]+`` (decimal, leading zeros too:
+    ``sol: 0042`` is 42, not 1.1 octal 34), ``0o17`` (15) and ``0x1F`` (31); floats such as ``1e-5``, ``-.5``,
+    ``+.5``, ``.5e3``, ``1.``, ``.inf``, ``.nan``. Everything else is a string: dates (``2001-12-14``), base-60
+    numbers (``12:30``, which 1.1 reads as 750), ``1_000``, ``0b101``, ``-0x1F``, ``=``. The one 1.1 reading kept
+    on purpose is the merge key ``<<`` (``<<: *defaults`` merges an anchored mapping): a common idiom with anchors,
+    which YAML 1.2 readers such as ruamel.yaml and Go's yaml.v3 keep too; without it such a file would have a key
+    named ``<<`` (an unknown-key error). A bare ``<<`` is no string: write it quoted."""
 
 
+# Tag resolution, first match wins (null, bool, int, float; https://yaml.org/spec/1.2.2/#1032-tag-resolution). The
+# table replaces PyYAML's 1.1 one (whose int/float also read 12:30, 1_000, 0b101, -0x1F, and not 0o17 or 1e3).
+_NULL = "tag:yaml.org,2002:null"
 _BOOL = "tag:yaml.org,2002:bool"
-_TIMESTAMP = "tag:yaml.org,2002:timestamp"  # YAML 1.2's core schema has none, and the contract no date field
-# a copy (the class's own from here on) without PyYAML's 1.1 boolean words and dates
-_Loader.yaml_implicit_resolvers = {
-    ch: [(tag, rx) for tag, rx in resolvers if tag not in (_BOOL, _TIMESTAMP)]
-    for ch, resolvers in _Base.yaml_implicit_resolvers.items()
-}
-_Loader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
-
+_INT = "tag:yaml.org,2002:int"
+_FLOAT = "tag:yaml.org,2002:float"
+_MERGE = "tag:yaml.org,2002:merge"
 _DECIMAL_INT = re.compile(r"^[-+]?[0-9]+$")
-# resolvers added here come after PyYAML's own (1.1) for the same first character: they catch what 1.1 leaves a string
-_Loader.add_implicit_resolver("tag:yaml.org,2002:int", _DECIMAL_INT, list("-+0123456789"))  # 0089
-_Loader.add_implicit_resolver(
-    "tag:yaml.org,2002:float",
-    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?[eE][-+]?[0-9]+|\.[0-9]+(?:[eE][-+]?[0-9]+)?)$"),
+_Loader.yaml_implicit_resolvers = {}  # the class's own table: none of PyYAML's 1.1 resolvers
+_Loader.add_implicit_resolver(_NULL, re.compile(r"^(?:null|Null|NULL|~|)$"), ["n", "N", "~", ""])
+_Loader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
+_Loader.add_implicit_resolver(_INT, re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$"), list("-+0123456789"))
+_Loader.add_implicit_resolver(  # after int: 12 matches both
+    _FLOAT,
+    re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"),
     list("-+.0123456789"),
 )
+_Loader.add_implicit_resolver(_MERGE, re.compile(r"^<<$"), ["<"])  # kept on purpose (class docstring)
 
 
 def _construct_int(loader, node):
     value = loader.construct_scalar(node)
     if _DECIMAL_INT.match(value):
         return int(value, 10)  # YAML 1.2: leading zeros are not octal
-    return yaml.SafeLoader.construct_yaml_int(loader, node)  # 0x1F, 1_000, 0b101, 0o17-less 1.1 forms
+    if value.startswith("0o"):
+        return int(value[2:], 8)
+    # 0x1F; other forms only through an explicit !!int tag (PyYAML's 1.1 reading: 1_000, 0b101)
+    return yaml.SafeLoader.construct_yaml_int(loader, node)
 
 
-_Loader.add_constructor("tag:yaml.org,2002:int", _construct_int)
+_Loader.add_constructor(_INT, _construct_int)
+# floats: PyYAML's constructor reads every 1.2 form (1e3, -.5, 1., .inf, .nan); ints and floats both through
+# Python's int()/float(), so a 5000-digit integer is a ValueError (malformed YAML, parse_yaml)
 
 #: the project's one YAML loader: downlink.yaml, an external rover configuration, rules files (io/rules_file.py)
 YamlLoader = _Loader
@@ -120,7 +134,8 @@ _STR = "tag:yaml.org,2002:str"
 
 
 class _Resolver12(yaml.resolver.BaseResolver):
-    """:data:`YamlLoader`'s implicit resolvers alone: the tag scipctl's reader gives a plain (unquoted) scalar."""
+    """:data:`YamlLoader`'s implicit resolvers alone (the same table, not a copy): the tag scipctl's reader gives a
+    plain (unquoted) scalar."""
 
     yaml_implicit_resolvers = _Loader.yaml_implicit_resolvers
 
@@ -132,7 +147,7 @@ class _Dumper(_DumperBase):  # type: ignore[misc,valid-type]
     """PyYAML's safe dumper, except that a scalar is written plain only if YAML 1.1 readers (PyYAML's own resolvers,
     e.g. ``yaml.safe_load``) and :data:`YamlLoader` (YAML 1.2) give it the same type; otherwise the emitter quotes
     it, as it quotes the string ``'yes'``. PyYAML's dumper asks only its 1.1 resolvers, so it left the strings
-    ``1e3``, ``0089``, ``-.5``, ``+.5``, ``.5e3`` bare, which YamlLoader reads as numbers."""
+    ``1e3``, ``0089``, ``-.5``, ``+.5``, ``.5e3`` (and ``0o17``) bare, which YamlLoader reads as numbers."""
 
     def resolve(self, kind, value, implicit):
         tag = super().resolve(kind, value, implicit)

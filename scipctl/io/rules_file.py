@@ -5,11 +5,11 @@ keys whose values have the kind the caller's spec names. Turning the values into
 (and their range checks) is ``scipctl.pipeline.rules``. Every error is an :class:`InputError` naming the file
 and the key (``section.key``): one line, CLI exit 2.
 
-YAML is read as ``downlink.yaml`` is (:func:`.downlink_dir.parse_yaml`: YAML 1.2 numbers and booleans, so
-``1e-3`` is a number, ``0010`` is 10, ``off`` and ``2001-12-14`` are strings; the same depth limit, and a value
-Python cannot build, a 5000-digit integer, is an error naming the file). Kinds: ``number`` (int or float, finite,
-not bool), ``number?`` (a number or null), ``int``, ``numbers`` (a list of numbers), ``camera_numbers`` / ``camera_ints``
-(a mapping camera name -> number / int).
+YAML is read as ``downlink.yaml`` is (:func:`.downlink_dir.parse_yaml`: YAML 1.2's core schema, so ``1e-3`` is a
+number, ``0010`` is 10, ``0o17`` 15, ``off``, ``2001-12-14``, ``12:30`` and ``1_000`` are strings; the same depth
+limit, and a value Python cannot build, a 5000-digit integer, is an error naming the file). Kinds: ``number`` (int or
+float, finite, not bool), ``number?`` (a number or null), ``int``, ``numbers`` (a list of numbers), ``camera_numbers`` /
+``camera_ints`` (a mapping camera name -> number / int).
 """
 
 from __future__ import annotations

@@ -113,7 +113,8 @@ def test_yaml_1_2_booleans_stay_booleans(written):
 # dumper left them bare), 1.1 booleans/nulls/numbers/dates/sexagesimals, special floats; and words that stay bare
 _TRICKY_STRINGS = ("1e3", "0089", "-.5", "+.5", ".5e3", "0042", "1E-5", "+12", "-0", "yes", "No", "on", "off", "true",
                    "FALSE", "null", "~", "1_000", "0x1F", "0o17", "0b101", ".inf", "-.inf", ".nan", "12:30",
-                   "2001-12-14", "2001-12-14 21:59:43.10", "=", "<<", "navcam_left", "rock 1", "e3", "1e", "1.2.3")
+                   "2001-12-14", "2001-12-14 21:59:43.10", "=", "<<", "navcam_left", "rock 1", "e3", "1e", "1.2.3",
+                   "190:20:30.15", "1_000.5", "-0x1F", "0x1_F", "1:2", "-0o17", "+0o17", "0o8", "1.", "-.nan")
 
 
 @pytest.mark.parametrize("word", _TRICKY_STRINGS)
@@ -184,3 +185,76 @@ def test_yaml_dates_are_strings(tmp_path):
     assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
     (tmp_path / "b.yaml").write_text("[2001-13-01, 2001-12-14, {2002-12-14: 2001-12-14 21:59:43.10}]\n")
     assert load_yaml(tmp_path / "b.yaml", "b") == ["2001-13-01", "2001-12-14", {"2002-12-14": "2001-12-14 21:59:43.10"}]
+
+
+# plain scalars YAML 1.1 reads as numbers and YAML 1.2's core schema as strings (sexagesimals, digit separators,
+# binary, signed hexadecimal), and PyYAML's 1.1 'value' key '='
+_YAML11_ONLY_NUMBERS = ("12:30", "190:20:30.15", "1_000", "1_000.5", "0b101", "-0x1F", "1:2", "=")
+
+
+def test_yaml_1_1_only_numbers_are_strings(tmp_path):
+    """YAML 1.2's core schema has no base-60, ``_``-separated or binary numbers: a product id, target id,
+    description or mission written bare as ``12:30`` is that string. PyYAML's 1.1 resolvers made ``12:30`` the
+    integer 750 and the downlink an error: ``images[0]: product_id: must be a string, got int 750``
+    (``190:20:30.15`` a float, ``1_000`` 1000, ``0b101`` 5; a bare ``=`` was malformed YAML)."""
+    from scipctl.io.downlink_dir import load_yaml
+
+    dl = make_small_downlink(n_positions=1)
+    words = iter(_YAML11_ONLY_NUMBERS)
+    renamed = {}
+    for im in dl.images[:3]:
+        renamed[im.product_id] = im.product_id = next(words)
+    for tm in dl.targets:
+        tm.marks = [dataclasses.replace(m, product_id=renamed.get(m.product_id, m.product_id)) for m in tm.marks]
+    dl.truth_images = [dataclasses.replace(t, product_id=renamed.get(t.product_id, t.product_id)) for t in dl.truth_images]
+    dl.targets[0].id, dl.targets[0].kind, dl.targets[0].description = next(words), next(words), next(words)
+    dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=dl.targets[0].id)
+    dl.mission = next(words)
+    dl.rover_config = dataclasses.replace(dl.rover_config, cameras=dict(dl.rover_config.cameras))
+    dl.rover_config.cameras[next(words)] = dl.rover_config.cameras["hazcam"]  # a camera name as a mapping key
+    write_downlink(dl, tmp_path / "d", container="dir")
+    path = tmp_path / "d" / "downlink.yaml"
+    text, n = re.subn(r"'(%s)'" % "|".join(map(re.escape, _YAML11_ONLY_NUMBERS)), r"\1", path.read_text())
+    assert n >= len(_YAML11_ONLY_NUMBERS)  # the writer quotes them
+    path.write_text(text)
+    back = read_downlink(tmp_path / "d")
+    assert [d for d in downlink_differences(dl, back) if ".pose.R" not in d] == []
+    assert list(back.rover_config.cameras)[-1] == "="
+
+
+def test_yaml_1_2_core_schema_numbers(tmp_path):
+    """Integers and floats exactly as YAML 1.2's core schema resolves them: ``[-+]?[0-9]+`` (decimal, leading zeros
+    too), ``0o[0-7]+`` (octal: ``0o17`` is 15, a string in YAML 1.1), ``0x[0-9a-fA-F]+``; floats
+    ``[-+]?(\\.[0-9]+|[0-9]+(\\.[0-9]*)?)([eE][-+]?[0-9]+)?``, ``[-+]?.inf``, ``.nan``. Anything else is a string."""
+    import math
+
+    from scipctl.io.downlink_dir import load_yaml
+
+    (tmp_path / "n.yaml").write_text(
+        "[0o17, 0o0, 0x1F, 0xff, +12, -12, 0042, -0042, 0089, 0, -0, 1e3, 1E-5, -.5, +.5, .5e3, 1., -1., 1.5, 0.,"
+        " 1e+3, .inf, -.Inf, +.INF,"
+        " 12:30, 190:20:30.15, 1_000, 1_000.5, 0b101, -0x1F, +0x1F, 0x1_F, -0o17, 0o8, 0o, 0x, 1__0, 1._5, -.nan, 1:2,"
+        " =, e3, 1e, ._5]\n")
+    got = load_yaml(tmp_path / "n.yaml", "n")
+    assert got[:24] == [15, 0, 31, 255, 12, -12, 42, -42, 89, 0, 0, 1000.0, 1e-5, -0.5, 0.5, 500.0, 1.0, -1.0, 1.5,
+                        0.0, 1000.0, math.inf, -math.inf, math.inf]
+    assert [type(v) for v in got[:11]] == [int] * 11 and [type(v) for v in got[11:24]] == [float] * 13
+    assert got[24:] == ["12:30", "190:20:30.15", "1_000", "1_000.5", "0b101", "-0x1F", "+0x1F", "0x1_F", "-0o17",
+                        "0o8", "0o", "0x", "1__0", "1._5", "-.nan", "1:2", "=", "e3", "1e", "._5"]
+    (tmp_path / "f.yaml").write_text("[.nan, .NaN, .NAN]\n")
+    assert all(math.isnan(v) for v in load_yaml(tmp_path / "f.yaml", "f"))
+
+
+def test_yaml_sol_as_yaml_1_2_reads_it(written):
+    """``sol: 0o17`` is the integer 15 (YAML 1.2 octal; 1.1 read a string, an error); a sexagesimal or
+    ``_``-separated sol is a string, so an error, where YAML 1.1 read ``sol: 12:30`` silently as 750."""
+    from scipctl.model import InputError
+
+    _, path = written
+    text = path.read_text()
+    path.write_text(re.sub(r"(?m)^sol: 42$", "sol: 0o17", text))
+    assert read_downlink(path.parent).sol == 15
+    for value in ("12:30", "1_000", "0b101"):
+        path.write_text(re.sub(r"(?m)^sol: 42$", f"sol: {value}", text))
+        with pytest.raises(InputError, match="sol: must be an integer, got str"):
+            read_downlink(path.parent)

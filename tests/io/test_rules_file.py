@@ -71,6 +71,16 @@ def test_yaml_is_read_as_downlink_yaml_is_yaml_1_2(tmp_path):
         _read(tmp_path, "limits:\n  a_m: true\n")
 
 
+def test_yaml_numbers_are_yaml_1_2_core_schema(tmp_path):
+    """Rules-file numbers are YAML 1.2's core schema's (the project's one loader): ``1e3`` is 1000.0, ``0o17`` 15;
+    ``12:30`` is a string, so an error, where YAML 1.1 read it silently as 750 (``1_000`` as 1000)."""
+    assert _read(tmp_path, "limits:\n  a_m: 1e3\n  n: 0o17\n  xs: [0x10, +2, .5]\n").values == {
+        "limits": {"a_m": 1000.0, "n": 15, "xs": (16, 2, 0.5)}}
+    for value in ("12:30", "1_000", "190:20:30.15", "0b101"):
+        with pytest.raises(InputError, match=f"must be a finite number, got '{value}'"):
+            _read(tmp_path, f"limits:\n  a_m: {value}\n")
+
+
 @pytest.mark.parametrize("value", ["2001-13-01", "9" * 5000, "[" * 5000 + "]" * 5000],
                          ids=["month-13", "5000-digit-integer", "5000-deep-list"])
 def test_yaml_python_cannot_build_is_an_input_error(tmp_path, value):
