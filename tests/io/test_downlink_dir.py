@@ -60,15 +60,13 @@ def test_long_product_ids_fit_in_file_names(tmp_path):
 _YAML11_BOOL_WORDS = ("yes", "Yes", "YES", "no", "No", "NO", "on", "On", "ON", "off", "Off", "OFF")
 
 
-def test_yaml_1_1_boolean_words_are_strings(tmp_path):
-    """A product id ``on``, a target id ``no``, a camera ``off`` written bare in ``downlink.yaml`` are strings
-    (YAML 1.2 core schema: only true/false are booleans). PyYAML's 1.1 rules read them as True/False, so such a
-    downlink was an error (``targets[0]: id: must be a string, got boolean False``) and a camera named ``on`` in
-    the rover configuration a key True (``cameras.True: camera names must be strings``)."""
+def _downlink_named_by(names, n_images: int):
+    """A small downlink whose first ``n_images`` product ids (and their marks and truth), first target's id, kind
+    and description, and mission are the next of ``names``; returns it and the iterator of the names left."""
     dl = make_small_downlink(n_positions=1)
-    words = iter(_YAML11_BOOL_WORDS)
+    words = iter(names)
     renamed = {}
-    for im in dl.images[:4]:
+    for im in dl.images[:n_images]:
         renamed[im.product_id] = im.product_id = next(words)
     for tm in dl.targets:
         tm.marks = [dataclasses.replace(m, product_id=renamed.get(m.product_id, m.product_id)) for m in tm.marks]
@@ -76,6 +74,15 @@ def test_yaml_1_1_boolean_words_are_strings(tmp_path):
     dl.targets[0].id, dl.targets[0].kind, dl.targets[0].description = next(words), next(words), next(words)
     dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=dl.targets[0].id)
     dl.mission = next(words)
+    return dl, words
+
+
+def test_yaml_1_1_boolean_words_are_strings(tmp_path):
+    """A product id ``on``, a target id ``no``, a camera ``off`` written bare in ``downlink.yaml`` are strings
+    (YAML 1.2 core schema: only true/false are booleans). PyYAML's 1.1 rules read them as True/False, so such a
+    downlink was an error (``targets[0]: id: must be a string, got boolean False``) and a camera named ``on`` in
+    the rover configuration a key True (``cameras.True: camera names must be strings``)."""
+    dl, words = _downlink_named_by(_YAML11_BOOL_WORDS, 4)
     dl.rover_config = dataclasses.replace(dl.rover_config, name=next(words), cameras=dict(dl.rover_config.cameras))
     dl.rover_config.cameras[next(words)] = dl.rover_config.cameras["pancam"]  # a camera name as a mapping key
     dl.images[-1].camera, dl.images[-1].mast = next(words), None  # a camera the rover configuration does not know
@@ -165,17 +172,7 @@ def test_yaml_dates_are_strings(tmp_path):
     datetime.date(2001, 12, 14)``; a date Python cannot build (``2001-13-01``) was malformed YAML."""
     from scipctl.io.downlink_dir import load_yaml
 
-    dl = make_small_downlink(n_positions=1)
-    words = iter(_DATES)
-    renamed = {}
-    for im in dl.images[:2]:
-        renamed[im.product_id] = im.product_id = next(words)
-    for tm in dl.targets:
-        tm.marks = [dataclasses.replace(m, product_id=renamed.get(m.product_id, m.product_id)) for m in tm.marks]
-    dl.truth_images = [dataclasses.replace(t, product_id=renamed.get(t.product_id, t.product_id)) for t in dl.truth_images]
-    dl.targets[0].id, dl.targets[0].kind, dl.targets[0].description = next(words), next(words), next(words)
-    dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=dl.targets[0].id)
-    dl.mission = next(words)
+    dl, words = _downlink_named_by(_DATES, 2)
     write_downlink(dl, tmp_path / "d", container="dir")
     path = tmp_path / "d" / "downlink.yaml"
     text, n = re.subn(r"'(%s)'" % "|".join(map(re.escape, _DATES)), r"\1", path.read_text())  # the writer quotes them
@@ -199,17 +196,7 @@ def test_yaml_1_1_only_numbers_are_strings(tmp_path):
     (``190:20:30.15`` a float, ``1_000`` 1000, ``0b101`` 5; a bare ``=`` was malformed YAML)."""
     from scipctl.io.downlink_dir import load_yaml
 
-    dl = make_small_downlink(n_positions=1)
-    words = iter(_YAML11_ONLY_NUMBERS)
-    renamed = {}
-    for im in dl.images[:3]:
-        renamed[im.product_id] = im.product_id = next(words)
-    for tm in dl.targets:
-        tm.marks = [dataclasses.replace(m, product_id=renamed.get(m.product_id, m.product_id)) for m in tm.marks]
-    dl.truth_images = [dataclasses.replace(t, product_id=renamed.get(t.product_id, t.product_id)) for t in dl.truth_images]
-    dl.targets[0].id, dl.targets[0].kind, dl.targets[0].description = next(words), next(words), next(words)
-    dl.truth_targets[0] = dataclasses.replace(dl.truth_targets[0], id=dl.targets[0].id)
-    dl.mission = next(words)
+    dl, words = _downlink_named_by(_YAML11_ONLY_NUMBERS, 3)
     dl.rover_config = dataclasses.replace(dl.rover_config, cameras=dict(dl.rover_config.cameras))
     dl.rover_config.cameras[next(words)] = dl.rover_config.cameras["hazcam"]  # a camera name as a mapping key
     write_downlink(dl, tmp_path / "d", container="dir")
