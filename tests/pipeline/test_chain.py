@@ -703,11 +703,13 @@ def test_the_texture_retry_replaces_only_a_step_that_confirmed_nothing(monkeypat
     real = chain_mod.feature_track
     calls = []
 
-    def stub(prev, prod, X_site, view_normals, n_site, pred_uv, scale, half, feats, params, new_stereo=None, vo=None):
+    def stub(prev, prod, X_site, view_normals, n_site, pred_uv, scale, half, feats, params, new_stereo=None, vo=None,
+             surface=None):
         calls.append((prev.product_id, prod.product_id, scale))
         if "#texture" not in prod.product_id and len(calls) == 1:  # the first step's first try: nothing confirmed
             return None, {"feature_status": "failed"}
-        tr, info = real(prev, prod, X_site, view_normals, n_site, pred_uv, scale, half, feats, params, new_stereo, vo)
+        tr, info = real(prev, prod, X_site, view_normals, n_site, pred_uv, scale, half, feats, params, new_stereo, vo,
+                        surface=surface)
         return tr, info
 
     monkeypatch.setattr(chain_mod, "feature_track", stub)
