@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-# the march along each ray: +-span of the distance to the plane's point (a rock 30 cm tall at 1 m stands well
-# inside), in this many samples (0.6 % of the range a step; the crossing is interpolated within the step)
+# the march along each ray: +-span of the distance to the plane's point (relief up to 30 cm along a ray 1 m long),
+# in this many samples (0.6 % of the range a step; the crossing is interpolated within the step)
 MARCH_SPAN = 0.3
 MARCH_SAMPLES = 96
 
