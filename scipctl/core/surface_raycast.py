@@ -63,17 +63,20 @@ def surface_points(origins_m, directions, t_plane_m, stereo, reference, disparit
     rect = stereo.rectified.left_model
     fb = stereo.focal_baseline_px_m
 
-    def disparities(P):
-        """Measured disparity at the rectified pixel of each point (P, 3) and the point's own, fB / depth."""
+    def own(P):
+        """Each point's (P, 3) own disparity, fB / depth (NaN behind the camera)."""
         with np.errstate(divide="ignore", invalid="ignore"):
             depth = (P - rect.C) @ rect.A
-            own = np.where(depth > 0, fb / depth, np.nan)
+            return np.where(depth > 0, fb / depth, np.nan)
+
+    def disparities(P):
+        """Measured disparity at the rectified pixel of each point (P, 3) and the point's own."""
         q = rect.project(P)
         meas = np.full(len(P), np.nan)
         ok = np.all(np.isfinite(q), axis=1)
         if ok.any():
             meas[ok] = stereo.disparity_at_rect_uv(q[ok])
-        return meas, own
+        return meas, own(P)
 
     P_plane = o[hit] + t0[hit, None] * d[hit]
     meas, own_plane = disparities(P_plane)
@@ -95,8 +98,7 @@ def surface_points(origins_m, directions, t_plane_m, stereo, reference, disparit
         t = ts[rows, k] + g0 / (g0 - g1) * (ts[rows, k + 1] - ts[rows, k])
         P_hit = oo[rows] + t[:, None] * dd[rows]
         # the first surface met is the plane, as far as the stereo can tell: the plane's (noiseless) point
-        _, own_hit = disparities(P_hit)
-        off_plane = ~(np.abs(own_hit - own_plane[rows]) <= disparity_error_px)
+        off_plane = ~(np.abs(own(P_hit) - own_plane[rows]) <= disparity_error_px)
         result[rows[off_plane]] = P_hit[off_plane]
     out[hit] = result
     return out

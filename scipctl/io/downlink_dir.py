@@ -130,9 +130,6 @@ def parse_yaml(text: str, label: str, field: str = "yaml"):
         raise InputError(label, field, f"malformed YAML: {str(e)[:120]}") from None
 
 
-_STR = "tag:yaml.org,2002:str"
-
-
 class _Resolver12(yaml.resolver.BaseResolver):
     """:data:`YamlLoader`'s implicit resolvers alone (the same table, not a copy): the tag scipctl's reader gives a
     plain (unquoted) scalar."""

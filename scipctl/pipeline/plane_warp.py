@@ -90,16 +90,21 @@ def render_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site,
     point-sampling it; where ``prev`` is the coarser nothing changes. Returns float32 (...) with NaN where ``prev``
     did not see it.
     """
-    from ..core.expected import antialiased_sample, bilinear_sample, map_jacobian
-
     uv = np.asarray(uv, float)
     uv_prev = prev_pixels_through_plane(prev, prod, X_site, n_site, uv.reshape(-1, 2))
-    if antialias and uv.ndim == 3 and min(uv.shape[:2]) >= 3:
-        q = uv_prev.reshape(uv.shape)
+    return _sample_prev(prev, uv_prev.reshape(uv.shape), antialias)
+
+
+def _sample_prev(prev: ImageProduct, q, antialias: bool) -> np.ndarray:
+    """``prev``'s image at its pixels ``q`` (..., 2): bilinear, or with ``antialias`` and a grid (h, w, 2), h, w >= 3,
+    blurred to the cells' footprint first (:func:`render_through_plane`). float32 (...), NaN outside."""
+    from ..core.expected import antialiased_sample, bilinear_sample, map_jacobian
+
+    if antialias and q.ndim == 3 and min(q.shape[:2]) >= 3:
         A = map_jacobian(q)
         if A is not None:
             return antialiased_sample(prev.pixels_float(), q, A)
-    return bilinear_sample(prev.pixels_float(), uv_prev).reshape(uv.shape[:-1])
+    return bilinear_sample(prev.pixels_float(), q)
 
 
 def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_site, stereo, uv,
@@ -112,7 +117,6 @@ def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_sit
     ``stereo``: :func:`near_dense_stereo` of ``prev`` (its models in ``prev``'s rover frame). Returns float32
     (h, w) with NaN where ``prev`` did not see it.
     """
-    from ..core.expected import antialiased_sample, bilinear_sample, map_jacobian
     from ..core.surface_raycast import surface_points
 
     uv = np.asarray(uv, float)
@@ -128,12 +132,7 @@ def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_sit
     ii, jj = np.meshgrid(np.arange(h) - (h - 1) / 2, np.arange(w) - (w - 1) / 2, indexing="ij")
     reference = (np.maximum(np.abs(ii), np.abs(jj)) <= max(1, min(h, w) // 8)).reshape(-1)
     P = surface_points(o_prev, d_prev, t_plane, stereo, reference, disparity_error_px)
-    q = prev.camera_model.project(P).reshape(uv.shape)
-    if antialias and min(h, w) >= 3:
-        A = map_jacobian(q)
-        if A is not None:
-            return antialiased_sample(prev.pixels_float(), q, A)
-    return bilinear_sample(prev.pixels_float(), q)
+    return _sample_prev(prev, prev.camera_model.project(P).reshape(uv.shape), antialias)
 
 
 def prev_pixels_through_plane(prev: ImageProduct, prod: ImageProduct, X_site, n_site, uv) -> np.ndarray:
