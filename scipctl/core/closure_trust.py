@@ -29,7 +29,9 @@ class ClosureEvidence(EvidenceRecord):
     """What a closure knows about itself (NaN: unknown). ``from_pancam``: 1 when it started from the 4.5 m pancam
     image (its track, or the navcam handoff's point projected into it), 0 from the navcam handoff's image;
     ``ref_p_success``: the reference step's own probability (step model); ``handoff_px``: distance (hazcam px) from
-    the closure pixel to the handoff path's answer (``closure_px``)."""
+    the closure pixel to the handoff path's answer (``closure_px``); ``path_p``: the product of the step
+    probabilities along the reference's lineage (``pipeline.chain.reference_lineage``), which sees the drift of
+    the tracks before the reference that ``ref_p_success`` alone does not."""
 
     ncc_peak: float = math.nan
     local_inliers: float = math.nan
@@ -41,6 +43,7 @@ class ClosureEvidence(EvidenceRecord):
     handoff_px: float = math.nan
     refine_px: float = math.nan  # |NCC peak - feature position| of the winning candidate (hazcam px)
     pooled: float = math.nan  # candidates whose NCC positions agreed
+    path_p: float = math.nan  # product of the step p along the reference's lineage (designation -> reference)
 
 
 # feature name -> (ClosureEvidence attribute, transform of core.handoff.trust_model.transform)
@@ -55,6 +58,7 @@ CLOSURE_FEATURES: dict[str, tuple[str, str]] = {
     "log_handoff_px": ("handoff_px", "log1p"),
     "log_refine": ("refine_px", "log1p"),
     "log_pooled": ("pooled", "log1p"),
+    "log_path_p": ("path_p", "log"),
 }
 
 

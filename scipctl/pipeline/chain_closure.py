@@ -201,8 +201,14 @@ def closure_evidence(steps: list, closure: dict):
     def num(v):
         return float("nan") if v is None else float(v)
 
+    from .chain import reference_lineage
+
     ref = closure.get("reference_step")
     R = steps[ref] if isinstance(ref, int) and 0 <= ref < len(steps) else None
+    # every step that carried the target's pixel from the designation to the reference, scored: the product of
+    # their p (a reference far down a drifting chain is only as good as the tracks before it)
+    path = [steps[i].p_success for i in reference_lineage(steps, ref)]
+    path_p = math.prod(path) if path and all(p is not None for p in path) else None
     # the image the closure started from: the reference's own, or the pancam at a navcam reference's point
     from_pancam = R is not None and (R.camera == "pancam" or closure.get("via") == "navcam")
     return ClosureEvidence(
@@ -210,4 +216,5 @@ def closure_evidence(steps: list, closure: dict):
         confirmed=num(closure.get("feature_confirmed")), shift_px=num(closure.get("feature_shift_px")),
         scale=num(closure.get("scale")), from_pancam=float(from_pancam),
         ref_p_success=num(None if R is None else R.p_success), handoff_px=num(closure.get("closure_px")),
-        refine_px=num(closure.get("feature_refine_px")), pooled=num(closure.get("feature_pooled")))
+        refine_px=num(closure.get("feature_refine_px")), pooled=num(closure.get("feature_pooled")),
+        path_p=num(path_p))

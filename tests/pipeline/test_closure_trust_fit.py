@@ -127,8 +127,11 @@ def test_a_step_model_scores_the_reference_again():
     want = float(model.probability([step_evidence(steps, 1)])[0])
     assert recorded.evidence["ref_p_success"] == 0.123
     assert again.evidence["ref_p_success"] == want != 0.123
-    assert {k: v for k, v in again.evidence.items() if k != "ref_p_success"} == \
-        {k: v for k, v in recorded.evidence.items() if k != "ref_p_success"}
+    # the reference names no earlier step: its lineage is itself, so the path's p is its own
+    assert recorded.evidence["path_p"] == 0.123 and again.evidence["path_p"] == want
+    rescored = ("ref_p_success", "path_p")
+    assert {k: v for k, v in again.evidence.items() if k not in rescored} == \
+        {k: v for k, v in recorded.evidence.items() if k not in rescored}
 
 
 def test_a_table_grows_from_the_committed_one(tmp_path):
