@@ -11,7 +11,8 @@
     python docs/scripts/fit_closure_trust.py score closures.jsonl.gz --model scipctl/data/closure_trust_model.json
     # 4. a campaign's whole chains with their adopted closures scored again by each model (the first: the one the
     #    chains ran with, whose recorded p and GO must come back), the verdict taken again; every chain counted
-    python docs/scripts/fit_closure_trust.py chains CAMP --model scipctl/data/closure_trust_model.json --model new.json
+    python docs/scripts/fit_closure_trust.py chains CAMP --model scipctl/data/closure_trust_model.json --model new.json \
+        [--closure-go-max-drives N]
 
 A chain's family is its campaign header's ``family``, or the first ``--family-dir DIR=FAMILY`` whose DIR is a
 component of the downlink's path (campaigns made before ``campaign`` read the family ``synth --family`` records
@@ -132,17 +133,21 @@ def cmd_score(args) -> None:
     print(json.dumps({"go_min_p": model.go_min_p, "scored": per}, indent=1, sort_keys=True))
 
 
-def chain_scores(campaigns: list, models: dict) -> dict:
+def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
     """Per model (name -> ClosureTrustModel, the first the one the chains ran with): over every chain of the
     campaigns, the final answer's p (an adopted closure's scored again by the model; otherwise as recorded; no final
     answer: 0) against the final answer within 4 px: Brier, base rate, AUC, the chain GO (``chain_verdict`` with the
-    final step's p and GO replaced) and how many GO chains are within 4 px, and the chains at p >= 0.9. ValueError
-    when the first model does not give a recorded p or GO back."""
+    final step's p and GO replaced; as the chain does, never GO when the closure's reference is more than
+    ``max_drives`` drives from the designation, None: ``ChainParams().closure_go_max_drives``) and how many GO
+    chains are within 4 px, and the chains at p >= 0.9. ValueError when the first model does not give a recorded p
+    or GO back."""
     from campaign_chains import auc, campaign_chains
     from scipctl.core.closure_trust import ClosureEvidence
-    from scipctl.pipeline.chain import ChainStep
+    from scipctl.pipeline.chain import ChainParams, ChainStep, reference_drives
     from scipctl.pipeline.chain_trust import chain_verdict
     from scipctl.pipeline.closure_trust_fit import SUCCESS_PX, closure_row
+
+    max_drives = ChainParams().closure_go_max_drives if max_drives is None else int(max_drives)
 
     names = list(models)
     res = {n: {"p": [], "go": []} for n in names}
@@ -159,12 +164,14 @@ def chain_scores(campaigns: list, models: dict) -> dict:
                 continue
             m = models[n]
             p = float(m.probability([ClosureEvidence.from_dict(row.evidence)])[0])
-            # as run_chain's _adopt_closure: GO needs point stereo at the closure's pixel (the step's ok) too
-            go = bool(fin["ok"]) and bool(p >= m.go_min_p)
+            # as run_chain's _adopt_closure: GO needs point stereo at the closure's pixel (the step's ok) too, and a
+            # reference no more than max_drives drives from the designation
+            steps = [ChainStep.from_dict(d) for d in st]
+            drives = reference_drives(steps, fin["extra"]["closure"].get("reference_step"))
+            go = bool(fin["ok"]) and bool(p >= m.go_min_p) and drives is not None and drives <= max_drives
             if n == names[0] and (abs(p - float(fin["p_success"])) > 1e-9 or go != bool(fin["go"])):
                 raise ValueError(f"{name} {rec.get('target')}: model {n!r} gives p {p} (GO {go}), the record "
                                  f"{fin['p_success']} (GO {fin['go']}): not the model the chains ran with")
-            steps = [ChainStep.from_dict(d) for d in st]
             steps[-1].p_success, steps[-1].go = p, go
             res[n]["p"].append(p)
             res[n]["go"].append(chain_verdict(steps).go)
@@ -189,7 +196,7 @@ def cmd_chains(args) -> None:
             if not Path(c, "records").is_dir():
                 raise ValueError(f"{c}: no records/ (not a campaign folder)")
         models = {f: closure_trust_model_from_text(Path(f).read_text(encoding="utf-8"), f) for f in args.model}
-        out = chain_scores(args.campaigns, models)
+        out = chain_scores(args.campaigns, models, args.closure_go_max_drives)
     except (OSError, ValueError, InputError) as e:
         print(f"fit_closure_trust.py chains: {e}", file=sys.stderr)
         sys.exit(2)
@@ -218,6 +225,8 @@ def main():
     c.add_argument("campaigns", nargs="+")
     c.add_argument("--model", action="append", required=True, metavar="FILE",
                    help="a closure model (repeat; the first is the one the chains ran with)")
+    c.add_argument("--closure-go-max-drives", type=int, metavar="N", help="never GO when the closure's reference is "
+                   "more than N drives from the designation (default: ChainParams' default, as the chains ran)")
     a = ap.parse_args()
     {"table": cmd_table, "fit": cmd_fit, "score": cmd_score, "chains": cmd_chains}[a.cmd](a)
 

@@ -117,6 +117,28 @@ def test_chains_scored_again_by_closure_models(camp):
             fct.chain_scores([str(camp)], {"other": dataclasses.replace(model, intercept=model.intercept + 1.0)})
 
 
+def test_chains_scored_again_keep_the_drives_rule_they_ran_with(camp):
+    """fit_closure_trust.py chains applies the chain's drives rule: with a closure model whose GO threshold is 1e-9
+    (every adopted closure with point stereo GO by its p), the fixture's chains, whose closures are NO-GO, are
+    what that model gives under ``closure_go_max_drives`` 0 (every reference is at least one drive away), so they
+    are scored; under the default rule (2 drives) the same model makes a closure GO that the records say is not,
+    and the chains are refused as not the model's."""
+    import dataclasses
+
+    from scipctl.io.closure_trust_model import load_packaged_closure_trust_model
+
+    fct = load("fit_closure_trust")
+    always = dataclasses.replace(load_packaged_closure_trust_model(), go_min_p=1e-9)
+    finals = [json.loads(x)["record"]["steps"][-1]
+              for x in (camp / "records" / "paper-s1-straight.jsonl").read_text().splitlines()[1:]]
+    adopted = [f for f in finals if f["extra"].get("answer") == "closure" and f["ok"]]
+    assert adopted and not any(f["go"] for f in adopted)  # the bundled sol: confirmed closures, none GO
+    out = fct.chain_scores([str(camp)], {"always": always}, max_drives=0)
+    assert out["models"]["always"]["chain_go"] == 0
+    with pytest.raises(ValueError, match="not the model the chains ran with"):
+        fct.chain_scores([str(camp)], {"always": always})
+
+
 def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, capsys):
     """Today's chains carry designate's trust on step 0: the script's designate gives it back, and the verdict
     with it is the recorded one. A record made before the designation was scored (its trust stripped) is taken as
