@@ -12,9 +12,15 @@ measures that relief. For each ray of the new camera:
 - the ray is marched from ``(1 - span)`` to ``(1 + span)`` times the distance to the plane's point in ``samples``
   steps and the first crossing from in front of the measured surface to behind it (the surface the new camera
   sees first) is found, linearly between the two samples;
-- where that crossing lies within ``disparity_error_px`` (the stereo's error bound) of the plane's point, as the
-  reference camera sees them, or there is none (nothing measured, or the surface outside the span), the plane's
-  point is kept: the plane is the noiseless model of a surface the stereo cannot tell from it.
+- where there is no crossing (nothing measured, or the surface outside the span), the plane's point is kept; with
+  a gate ``disparity_error_px`` (the stereo's error bound) also where the crossing lies within it of the plane's
+  point, as the reference camera sees them (the plane as the noiseless model of a surface the stereo cannot tell
+  from it).
+
+Both the levelling and the gate are optional (``reference`` all False, ``disparity_error_px`` None: the surface as
+measured). Measured on 471 single navcam steps from the true reference (docs/stereo-and-tracking.md, "The surface
+template without its gate"), they take back most of what the surface gives there; in the chain, without them, the
+stereo's own offset from the point stereo moves every step's answer the same way, and the tracks drift more.
 
 Everything here is in the stereo models' frame (the previous image's rover frame).
 """
@@ -37,7 +43,8 @@ def surface_points(origins_m, directions, t_plane_m, stereo, reference, disparit
     models (a :class:`~scipctl.core.dense_stereo.DenseStereo`); ``t_plane_m`` ``(N,)``: the distance along each ray
     to the plane's point (NaN or <= 0: the ray misses the plane; its row is NaN); ``reference`` ``(N,)`` bool: the
     rays whose median disagreement with the plane offsets the stereo (none finite: no offset);
-    ``disparity_error_px`` (>= 0): the stereo's disparity error bound, in its own (rectified grid) pixels;
+    ``disparity_error_px`` (>= 0, or None: no gate): the stereo's disparity error bound, in its own (rectified
+    grid) pixels;
     ``span`` in (0, 1), ``samples`` >= 2.
     """
     o = np.asarray(origins_m, float)
@@ -49,8 +56,8 @@ def surface_points(origins_m, directions, t_plane_m, stereo, reference, disparit
             or ref.dtype != bool:
         raise ValueError(f"origins_m (N, 3), directions (N, 3), t_plane_m (N,) and reference (N,) bool expected, got "
                          f"{o.shape}, {d.shape}, {t0.shape} and {ref.dtype} {ref.shape}")
-    if not (np.isfinite(disparity_error_px) and disparity_error_px >= 0):
-        raise ValueError(f"disparity_error_px: must be >= 0, got {disparity_error_px!r}")
+    if disparity_error_px is not None and not (np.isfinite(disparity_error_px) and disparity_error_px >= 0):
+        raise ValueError(f"disparity_error_px: must be >= 0 or None, got {disparity_error_px!r}")
     if not (0 < span < 1):
         raise ValueError(f"span: must be in (0, 1), got {span!r}")
     if not (isinstance(samples, (int, np.integer)) and samples >= 2):
@@ -97,8 +104,11 @@ def surface_points(origins_m, directions, t_plane_m, stereo, reference, disparit
         g0, g1 = g[rows, k], g[rows, k + 1]
         t = ts[rows, k] + g0 / (g0 - g1) * (ts[rows, k + 1] - ts[rows, k])
         P_hit = oo[rows] + t[:, None] * dd[rows]
-        # the first surface met is the plane, as far as the stereo can tell: the plane's (noiseless) point
-        off_plane = ~(np.abs(own(P_hit) - own_plane[rows]) <= disparity_error_px)
-        result[rows[off_plane]] = P_hit[off_plane]
+        if disparity_error_px is None:
+            result[rows] = P_hit
+        else:
+            # the first surface met is the plane, as far as the stereo can tell: the plane's (noiseless) point
+            off_plane = ~(np.abs(own(P_hit) - own_plane[rows]) <= disparity_error_px)
+            result[rows[off_plane]] = P_hit[off_plane]
     out[hit] = result
     return out

@@ -91,18 +91,21 @@ class ChainParams:
     # within 4 px, its median better on one population and worse on the other), for a dense stereo pair per step
     # (0.15-0.20 CPU s each); the closure check never uses it (it confirmed more wrong closures)
     relief_max_parallax_px: Optional[float] = None
-    # (also the bound within which template_surface keeps the plane: the same stereo, the same error)
     relief_disparity_error_px: float = 0.45
     # ... unless fewer than this part of the template is kept (then every pixel counts)
     relief_min_kept: float = 0.25
-    # the tracking steps' NCC templates drawn through the surface the reference image's dense stereo measured,
-    # where it stands off the target's plane by more than relief_disparity_error_px (core/surface_raycast.py,
-    # plane_warp.render_through_surface), instead of through the plane alone; the feature views, the NCC fallback,
-    # the handoffs and the closure keep the plane. False (the default): the plane. Measured on 18 traverse chains
-    # (docs/stereo-and-tracking.md, "A template through the measured surface"): navcam tracks within 4 px 116 -> 109
-    # of 177, the final answer unchanged (13); half-resolution stereo noise puts a few template pixels on the wrong
-    # surface
+    # the tracking steps' NCC templates drawn through the surface the reference image's dense stereo measured
+    # (core/surface_raycast.py, plane_warp.render_through_surface), instead of through the plane alone; the feature
+    # views, the NCC fallback, the handoffs and the closure keep the plane. False (the default): the plane.
+    # template_surface_gate_px: the plane kept where the crossing is within that many (half-resolution) disparity
+    # pixels of it (the stereo's error bound, as relief_disparity_error_px); None: every crossing the stereo
+    # measured. template_surface_level: the stereo shifted to agree with the plane at the template's centre first.
+    # Measured on the first 18 trav38 chains (docs/stereo-and-tracking.md, "A template through the measured surface"
+    # and "The surface template without its gate"): navcam tracks within 4 px 116 of 177 with the plane, 109 with
+    # gate 0.45 and levelling (these defaults), 105 with neither (better single steps from the true reference)
     template_surface: bool = False
+    template_surface_gate_px: Optional[float] = 0.45
+    template_surface_level: bool = True
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
     # image's keypoints, placed in 3-D by its stereo, matched to the new image's; PnP RANSAC within vo_threshold_px,
@@ -242,6 +245,13 @@ class ChainParams:
             raise ValueError(f"ChainParams.vo_ratio: must be a number in (0, 1], got {q!r}")
         if not isinstance(self.template_surface, bool):
             raise ValueError(f"ChainParams.template_surface: must be true or false, got {self.template_surface!r}")
+        gp = self.template_surface_gate_px
+        if gp is not None and not (isinstance(gp, (int, float)) and not isinstance(gp, bool) and np.isfinite(gp)
+                                   and gp >= 0):
+            raise ValueError(f"ChainParams.template_surface_gate_px: must be a number >= 0 or None, got {gp!r}")
+        if not isinstance(self.template_surface_level, bool):
+            raise ValueError(f"ChainParams.template_surface_level: must be true or false, got "
+                             f"{self.template_surface_level!r}")
         if not isinstance(self.closure_vo, bool):
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
         if not isinstance(self.vo_handoff, bool):

@@ -55,8 +55,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     coarse position the target seen through it and its ``G`` the plane's homography under it, NCC-refined and
     confirmed like the others. ``surface``: ``prev``'s
     :class:`~scipctl.core.dense_stereo.DenseStereo` (its rover frame) or None: when given, the NCC templates are drawn
-    through the surface it measured where that stands off the plane by more than ``params.relief_disparity_error_px``
-    (:func:`~scipctl.pipeline.plane_warp.render_through_surface`; the feature views stay the plane's). ``info`` records the path, the winner's inlier counts and the coarse position.
+    through the surface it measured (``params.template_surface_gate_px`` / ``template_surface_level``;
+    :func:`~scipctl.pipeline.plane_warp.render_through_surface`; the feature views stay the plane's). ``info`` records the path, the winner's inlier counts and the coarse position.
     """
     from ..core.features import detect_features, knn_matches, locate_by_features
     from ..core.relief_mask import relief_keep
@@ -91,8 +91,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         if surface is None:
             tpl = render_through_plane(prev, prod, X_site, n_site, grid, params.render_antialias)
         else:
-            tpl = render_through_surface(prev, prod, X_site, n_site, surface, grid, params.relief_disparity_error_px,
-                                         params.render_antialias)
+            tpl = render_through_surface(prev, prod, X_site, n_site, surface, grid, params.template_surface_gate_px,
+                                         params.template_surface_level, params.render_antialias)
         if np.isfinite(tpl).mean() < 0.9:
             return
         keep, kept = None, None

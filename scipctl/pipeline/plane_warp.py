@@ -3,6 +3,8 @@ local surface normals it needs (site frame; each image through its own pose esti
 
 from __future__ import annotations
 
+from typing import Optional
+
 import numpy as np
 
 from ..model import Downlink, ImageProduct
@@ -108,12 +110,14 @@ def _sample_prev(prev: ImageProduct, q, antialias: bool) -> np.ndarray:
 
 
 def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_site, stereo, uv,
-                           disparity_error_px: float, antialias: bool = False) -> np.ndarray:
+                           disparity_error_px: Optional[float] = None, level: bool = False,
+                           antialias: bool = False) -> np.ndarray:
     """``prev``'s image seen at ``prod``'s pixels ``uv`` (h, w, 2) through the surface ``prev``'s dense stereo
-    measured, where it stands off the plane (X_site, n_site) by more than ``disparity_error_px`` (its own pixels):
-    :func:`render_through_plane` with each ray's point from
-    :func:`~scipctl.core.surface_raycast.surface_points` (rays of ``prod``'s camera at its pose estimate, in
-    ``prev``'s rover frame; the reference rays, which set the stereo's level, are the grid's central box, a quarter of its width).
+    measured (the plane (X_site, n_site) where a ray finds no crossing of it; with ``disparity_error_px`` (its own
+    pixels) also where the crossing is within that of the plane): :func:`render_through_plane` with each ray's
+    point from :func:`~scipctl.core.surface_raycast.surface_points` (rays of ``prod``'s camera at its pose
+    estimate, in ``prev``'s rover frame). ``level``: the stereo first shifted to agree with the plane at the grid's
+    central box, a quarter of its width (session 39's first version; measured worse).
     ``stereo``: :func:`near_dense_stereo` of ``prev`` (its models in ``prev``'s rover frame). Returns float32
     (h, w) with NaN where ``prev`` did not see it.
     """
@@ -130,7 +134,7 @@ def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_sit
     P_plane = prev.pose.T_site_rover.inverse().apply(plane_points_site(prod, X_site, n_site, flat))
     t_plane = np.einsum("ij,ij->i", P_plane - o_prev, d_prev)
     ii, jj = np.meshgrid(np.arange(h) - (h - 1) / 2, np.arange(w) - (w - 1) / 2, indexing="ij")
-    reference = (np.maximum(np.abs(ii), np.abs(jj)) <= max(1, min(h, w) // 8)).reshape(-1)
+    reference = (np.maximum(np.abs(ii), np.abs(jj)) <= max(1, min(h, w) // 8)).reshape(-1) & bool(level)
     P = surface_points(o_prev, d_prev, t_plane, stereo, reference, disparity_error_px)
     return _sample_prev(prev, prev.camera_model.project(P).reshape(uv.shape), antialias)
 

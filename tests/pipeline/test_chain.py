@@ -671,6 +671,16 @@ def test_chain_params_refuse_a_template_surface_that_is_not_a_flag(bad):
     assert ChainParams(template_surface=True).check()
 
 
+@pytest.mark.parametrize("field, bad", [("template_surface_gate_px", -0.1), ("template_surface_gate_px", float("nan")),
+                                        ("template_surface_gate_px", True), ("template_surface_gate_px", "0.45"),
+                                        ("template_surface_level", 1), ("template_surface_level", None)])
+def test_chain_params_refuse_bad_surface_template_settings(field, bad):
+    with pytest.raises(ValueError, match=f"ChainParams.{field}"):
+        ChainParams(**{field: bad}).check()
+    assert ChainParams(template_surface_gate_px=None, template_surface_level=False).check()
+    assert ChainParams(template_surface_gate_px=0.0).check()
+
+
 def test_the_relief_mask_is_an_option_that_changes_only_the_tracking_steps(dl, chains):
     """ChainParams.relief_max_parallax_px (off by default: every template pixel counts, and nothing is recorded):
     set, each feature-guided tracking step records the part of its winning template the relief mask kept
@@ -702,8 +712,8 @@ def test_the_relief_mask_is_an_option_that_changes_only_the_tracking_steps(dl, c
 def test_the_surface_template_is_an_option_of_the_tracking_steps_only(dl, chains, monkeypatch):
     """ChainParams.template_surface (off by default): set, the feature step of each tracking step (same camera,
     next stop) gets its reference image's dense stereo to draw the NCC templates through (plane_warp
-    .render_through_surface); a handoff across a drive never does; the designation is untouched and the same steps
-    are found."""
+    .render_through_surface, with template_surface_gate_px and template_surface_level as set); a handoff across a
+    drive never does; the designation is untouched and the same steps are found."""
     if _stem(dl) != "paper-s1-straight":
         pytest.skip("one sol is enough (a whole chain, ~10 s)")
     import scipctl.pipeline.chain as chain_module
@@ -716,12 +726,23 @@ def test_the_surface_template_is_an_option_of_the_tracking_steps_only(dl, chains
         calls.append((prev.camera, prod.camera, prev.position != prod.position, surface is not None))
         return real(prev, prod, *args, surface=surface, **kw)
 
+    import scipctl.pipeline.feature_track as ft_module
+
+    real_render = ft_module.render_through_surface
+    drawn = set()
+
+    def render_spy(*args, **kw):
+        drawn.add(args[6:8])  # (gate, level): the parameters' values
+        return real_render(*args, **kw)
+
     monkeypatch.setattr(chain_module, "feature_track", spy)
+    monkeypatch.setattr(ft_module, "render_through_surface", render_spy)
     base = chains["t1"]
     start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
     mk = dl.target("t1").mark_in(start.product_id)
-    steps = run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(answer="handoff",
-                                                                                  template_surface=True))
+    steps = run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(
+        answer="handoff", template_surface=True, template_surface_gate_px=None, template_surface_level=False))
+    assert drawn == {(None, False)}  # as set (not the defaults)
     assert [(s.camera, s.kind) for s in steps] == [(s.camera, s.kind) for s in base]
     assert steps[0].tracked_uv == base[0].tracked_uv
     tracks = [c for c in calls if c[0] == c[1]]
