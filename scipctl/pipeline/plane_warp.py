@@ -117,7 +117,8 @@ def render_through_surface(prev: ImageProduct, prod: ImageProduct, X_site, n_sit
     pixels) also where the crossing is within that of the plane): :func:`render_through_plane` with each ray's
     point from :func:`~scipctl.core.surface_raycast.surface_points` (rays of ``prod``'s camera at its pose
     estimate, in ``prev``'s rover frame). ``level``: the stereo first shifted to agree with the plane at the grid's
-    central box, a quarter of its width (session 39's first version; measured worse).
+    central box, a quarter of its width (the chain's choices: ``ChainParams.template_surface_gate_px`` and
+    ``template_surface_level``).
     ``stereo``: :func:`near_dense_stereo` of ``prev`` (its models in ``prev``'s rover frame). Returns float32
     (h, w) with NaN where ``prev`` did not see it.
     """
