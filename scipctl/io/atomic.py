@@ -205,10 +205,42 @@ def check_output_dir(path, option: str = "-o") -> Path:
     return path
 
 
+def _sync_folder(folder: Path) -> None:
+    """Make a rename in ``folder`` durable (fsync of the folder); a system or file system that cannot sync a
+    folder (Windows, some network file systems) is left as it is: the rename itself stays atomic."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _sync_tree(root: Path) -> None:
+    """fsync every regular file and folder under ``root`` (a folder about to be renamed into place), deepest first,
+    so that the rename publishes what was written, not what the page cache still holds."""
+    for folder, _dirs, files in os.walk(root, topdown=False):
+        for name in files:
+            p = os.path.join(folder, name)
+            if os.path.isfile(p) and not os.path.islink(p):
+                fd = os.open(p, os.O_RDONLY)
+                try:
+                    os.fsync(fd)
+                finally:
+                    os.close(fd)
+        _sync_folder(Path(folder))
+
+
 @contextlib.contextmanager
 def atomic_open(path):
     """Yield a binary file open for writing; on success it replaces ``path``, on error it is removed. Stale
-    temporaries in ``path``'s folder are removed first (:func:`remove_stale_temporaries`)."""
+    temporaries in ``path``'s folder are removed first (:func:`remove_stale_temporaries`). The file's bytes reach
+    the disk (fsync) before the rename, and the rename before this returns (the folder's fsync): after a power cut
+    ``path`` is the old file or the whole new one, never an empty one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent)
@@ -216,8 +248,11 @@ def atomic_open(path):
     try:
         with os.fdopen(fd, "wb") as f:
             yield f
+            f.flush()
+            os.fsync(f.fileno())
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the permissions open() would
         os.replace(tmp, path)
+        _sync_folder(path.parent)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
@@ -253,6 +288,8 @@ def atomic_directory(path, overwrite: bool = True):
     The replaced copy is renamed to the temporary's ``.tmp`` name before it is deleted, so that a kill while it is
     being deleted leaves a ``.tmp`` (removed by the next write), never a partial ``.old``.
 
+    What was written under the temporary is synced to the disk before the rename, and the rename before this returns.
+
     Usage::
 
         with atomic_directory(out) as tmp:
@@ -266,6 +303,7 @@ def atomic_directory(path, overwrite: bool = True):
     os.chmod(tmp, 0o777 & ~_umask())
     try:
         yield tmp
+        _sync_tree(tmp)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -286,3 +324,4 @@ def atomic_directory(path, overwrite: bool = True):
             shutil.rmtree(tmp, ignore_errors=True)
     else:
         os.replace(tmp, path)
+    _sync_folder(path.parent)

@@ -240,3 +240,40 @@ def test_sigkill_mid_workspace_write_leaves_a_copy_that_the_next_write_removes(t
     with atomic_directory(ws) as d:
         (d / "f").write_text("x")
     assert _names(tmp_path) == ["ws"]
+
+
+def test_writes_reach_the_disk_before_and_after_the_rename(tmp_path, monkeypatch):
+    """A file written by atomic_write_bytes is fsynced before it replaces the target and the folder after; a
+    folder written by atomic_directory has each of its files and folders fsynced before the swap, and the parent
+    after it (after a power cut: the old version or the whole new one)."""
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.readlink(f"/proc/self/fd/{fd}")))
+        real_fsync(fd)
+
+    def replace(a, b):
+        events.append(("replace", str(b)))
+        real_replace(a, b)
+
+    monkeypatch.setattr(atomic.os, "fsync", fsync)
+    monkeypatch.setattr(atomic.os, "replace", replace)
+    target = tmp_path / "out.json"
+    atomic_write_bytes(target, b"{}")
+    assert target.read_bytes() == b"{}"
+    kinds = [(k, Path(p).name if k == "fsync" else p) for k, p in events]
+    i = kinds.index(("replace", str(target)))
+    assert any(k == "fsync" and n.startswith(".out.json.") for k, n in kinds[:i])  # the temporary's bytes
+    assert ("fsync", tmp_path.name) in kinds[i + 1:]  # then the folder that holds the new name
+    events.clear()
+    folder = tmp_path / "ws"
+    with atomic_directory(folder) as tmp:
+        (tmp / "sub").mkdir()
+        (tmp / "sub" / "a.txt").write_text("a")
+        (tmp / "b.txt").write_text("b")
+    assert (folder / "sub" / "a.txt").read_text() == "a"
+    i = [k for k, _ in events].index("replace")
+    synced = {Path(p).name for k, p in events[:i] if k == "fsync"}
+    assert {"a.txt", "b.txt", "sub"} <= synced
+    assert ("fsync", str(tmp_path)) in events[i + 1:]
