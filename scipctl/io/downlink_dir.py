@@ -9,7 +9,8 @@ relative to the YAML file that names it. YAML anchors/aliases are plain YAML.
 Plain scalars are read as YAML 1.2's core schema reads them (:data:`YamlLoader`):
 ``1e-5`` and ``-.5`` are numbers, ``0042`` is 42, ``0o17`` is 15, and
 ``yes``/``no``/``on``/``off`` are strings (only ``true``/``false`` are booleans),
-as are dates (``2001-12-14``), ``12:30``, ``1_000`` and ``0b101``. The one YAML 1.1
+as are dates (``2001-12-14``), ``12:30``, ``1_000`` and ``0b101``; an explicit tag
+holds to the same forms (``!!int 1_000`` is malformed, not 1000). The one YAML 1.1
 reading kept on purpose is the merge key ``<<``.
 """
 
@@ -54,32 +55,56 @@ _INT = "tag:yaml.org,2002:int"
 _FLOAT = "tag:yaml.org,2002:float"
 _MERGE = "tag:yaml.org,2002:merge"
 _DECIMAL_INT = re.compile(r"^[-+]?[0-9]+$")
+_NULL_RE = re.compile(r"^(?:null|Null|NULL|~|)$")
+_BOOL_RE = re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$")
+_INT_RE = re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$")
+_FLOAT_RE = re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+                       r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$")
 _Loader.yaml_implicit_resolvers = {}  # the class's own table: none of PyYAML's 1.1 resolvers
-_Loader.add_implicit_resolver(_NULL, re.compile(r"^(?:null|Null|NULL|~|)$"), ["n", "N", "~", ""])
-_Loader.add_implicit_resolver(_BOOL, re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF"))
-_Loader.add_implicit_resolver(_INT, re.compile(r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$"), list("-+0123456789"))
-_Loader.add_implicit_resolver(  # after int: 12 matches both
-    _FLOAT,
-    re.compile(r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
-               r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$"),
-    list("-+.0123456789"),
-)
+_Loader.add_implicit_resolver(_NULL, _NULL_RE, ["n", "N", "~", ""])
+_Loader.add_implicit_resolver(_BOOL, _BOOL_RE, list("tTfF"))
+_Loader.add_implicit_resolver(_INT, _INT_RE, list("-+0123456789"))
+_Loader.add_implicit_resolver(_FLOAT, _FLOAT_RE, list("-+.0123456789"))  # after int: 12 matches both
 _Loader.add_implicit_resolver(_MERGE, re.compile(r"^<<$"), ["<"])  # kept on purpose (class docstring)
 
 
-def _construct_int(loader, node):
+def _core_scalar(loader, node, pattern, what: str) -> str:
+    """The scalar's text when it is one of YAML 1.2's core forms of ``what``: a plain scalar got its tag from that
+    pattern already; an explicitly tagged one (``!!int 1_000``, ``!!bool yes``) is checked here, where PyYAML's own
+    constructors would read it by YAML 1.1's rules (1000, True). Otherwise a ConstructorError (malformed YAML)."""
     value = loader.construct_scalar(node)
+    if not pattern.match(value):
+        raise yaml.constructor.ConstructorError(None, None, f"{value!r} is not a YAML 1.2 {what}", node.start_mark)
+    return value
+
+
+def _construct_int(loader, node):
+    value = _core_scalar(loader, node, _INT_RE, "integer")
     if _DECIMAL_INT.match(value):
         return int(value, 10)  # YAML 1.2: leading zeros are not octal
-    if value.startswith("0o"):
-        return int(value[2:], 8)
-    # 0x1F; other forms only through an explicit !!int tag (PyYAML's 1.1 reading: 1_000, 0b101)
-    return yaml.SafeLoader.construct_yaml_int(loader, node)
+    return int(value[2:], 8 if value.startswith("0o") else 16)
+
+
+def _construct_float(loader, node):
+    # PyYAML's constructor reads every 1.2 form (1e3, -.5, 1., .inf, .nan) once the form is checked
+    _core_scalar(loader, node, _FLOAT_RE, "float")
+    return yaml.SafeLoader.construct_yaml_float(loader, node)
+
+
+def _construct_bool(loader, node):
+    return _core_scalar(loader, node, _BOOL_RE, "boolean").lower() == "true"
+
+
+def _construct_null(loader, node):
+    _core_scalar(loader, node, _NULL_RE, "null")
 
 
 _Loader.add_constructor(_INT, _construct_int)
-# floats: PyYAML's constructor reads every 1.2 form (1e3, -.5, 1., .inf, .nan); ints and floats both through
-# Python's int()/float(), so a 5000-digit integer is a ValueError (malformed YAML, parse_yaml)
+_Loader.add_constructor(_FLOAT, _construct_float)
+_Loader.add_constructor(_BOOL, _construct_bool)
+_Loader.add_constructor(_NULL, _construct_null)
+# ints and floats both through Python's int()/float(), so a 5000-digit integer is a ValueError (malformed YAML,
+# parse_yaml)
 
 #: the project's one YAML loader: downlink.yaml, an external rover configuration, rules files (io/rules_file.py)
 YamlLoader = _Loader

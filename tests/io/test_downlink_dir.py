@@ -232,6 +232,26 @@ def test_yaml_1_2_core_schema_numbers(tmp_path):
     assert all(math.isnan(v) for v in load_yaml(tmp_path / "f.yaml", "f"))
 
 
+def test_explicit_tags_hold_to_yaml_1_2_forms():
+    """An explicit core tag is read by YAML 1.2's forms as a plain scalar is (``!!int 0o17`` 15, ``!!float 2``
+    2.0, ``!!int '12'`` 12); a value that is not one of them is malformed YAML with a one-line error, where
+    PyYAML's own constructors read it by YAML 1.1 (``!!int 1_000`` 1000, ``!!int 0b101`` 5, ``!!int 12:30`` 750,
+    ``!!bool yes`` true, ``!!float 1_000.5`` 1000.5)."""
+    from scipctl.io.downlink_dir import parse_yaml
+    from scipctl.model import InputError
+
+    got = parse_yaml("[!!int 12, !!int 0o17, !!int 0x1F, !!int '12', !!float 1e3, !!float 2, !!bool true, !!bool FALSE,"
+                     " !!null ~, !!null '', !!str 12, 1_000]", "t")
+    assert got == [12, 15, 31, 12, 1000.0, 2.0, True, False, None, None, "12", "1_000"]
+    assert [type(v) for v in got[:6]] == [int] * 4 + [float] * 2
+    for text, what in (("!!int 1_000", "integer"), ("!!int 0b101", "integer"), ("!!int 12:30", "integer"),
+                       ("!!bool yes", "boolean"), ("!!bool on", "boolean"), ("!!float 1_000.5", "float"),
+                       ("!!float 12:30", "float"), ("!!null nothing", "null"), ("sol: !!int -0x1F", "integer")):
+        with pytest.raises(InputError, match=f"malformed YAML at line 1, column .*is not a YAML 1.2 {what}") as e:
+            parse_yaml(text, "t")
+        assert "\n" not in str(e.value)
+
+
 def test_yaml_sol_as_yaml_1_2_reads_it(written):
     """``sol: 0o17`` is the integer 15 (YAML 1.2 octal; 1.1 read a string, an error); a sexagesimal or
     ``_``-separated sol is a string, so an error, where YAML 1.1 read ``sol: 12:30`` silently as 750."""
