@@ -30,7 +30,7 @@ class ClosureEvidence(EvidenceRecord):
     image (its track, or the navcam handoff's point projected into it), 0 from the navcam handoff's image;
     ``ref_p_success``: the reference step's own probability (step model); ``handoff_px``: distance (hazcam px) from
     the closure pixel to the handoff path's answer (``closure_px``); ``path_p``: the product of the step
-    probabilities along the reference's lineage (``pipeline.chain.reference_lineage``), which sees the drift of
+    probabilities along the reference's lineage (``pipeline.chain_closure.reference_lineage``), which sees the drift of
     the tracks before the reference that ``ref_p_success`` alone does not."""
 
     ncc_peak: float = math.nan

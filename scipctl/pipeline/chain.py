@@ -720,21 +720,6 @@ def reference_drives(steps: list, reference_step) -> Optional[int]:
     return len({tuple(s.position) for s in steps[: reference_step + 1]}) - 1
 
 
-def reference_lineage(steps: list, index) -> list:
-    """The step indices whose pixels carried the target to ``steps[index]``: ``index``, then the step it was
-    tracked from (its ``extra["reference"]`` product), and so on back to the designation (``steps[0]``, not
-    listed); ``[]`` when ``index`` is not a step index or is the designation. A reference that names no step of
-    the chain ends the lineage there."""
-    if not isinstance(index, int) or not 0 < index < len(steps):
-        return []
-    by_product = {s.product_id: i for i, s in enumerate(steps)}
-    lineage, i = [], index
-    while i is not None and 0 < i and i not in lineage:
-        lineage.append(i)
-        i = by_product.get(steps[i].extra.get("reference"))
-    return lineage
-
-
 def _mark_after_unverified(steps: list) -> None:
     """Steps after an unverified one carry ``extra["follows_unverified"]`` (its product id) and say so.
 

@@ -192,6 +192,21 @@ def closure_check(dl, steps: list, params, feats: Optional[dict] = None) -> Clos
     return out
 
 
+def reference_lineage(steps: list, index) -> list:
+    """The step indices whose pixels carried the target to ``steps[index]``: ``index``, then the step it was
+    tracked from (its ``extra["reference"]`` product), and so on back to the designation (``steps[0]``, not
+    listed); ``[]`` when ``index`` is not a step index or is the designation. A reference that names no step of
+    the chain ends the lineage there."""
+    if not isinstance(index, int) or not 0 < index < len(steps):
+        return []
+    by_product = {s.product_id: i for i, s in enumerate(steps)}
+    lineage, i = [], index
+    while i is not None and 0 < i and i not in lineage:
+        lineage.append(i)
+        i = by_product.get(steps[i].extra.get("reference"))
+    return lineage
+
+
 def closure_evidence(steps: list, closure: dict):
     """The :class:`~scipctl.core.closure_trust.ClosureEvidence` of a chain's closure (``closure``: a
     :class:`Closure`'s dict, as recorded on the final step); ``steps``: the chain's
@@ -200,8 +215,6 @@ def closure_evidence(steps: list, closure: dict):
 
     def num(v):
         return float("nan") if v is None else float(v)
-
-    from .chain import reference_lineage
 
     ref = closure.get("reference_step")
     R = steps[ref] if isinstance(ref, int) and 0 <= ref < len(steps) else None

@@ -1,6 +1,5 @@
 """Tracking through the stops and the pancam->navcam handoff, on the bundled sample sols (exact marks)."""
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -565,45 +564,6 @@ def test_reference_drives_counts_the_stops_between():
     steps = [st((1, 0)), st((1, 1)), st((1, 1)), st((1, 2)), st((1, 3))]  # a track and a handoff at one stop
     assert [reference_drives(steps, i) for i in range(5)] == [0, 1, 1, 2, 3]
     assert reference_drives(steps, None) is None and reference_drives(steps, 5) is None
-
-
-def test_reference_lineage_follows_each_steps_reference_back_to_the_designation():
-    from scipctl.pipeline.chain import ChainStep, reference_lineage
-
-    def st(pid, ref=None, kind="track"):
-        return ChainStep((1, 0), "pancam", pid, kind, None, None, None, None, None, None, None, None, None, True,
-                         extra={} if ref is None else {"reference": ref})
-
-    # d -> p1 -> p2 (p3 unverified: skipped as a reference) -> p4; n1 a navcam handoff from p2
-    steps = [st("d", kind="designate"), st("p1", "d"), st("p2", "p1"), st("p3", "p2"), st("n1", "p2", "handoff"),
-             st("p4", "p2")]
-    assert reference_lineage(steps, 5) == [5, 2, 1]
-    assert reference_lineage(steps, 4) == [4, 2, 1]
-    assert reference_lineage(steps, 1) == [1]
-    assert reference_lineage(steps, 0) == [] and reference_lineage(steps, None) == [] and \
-        reference_lineage(steps, 6) == []
-    # a reference that names no step of the chain ends the lineage; a loop does not hang it
-    assert reference_lineage([st("d", kind="designate"), st("a", "elsewhere"), st("b", "a")], 2) == [2, 1]
-    assert reference_lineage([st("d", kind="designate"), st("a", "b"), st("b", "a")], 2) == [2, 1]
-
-
-def test_closure_evidence_multiplies_the_step_p_along_the_reference_lineage():
-    from scipctl.pipeline.chain import ChainStep
-    from scipctl.pipeline.chain_closure import closure_evidence
-
-    def st(pid, ref, p):
-        return ChainStep((1, 0), "pancam", pid, "track", None, None, None, None, None, None, None, None, None, True,
-                         extra={"reference": ref}, p_success=p)
-
-    steps = [ChainStep((1, 0), "pancam", "d", "designate", None, None, None, None, None, None, None, None, None,
-                       True, p_success=0.99),
-             st("p1", "d", 0.9), st("p2", "p1", 0.5), st("n1", "p1", 0.2), st("p3", "p2", 0.8)]
-    ev = closure_evidence(steps, {"reference_step": 4})
-    assert ev.path_p == pytest.approx(0.9 * 0.5 * 0.8, rel=1e-15)  # n1 is not on p3's lineage; d not a track
-    assert ev.ref_p_success == 0.8
-    steps[2].p_success = None  # a step on the lineage unscored: the path's p is unknown
-    assert math.isnan(closure_evidence(steps, {"reference_step": 4}).path_p)
-    assert math.isnan(closure_evidence(steps, {}).path_p)
 
 
 def test_chain_params_refuse_an_unknown_answer():
