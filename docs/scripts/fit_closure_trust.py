@@ -143,7 +143,7 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
     or GO back."""
     from campaign_chains import auc, campaign_chains
     from scipctl.core.closure_trust import ClosureEvidence
-    from scipctl.pipeline.chain import ChainParams, ChainStep, reference_drives
+    from scipctl.pipeline.chain import ChainParams, ChainStep, closure_reference_within
     from scipctl.pipeline.chain_trust import chain_verdict
     from scipctl.pipeline.closure_trust_fit import SUCCESS_PX, closure_row
 
@@ -157,6 +157,9 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
         fin = st[-1] if st and st[-1]["camera"] == "hazcam" and st[-1]["extra"].get("final") else None
         ys.append(fin is not None and fin["error_px"] is not None and fin["error_px"] <= SUCCESS_PX)
         row = closure_row(rec, fam, name) if fin is not None and fin["extra"].get("answer") == "closure" else None
+        if row is not None:  # each model's p and GO go into the same steps before the verdict
+            steps = [ChainStep.from_dict(d) for d in st]
+            within = closure_reference_within(steps, fin["extra"]["closure"].get("reference_step"), max_drives)
         for n in names:
             if row is None:
                 res[n]["p"].append(0.0 if fin is None or fin["p_success"] is None else float(fin["p_success"]))
@@ -166,9 +169,7 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
             p = float(m.probability([ClosureEvidence.from_dict(row.evidence)])[0])
             # as run_chain's _adopt_closure: GO needs point stereo at the closure's pixel (the step's ok) too, and a
             # reference no more than max_drives drives from the designation
-            steps = [ChainStep.from_dict(d) for d in st]
-            drives = reference_drives(steps, fin["extra"]["closure"].get("reference_step"))
-            go = bool(fin["ok"]) and bool(p >= m.go_min_p) and drives is not None and drives <= max_drives
+            go = bool(fin["ok"]) and bool(p >= m.go_min_p) and within
             if n == names[0] and (abs(p - float(fin["p_success"])) > 1e-9 or go != bool(fin["go"])):
                 raise ValueError(f"{name} {rec.get('target')}: model {n!r} gives p {p} (GO {go}), the record "
                                  f"{fin['p_success']} (GO {fin['go']}): not the model the chains ran with")

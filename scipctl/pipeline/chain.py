@@ -703,13 +703,20 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
     else:
         p = float(model.probability([closure_evidence(steps, cl)])[0])
         new.p_success, new.go = p, bool(ok and p >= model.go_min_p)
-        drives = reference_drives(steps, cl.get("reference_step"))
-        if new.go and (drives is None or drives > params.closure_go_max_drives):
+        if new.go and not closure_reference_within(steps, cl.get("reference_step"), params.closure_go_max_drives):
             new.go = False
+            drives = reference_drives(steps, cl.get("reference_step"))
             note = (f"the closure's reference is {drives} drives from the designation, beyond the closure model's "
                     f"{params.closure_go_max_drives} (its p does not see the drift of the tracks between)")
             new.reason = f"{new.reason}; {note}" if new.reason else note
     steps[final] = new
+
+
+def closure_reference_within(steps: list, reference_step, max_drives: int) -> bool:
+    """The drives rule of a closure's GO (``ChainParams.closure_go_max_drives``): its reference is a step no more
+    than ``max_drives`` drives from the designation (:func:`reference_drives`)."""
+    drives = reference_drives(steps, reference_step)
+    return drives is not None and drives <= max_drives
 
 
 def reference_drives(steps: list, reference_step) -> Optional[int]:
