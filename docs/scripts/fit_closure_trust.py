@@ -140,14 +140,17 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
     final step's p and GO replaced; as the chain does, never GO when the closure's reference is more than
     ``max_drives`` drives from the designation, None: ``ChainParams().closure_go_max_drives``) and how many GO
     chains are within 4 px, and the chains at p >= 0.9. ValueError when the first model does not give a recorded p
-    or GO back."""
+    or GO back, or when ``max_drives`` is not an integer >= 0."""
     from campaign_chains import auc, campaign_chains
     from scipctl.core.closure_trust import ClosureEvidence
     from scipctl.pipeline.chain import ChainParams, ChainStep, closure_reference_within
     from scipctl.pipeline.chain_trust import chain_verdict
     from scipctl.pipeline.closure_trust_fit import SUCCESS_PX, closure_row
 
-    max_drives = ChainParams().closure_go_max_drives if max_drives is None else int(max_drives)
+    # ChainParams checks the limit (an integer >= 0), so the script refuses what a chain would refuse
+    params = ChainParams() if max_drives is None else ChainParams(closure_go_max_drives=max_drives)
+    params.check()
+    max_drives = params.closure_go_max_drives
 
     names = list(models)
     res = {n: {"p": [], "go": []} for n in names}

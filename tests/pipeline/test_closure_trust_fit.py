@@ -187,10 +187,11 @@ def test_chains_keep_an_adopted_closure_without_stereo_no_go(tmp_path):
     ["chains", "{tmp}/camp", "--model", "{tmp}/missing.json"],
     ["chains", "{tmp}/camp", "--model", "{tmp}/camp/bad.json"],
     ["table", "{tmp}/camp", "--add", "{tmp}/missing.jsonl.gz", "-o", "{tmp}/out.jsonl.gz"],
+    ["chains", "{tmp}/camp", "--model", str(MODEL), "--closure-go-max-drives", "-1"],
 ])
 def test_bad_input_is_one_line_and_exit_2(args, tmp_path):
-    """A folder that is no campaign, a missing or unreadable model, a missing table to add: one line naming it, exit
-    code 2, nothing written."""
+    """A folder that is no campaign, a missing or unreadable model, a missing table to add, a negative drives limit:
+    one line naming it, exit code 2, nothing written."""
     (tmp_path / "camp" / "records").mkdir(parents=True)
     (tmp_path / "camp" / "bad.json").write_text("not json")
     argv = [a.replace("{tmp}", str(tmp_path)) for a in args]
