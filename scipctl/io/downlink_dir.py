@@ -165,17 +165,26 @@ class _Resolver12(yaml.resolver.BaseResolver):
 _READ_12 = _Resolver12()
 
 
-class _Dumper(_DumperBase):  # type: ignore[misc,valid-type]
-    """PyYAML's safe dumper, except that a scalar is written plain only if YAML 1.1 readers (PyYAML's own resolvers,
-    e.g. ``yaml.safe_load``) and :data:`YamlLoader` (YAML 1.2) give it the same type; otherwise the emitter quotes
-    it, as it quotes the string ``'yes'``. PyYAML's dumper asks only its 1.1 resolvers, so it left the strings
-    ``1e3``, ``0089``, ``-.5``, ``+.5``, ``.5e3`` (and ``0o17``) bare, which YamlLoader reads as numbers."""
+class _QuoteWhatReadersTypeDifferently:
+    """A scalar is written plain only if YAML 1.1 readers (PyYAML's own resolvers, e.g. ``yaml.safe_load``) and
+    :data:`YamlLoader` (YAML 1.2) give it the same type; otherwise the emitter quotes it, as it quotes the string
+    ``'yes'``. PyYAML's dumper asks only its 1.1 resolvers, so it left the strings ``1e3``, ``0089``, ``-.5``,
+    ``+.5``, ``.5e3`` (and ``0o17``) bare, which YamlLoader reads as numbers. A mixin before a PyYAML dumper."""
 
     def resolve(self, kind, value, implicit):
-        tag = super().resolve(kind, value, implicit)
+        tag = super().resolve(kind, value, implicit)  # type: ignore[misc]
         if kind is yaml.ScalarNode and implicit[0] and _READ_12.resolve(kind, value, implicit) != tag:
             return "tag:scipctl:read-differently"  # no node has this tag: never plain
         return tag
+
+
+class _Dumper(_QuoteWhatReadersTypeDifferently, _DumperBase):  # type: ignore[misc,valid-type]
+    """PyYAML's safe dumper (libyaml's when there), quoting as :class:`_QuoteWhatReadersTypeDifferently` says."""
+
+
+class PyYamlDumper(_QuoteWhatReadersTypeDifferently, yaml.SafeDumper):
+    """The writer's dumper in PyYAML's pure-Python emitter, which escapes (``allow_unicode=False``) what libyaml's
+    cannot encode, a lone surrogate: for tests that write odd values for the reader to refuse."""
 
 
 def dump_yaml(obj) -> str:

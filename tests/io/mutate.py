@@ -24,8 +24,10 @@ import struct
 import zlib
 
 import numpy as np
+
 import yaml
 
+from scipctl.io.downlink_dir import PyYamlDumper
 from scipctl.io.images import encode_png
 
 # --------------------------------------------------------------------------- bytes
@@ -122,8 +124,10 @@ def dump_json(obj) -> bytes:
 
 
 def dump_yaml(obj) -> str:
-    """YAML text of ``obj`` (``.nan``/``.inf``; placeholders spliced in)."""
-    return _splice(yaml.safe_dump(obj, sort_keys=False, width=4096), quoted=False)
+    """YAML text of ``obj`` with scipctl's dumper (``.nan``/``.inf``; a string quoted wherever a YAML 1.1 or 1.2
+    reader would type it otherwise), non-ASCII escaped so that strings no UTF-8 file holds (a lone surrogate) are
+    written too; placeholders spliced in."""
+    return _splice(yaml.dump(obj, Dumper=PyYamlDumper, sort_keys=False, width=4096), quoted=False)
 
 
 # --------------------------------------------------------------------------- images

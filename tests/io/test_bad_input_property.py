@@ -30,6 +30,7 @@ import yaml
 
 from scipctl.io.cmodfile import format_cmod
 from scipctl.io.downlink import downlink_differences, read_downlink, write_downlink
+from scipctl.io.downlink_dir import YamlLoader
 from scipctl.model import InputError
 from tests.io.builders import META, make_small_downlink, plain_records, write_raw_mcap
 from tests.io.mutate import (BYTE_OPS, ODD_VALUES, dump_json, dump_yaml, error_problems, mutate_bytes,
@@ -57,16 +58,16 @@ def base(tmp_path_factory, valid):
     write_downlink(valid, d / "dir", container="dir")
     ext = d / "ext"
     shutil.copytree(d / "dir", ext)
-    doc = yaml.safe_load((ext / "downlink.yaml").read_text())
+    doc = yaml.load((ext / "downlink.yaml").read_text(), Loader=YamlLoader)
     rec = doc["images"][1]
     im = valid.product(rec["product_id"])
     (ext / "models").mkdir()
     (ext / "models" / "cam.cahvor").write_text(format_cmod(im.camera_model, im.width, im.height))
     del rec["camera_model"]
     rec["camera_model_file"] = "models/cam.cahvor"
-    (ext / "rover.yaml").write_text(yaml.safe_dump(doc["rover_config"], sort_keys=False))
+    (ext / "rover.yaml").write_text(dump_yaml(doc["rover_config"]))
     doc["rover_config"] = "rover.yaml"
-    (ext / "downlink.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    (ext / "downlink.yaml").write_text(dump_yaml(doc))
     paths = {"mcap": d / "dl.mcap", "plain": d / "plain.mcap", "dir": d / "dir", "ext": ext}
     ref = read_downlink(paths["mcap"])
     for p in paths.values():
@@ -212,7 +213,7 @@ def test_damaged_downlink_yaml_bytes(base, tmp_path, capfd):
 
 
 def test_damaged_downlink_yaml_records(base, tmp_path, capfd):
-    doc = yaml.safe_load((base["dir"] / "downlink.yaml").read_text())
+    doc = yaml.load((base["dir"] / "downlink.yaml").read_text(), Loader=YamlLoader)
 
     def make(rng, work):
         shutil.copytree(base["dir"], work, dirs_exist_ok=True)
@@ -228,7 +229,7 @@ def test_damaged_downlink_yaml_records(base, tmp_path, capfd):
 def test_damaged_files_of_a_directory_downlink(base, valid, tmp_path, capfd):
     ext = base["ext"]
     pngs = sorted(p.name for p in (ext / "images").iterdir())
-    rover_doc = yaml.safe_load((ext / "rover.yaml").read_text())
+    rover_doc = yaml.load((ext / "rover.yaml").read_text(), Loader=YamlLoader)
 
     def make(rng, work):
         shutil.copytree(ext, work, dirs_exist_ok=True)

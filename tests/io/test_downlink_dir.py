@@ -161,6 +161,25 @@ def test_every_string_written_reads_back_a_string(tmp_path, word):
             doc11["truth"]["images"][0]["product_id"], doc11["truth"]["targets"][0]["id"]] == [word] * 11
 
 
+def test_the_pure_python_dumper_quotes_as_the_writer_and_escapes_what_libyaml_cannot():
+    """``PyYamlDumper`` (the fuzz tests' dumper, tests/io/mutate.py) quotes every tricky string as the writer does, so
+    a fixture's string reads back a string with scipctl's YAML 1.2 loader (PyYAML's ``safe_dump``, which the
+    fixtures used before, leaves ``1e3`` bare: a float to that loader); and it writes a lone surrogate, escaped,
+    which libyaml's emitter cannot encode (the reader refuses it as malformed YAML)."""
+    import yaml
+
+    from scipctl.io.downlink_dir import PyYamlDumper, YamlLoader, parse_yaml
+    from scipctl.model import InputError
+
+    doc = {"ids": list(_TRICKY_STRINGS)}
+    assert yaml.load(yaml.dump(doc, Dumper=PyYamlDumper), Loader=YamlLoader) == doc
+    assert yaml.load(yaml.safe_dump(doc), Loader=YamlLoader) != doc  # what the fixtures wrote before
+    text = yaml.dump({"id": "\ud800"}, Dumper=PyYamlDumper)
+    assert text == 'id: "\\uD800"\n'
+    with pytest.raises(InputError, match="d: yaml: malformed YAML at line 1, column 8"):
+        parse_yaml(text, "d")
+
+
 _DATES = ("2001-12-14", "2001-12-14t21:59:43.10-05:00", "2001-12-14 21:59:43.10", "2002-12-14", "2003-1-2",
           "2004-02-29 1:02:03", "2005-06-07T08:09:10Z")
 

@@ -12,6 +12,7 @@ import pytest
 import yaml
 
 from scipctl.io.downlink import read_downlink, write_downlink
+from scipctl.io.downlink_dir import YamlLoader, dump_yaml
 from scipctl.io.images import encode_png
 from scipctl.model import InputError
 from tests.io.builders import META, make_small_downlink, plain_records, write_raw_mcap
@@ -528,12 +529,12 @@ def test_directory_without_downlink_yaml(tmp_path):
 def dir_dl(tmp_path):
     write_downlink(make_small_downlink(), tmp_path / "d", container="dir")
     root = tmp_path / "d"
-    doc = yaml.safe_load((root / "downlink.yaml").read_text())
+    doc = yaml.load((root / "downlink.yaml").read_text(), Loader=YamlLoader)
     return root, doc
 
 
 def _save(root, doc):
-    (root / "downlink.yaml").write_text(yaml.safe_dump(doc, sort_keys=False))
+    (root / "downlink.yaml").write_text(dump_yaml(doc))
 
 
 def test_dir_malformed_yaml(dir_dl):
@@ -557,7 +558,7 @@ def test_dir_yaml_nested_too_deep(dir_dl):
     then hit RecursionError); at ~40000 levels libyaml's loader crashed the process (see the next test)."""
     root, doc = dir_dl
     doc["images"][0]["gain"] = "DEEP"
-    (root / "downlink.yaml").write_text(yaml.safe_dump(doc).replace("DEEP", "[" * 5000 + "]" * 5000))
+    (root / "downlink.yaml").write_text(dump_yaml(doc).replace("DEEP", "[" * 5000 + "]" * 5000))
     expect_error(root, str(root / "downlink.yaml"), "yaml", "nested more than 100 deep")
 
 
