@@ -106,6 +106,13 @@ class ChainParams:
     template_surface: bool = False
     template_surface_gate_px: Optional[float] = 0.45
     template_surface_level: bool = True
+    # two-stage NCC in the feature step (feature_track.place_with_centre): for the cameras in this dict, the whole
+    # template finds the peak and scores it, then its central (2 h + 1)-pixel crop (h the value; smaller than the
+    # camera's template_half_px) places it, NCC within +-ncc_place_radius_px of the found peak; a peak on that border or
+    # a failed match keeps the found position. A large window finds the target; the relief around it biases where
+    # (docs/stereo-and-tracking.md, "A two-stage NCC for the navcam tracks"). {} (the default): one stage.
+    ncc_place_half_px: dict = field(default_factory=dict)
+    ncc_place_radius_px: float = 2.0
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
     # image's keypoints, placed in 3-D by its stereo, matched to the new image's; PnP RANSAC within vo_threshold_px,
@@ -252,6 +259,16 @@ class ChainParams:
         if not isinstance(self.template_surface_level, bool):
             raise ValueError(f"ChainParams.template_surface_level: must be true or false, got "
                              f"{self.template_surface_level!r}")
+        if not isinstance(self.ncc_place_half_px, dict):
+            raise ValueError(f"ChainParams.ncc_place_half_px: must be a mapping camera -> integer, got "
+                             f"{self.ncc_place_half_px!r}")
+        for cam, h in self.ncc_place_half_px.items():
+            if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 1 <= h < self.template_half(cam):
+                raise ValueError(f"ChainParams.ncc_place_half_px[{cam!r}]: must be an integer >= 1 and below the "
+                                 f"camera's template_half_px ({self.template_half(cam)}), got {h!r}")
+        r = self.ncc_place_radius_px
+        if not (isinstance(r, (int, float)) and not isinstance(r, bool) and np.isfinite(r) and r > 0):
+            raise ValueError(f"ChainParams.ncc_place_radius_px: must be a number > 0, got {r!r}")
         if not isinstance(self.closure_vo, bool):
             raise ValueError(f"ChainParams.closure_vo: must be true or false, got {self.closure_vo!r}")
         if not isinstance(self.vo_handoff, bool):

@@ -133,6 +133,9 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                             min_score=0.3, accept_border_peak=False, template_mask=keep)
                 if raw.ok and np.all(np.isfinite(raw.uv)):
                     tr = raw
+        place_half = params.ncc_place_half_px.get(prod.camera)
+        if place_half is not None and crop is None:
+            tr = place_with_centre(tr, tpl, img, loc.uv - (cc - half), place_half, params.ncc_place_radius_px, keep)
         cands.append((loc, tr, k, reach, factor, kept, keep is not None))
 
     def confirmed(cd):
@@ -223,6 +226,33 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     if relief:
         info.update({"relief_kept": _f(kept), "relief_masked": masked})
     return out, info
+
+
+def place_with_centre(found, template, image, centre_in_template_uv, place_half: int, radius_px: float, mask=None):
+    """The second stage of a two-stage NCC (``ChainParams.ncc_place_half_px``): ``found`` (a
+    :class:`~scipctl.core.tracking.TrackResult` of ``template`` in ``image``) moved to where the template's central
+    ``(2 place_half + 1)`` square crop peaks, NCC within ``radius_px`` of ``found.uv``; its score and shape stay the
+    whole template's. ``found`` unchanged when it failed, when the crop's match fails or peaks on the search border,
+    or when the crop would not be smaller than the template.
+
+    ``template`` ``(2 h + 1, 2 h + 1)`` with the tracked point at ``centre_in_template_uv`` (template pixels, within
+    half a pixel of its centre ``(h, h)``); ``mask`` ``None`` or bool of the template's shape (the pixels NCC
+    counts), cropped alike.
+    """
+    from ..core.tracking import track
+
+    h = (template.shape[0] - 1) // 2
+    if not found.ok or not np.all(np.isfinite(found.uv)) or not 1 <= place_half < h:
+        return found
+    if template.shape != (2 * h + 1, 2 * h + 1):
+        raise ValueError(f"template: expected a square of odd size, got shape {template.shape}")
+    box = (slice(h - place_half, h + place_half + 1),) * 2
+    centre = np.asarray(centre_in_template_uv, float) - (h - place_half)
+    placed = track(template[box], image, found.uv, float(radius_px), template_center_uv=centre, min_score=0.3,
+                   accept_border_peak=False, template_mask=None if mask is None else mask[box])
+    if not placed.ok or not np.all(np.isfinite(placed.uv)):
+        return found
+    return dataclasses.replace(found, uv=placed.uv)
 
 
 def texture_view(im: ImageProduct, sigma_px: float) -> ImageProduct:

@@ -309,3 +309,86 @@ def test_texture_view_is_the_same_product_with_its_lighting_taken_out(dl):
     # the factor (exact: the same float32 array divided once)
     assert np.array_equal(tv.pixels_float(), log_highpass(im.pixels_float(), 6.0) / np.float32(255.0))
     assert np.array_equal(im.pixels, before)
+
+
+# ----------------------------------------------------------------------------- the two-stage NCC (ncc_place_half_px)
+def _relief_template(dy_px: int, half: int = 15, place_half: int = 7):
+    """A smooth random image (seeded) and a template of it whose central ``(2 place_half + 1)`` square is the image
+    at the target (100, 90) and whose surroundings are drawn ``dy_px`` rows off: what a plane template shows when
+    the ground around a rock stands off the rock top's plane."""
+    import cv2
+
+    rng = np.random.default_rng(5)
+    img = cv2.GaussianBlur(rng.normal(size=(200, 200)).astype(np.float32), (0, 0), 1.5)
+    ii, jj = np.mgrid[-half:half + 1, -half:half + 1]
+    outer = np.maximum(abs(ii), abs(jj)) > place_half
+    return img, img[90 + ii + np.where(outer, dy_px, 0), 100 + jj]
+
+
+@pytest.mark.parametrize("dy_px", [1, 2, 3])
+def test_the_centre_places_what_the_whole_template_found(dy_px):
+    """The whole template's NCC peak is pulled towards where its surroundings match (0.74-2.50 px off for 1-3 rows,
+    measured); the central 15 px crop, searched within 2 px of that peak, puts the target back where its own pixels
+    match exactly: within 0.02 px (an exact match at an integer position; the sub-pixel fit leaves 0.0034 px,
+    measured, bound 6x that). The score stays the whole template's (what the trust models were fitted on)."""
+    from scipctl.core.tracking import track
+    from scipctl.pipeline.feature_track import place_with_centre
+
+    img, tpl = _relief_template(dy_px)
+    found = track(tpl, img, np.array([103.0, 93.0]), 10.0, min_score=0.3, accept_border_peak=False)
+    assert found.ok and np.linalg.norm(found.uv - [100, 90]) > 0.5
+    placed = place_with_centre(found, tpl, img, np.array([15.0, 15.0]), 7, 2.0)
+    assert np.linalg.norm(placed.uv - [100, 90]) < 0.02
+    assert placed.score == found.score and placed.second_score == found.second_score
+
+
+def test_the_centre_keeps_the_found_answer_when_it_cannot_place_it():
+    """A failed match, a crop no smaller than the template, or a crop whose peak lies on the border of its search
+    (the truth beyond the radius) give the found answer back unchanged."""
+    import dataclasses
+
+    from scipctl.core.tracking import track
+    from scipctl.pipeline.feature_track import place_with_centre
+
+    img, tpl = _relief_template(3)
+    found = track(tpl, img, np.array([103.0, 93.0]), 10.0, min_score=0.3, accept_border_peak=False)
+    centre = np.array([15.0, 15.0])
+    failed = dataclasses.replace(found, ok=False)
+    assert place_with_centre(failed, tpl, img, centre, 7, 2.0) is failed
+    assert place_with_centre(found, tpl, img, centre, 15, 2.0) is found
+    assert np.linalg.norm(found.uv - [100, 90]) > 2.0  # 2.50 px: beyond a 1 px search
+    assert place_with_centre(found, tpl, img, centre, 7, 1.0) is found
+
+
+@pytest.mark.parametrize("value", [{"navcam": 15}, {"navcam": 0}, {"navcam": 7.0}, {"navcam": True}, "navcam",
+                                   {"pancam": 20}])
+def test_chain_params_refuse_a_bad_placing_crop(value):
+    with pytest.raises(ValueError, match="ChainParams.ncc_place_half_px"):
+        ChainParams(ncc_place_half_px=value).check()
+
+
+@pytest.mark.parametrize("radius", [0.0, -1.0, float("nan"), True])
+def test_chain_params_refuse_a_bad_placing_radius(radius):
+    with pytest.raises(ValueError, match="ChainParams.ncc_place_radius_px"):
+        ChainParams(ncc_place_radius_px=radius).check()
+
+
+def test_the_two_stage_ncc_is_an_option_of_the_navcam_tracks(dl):
+    """Off by default; with ncc_place_half_px={"navcam": 7} the pancam steps are the same bit for bit and the first
+    step that differs is a feature step into a navcam image (here the handoff from the pancam), within the placing
+    radius plus the pooling's reach (feature_agree_px) of the one-stage answer."""
+    assert ChainParams().ncc_place_half_px == {} and ChainParams(ncc_place_half_px={"navcam": 7}).check()
+    if Path(dl.source).stem != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains)")
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    tid = dl.targets[0].id
+    mk = dl.target(tid).mark_in(start.product_id)
+    base = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="handoff"))
+    params = ChainParams(answer="handoff", ncc_place_half_px={"navcam": 7})
+    steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=params)
+    diff = [(s, s0) for s, s0 in zip(steps, base) if s.tracked_uv != s0.tracked_uv]
+    assert diff and all(s.tracked_uv == s0.tracked_uv for s, s0 in zip(steps, base) if s.camera == "pancam")
+    s, s0 = diff[0]
+    assert s.camera == "navcam" and s.extra.get("coarse") == "features"
+    assert np.linalg.norm(np.subtract(s.tracked_uv, s0.tracked_uv)) <= params.ncc_place_radius_px \
+        + params.feature_agree_px
