@@ -87,6 +87,22 @@ def test_chain_params_refuse_bad_vo_settings(field, bad):
     assert ChainParams(vo_cameras=("navcam",)).check()
 
 
+_CHAINS: dict = {}
+
+
+def _first_target_chain(dl, **fields):
+    """``run_chain`` of the sol's first target from its first pancam mark, answer "handoff" (every step tracked),
+    with these ``ChainParams`` fields; each run once per module (the options' tests compare against the same
+    default chain)."""
+    key = (dl.source, repr(sorted(fields.items())))
+    if key not in _CHAINS:
+        start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+        tid = dl.targets[0].id
+        mk = dl.target(tid).mark_in(start.product_id)
+        _CHAINS[key] = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="handoff", **fields))
+    return _CHAINS[key]
+
+
 def test_visual_odometry_is_an_option_of_the_navcam_tracks(dl):
     """Off by default (no track records it; the handoff across a drive has its own odometry, ChainParams.vo_handoff,
     on by default since session 31); with vo_cameras=("navcam",) every navcam track records whether the winning
@@ -95,13 +111,10 @@ def test_visual_odometry_is_an_option_of_the_navcam_tracks(dl):
     assert ChainParams().vo_cameras == ()
     if Path(dl.source).stem != "paper-s1-straight":
         pytest.skip("one sol is enough (two whole chains, ~40 s)")
-    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
-    tid = dl.targets[0].id
-    mk = dl.target(tid).mark_in(start.product_id)
-    base = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="handoff"))
+    base = _first_target_chain(dl)
     assert not any("feature_vo" in s.extra or "vo_inliers" in s.extra for s in base if s.kind == "track")
     params = ChainParams(answer="handoff", vo_cameras=("navcam",))
-    steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=params)
+    steps = _first_target_chain(dl, vo_cameras=("navcam",))
     assert [(s.camera, s.kind) for s in steps[:3]] == [(s.camera, s.kind) for s in base[:3]]
     for s, s0 in zip(steps[:3], base[:3]):
         assert s.tracked_uv == s0.tracked_uv
@@ -380,12 +393,9 @@ def test_the_two_stage_ncc_is_an_option_of_the_navcam_tracks(dl):
     assert ChainParams().ncc_place_half_px == {} and ChainParams(ncc_place_half_px={"navcam": 7}).check()
     if Path(dl.source).stem != "paper-s1-straight":
         pytest.skip("one sol is enough (two whole chains)")
-    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
-    tid = dl.targets[0].id
-    mk = dl.target(tid).mark_in(start.product_id)
-    base = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=ChainParams(answer="handoff"))
+    base = _first_target_chain(dl)
     params = ChainParams(answer="handoff", ncc_place_half_px={"navcam": 7})
-    steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=params)
+    steps = _first_target_chain(dl, ncc_place_half_px={"navcam": 7})
     diff = [(s, s0) for s, s0 in zip(steps, base) if s.tracked_uv != s0.tracked_uv]
     assert diff and all(s.tracked_uv == s0.tracked_uv for s, s0 in zip(steps, base) if s.camera == "pancam")
     s, s0 = diff[0]
