@@ -269,6 +269,9 @@ class ChainParams:
             if isinstance(h, bool) or not isinstance(h, (int, np.integer)) or not 1 <= h < self.template_half(cam):
                 raise ValueError(f"ChainParams.ncc_place_half_px[{cam!r}]: must be an integer >= 1 and below the "
                                  f"camera's template_half_px ({self.template_half(cam)}), got {h!r}")
+        if self.ncc_place_half_px and (self.ncc_median_prev_px is not None or self.ncc_matched_blur):
+            raise ValueError("ChainParams.ncc_place_half_px: places on the unfiltered image only, not with "
+                             "ncc_median_prev_px or ncc_matched_blur")
         r = self.ncc_place_radius_px
         if not (isinstance(r, (int, float)) and not isinstance(r, bool) and np.isfinite(r) and r > 0):
             raise ValueError(f"ChainParams.ncc_place_radius_px: must be a number > 0, got {r!r}")

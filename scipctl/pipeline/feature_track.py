@@ -134,7 +134,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                 if raw.ok and np.all(np.isfinite(raw.uv)):
                     tr = raw
         place_half = params.ncc_place_half_px.get(prod.camera)
-        if place_half is not None and crop is None:
+        if place_half is not None and crop is None:  # (no filtered crop: ChainParams.check refuses the two together)
             tr = place_with_centre(tr, tpl, img, loc.uv - (cc - half), place_half, params.ncc_place_radius_px, keep)
         cands.append((loc, tr, k, reach, factor, kept, keep is not None))
 
@@ -242,10 +242,10 @@ def place_with_centre(found, template, image, centre_in_template_uv, place_half:
     from ..core.tracking import track
 
     h = (template.shape[0] - 1) // 2
-    if not found.ok or not np.all(np.isfinite(found.uv)) or not 1 <= place_half < h:
-        return found
     if template.shape != (2 * h + 1, 2 * h + 1):
         raise ValueError(f"template: expected a square of odd size, got shape {template.shape}")
+    if not found.ok or not np.all(np.isfinite(found.uv)) or not 1 <= place_half < h:
+        return found
     box = (slice(h - place_half, h + place_half + 1),) * 2
     centre = np.asarray(centre_in_template_uv, float) - (h - place_half)
     placed = track(template[box], image, found.uv, float(radius_px), template_center_uv=centre, min_score=0.3,
