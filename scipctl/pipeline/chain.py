@@ -107,10 +107,12 @@ class ChainParams:
     template_surface_gate_px: Optional[float] = 0.45
     template_surface_level: bool = True
     # two-stage NCC in the feature step (feature_track.place_with_centre): for the cameras in this dict, the whole
-    # template finds the peak and scores it, then its central (2 h + 1)-pixel crop (h the value; smaller than the
-    # camera's template_half_px) places it, NCC within +-ncc_place_radius_px of the found peak; a peak on that border or
-    # a failed match keeps the found position. A large window finds the target; the relief around it biases where
+    # template finds the peak, scores it and decides with it (confirmation, pooling, the trust evidence), then its
+    # central (2 h + 1)-pixel crop (h the value; smaller than the camera's template_half_px) places each pooled
+    # candidate's answer, NCC within +-ncc_place_radius_px of its peak; a peak on that border or a failed match keeps
+    # the found position. A large window finds the target; the relief around it biases where
     # (docs/stereo-and-tracking.md, "A two-stage NCC for the navcam tracks"). {} (the default): one stage.
+    # (Session 41's figures below placed before deciding: a placed peak could confirm a wrong candidate.)
     # Measured with {"navcam": 7, "hazcam": 7} on two held-out traverse populations (102 chains): final answer within
     # 4 px 71 -> 73, the finals smaller in 66 chains and larger in 30, navcam tracks within 4 px +6 %, no chain GO;
     # off until a default change re-measures the chain tests' bounds and the trust models' refine_px input

@@ -133,10 +133,14 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                             min_score=0.3, accept_border_peak=False, template_mask=keep)
                 if raw.ok and np.all(np.isfinite(raw.uv)):
                     tr = raw
+        # the pixel this candidate answers with: its NCC peak, or that peak placed by the template's centre (the
+        # second stage; the peak itself still decides confirmation, pooling and the trust evidence)
+        place_uv = tr.uv
         place_half = params.ncc_place_half_px.get(prod.camera)
         if place_half is not None and crop is None:  # (no filtered crop: ChainParams.check refuses the two together)
-            tr = place_with_centre(tr, tpl, img, loc.uv - (cc - half), place_half, params.ncc_place_radius_px, keep)
-        cands.append((loc, tr, k, reach, factor, kept, keep is not None))
+            place_uv = place_with_centre(tr, tpl, img, loc.uv - (cc - half), place_half, params.ncc_place_radius_px,
+                                         keep).uv
+        cands.append((loc, tr, k, reach, factor, kept, keep is not None, place_uv))
 
     def confirmed(cd):
         loc, tr = cd[0], cd[1]
@@ -201,8 +205,9 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         best = max(good, key=lambda cd: (cd[1].score, -cd[2], cd[3], cd[4]))
         near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= params.feature_agree_px]
         w = np.array([max(cd[1].score, 1e-3) for cd in near])
-        uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
-        loc, tr, k, reach, factor, kept, masked = best
+        found_uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
+        uv = (w[:, None] * np.array([cd[7] for cd in near])).sum(0) / w.sum()
+        loc, tr, k, reach, factor, kept, masked, _ = best
         info["feature_status"] = "confirmed"
         info["feature_pooled"] = len(near)
         out = TrackResult(True, "", uv, best[1].score, best[1].second_score, best[1].ratio, best[1].sharpness,
@@ -210,8 +215,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     else:
         pts = np.array([cd[0].uv for cd in cands])
         w = np.array([max(cd[0].n_inliers, 1) for cd in cands], float)
-        uv = geometric_median(pts, w)
-        loc, tr, k, reach, factor, kept, masked = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv),
+        uv = found_uv = geometric_median(pts, w)
+        loc, tr, k, reach, factor, kept, masked, _ = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv),
                                                                             -cd[0].n_inliers))
         info["feature_status"] = "unconfirmed"
         info["feature_pooled"] = len(cands)
@@ -221,8 +226,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                  "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
                  "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
                  **({"feature_vo": bool(reach == 0.0)} if vo is not None else {}),
-                 "feature_shift_px": float(np.linalg.norm(out.uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
+                 "feature_shift_px": float(np.linalg.norm(found_uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
+    if prod.camera in params.ncc_place_half_px and good:
+        info["ncc_placed_uv"] = best[7].tolist() if np.all(np.isfinite(best[7])) else None
     if relief:
         info.update({"relief_kept": _f(kept), "relief_masked": masked})
     return out, info
