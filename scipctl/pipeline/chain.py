@@ -112,10 +112,12 @@ class ChainParams:
     # candidate's answer, NCC within +-ncc_place_radius_px of its peak; a peak on that border or a failed match keeps
     # the found position. A large window finds the target; the relief around it biases where
     # (docs/stereo-and-tracking.md, "A two-stage NCC for the navcam tracks"). {} (the default): one stage.
-    # (Session 41's figures below placed before deciding: a placed peak could confirm a wrong candidate.)
+    # (Session 41's traverse figures below placed before deciding: a placed peak could move a candidate across
+    # feature_confirm_px.)
     # Measured with {"navcam": 7, "hazcam": 7} on two held-out traverse populations (102 chains): final answer within
     # 4 px 71 -> 73, the finals smaller in 66 chains and larger in 30, navcam tracks within 4 px +6 %, no chain GO;
-    # off until a default change re-measures the chain tests' bounds and the trust models' refine_px input
+    # on the paper scenario (the navcam handoff across the drive a feature step too; session 42, 139 chains): 90 -> 93,
+    # none better on the fresh population (28 -> 27 of 49) and one chain lost beyond 20 px on the dev ones, so off
     ncc_place_half_px: dict = field(default_factory=dict)
     ncc_place_radius_px: float = 2.0
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
