@@ -91,7 +91,7 @@ def _summary(data, sequences) -> dict:
 def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None):
     """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
     (and stdout with ``--json``)."""
-    from ..io.atomic import check_not_input, check_output_file, write_output_text
+    from ..io.atomic import check_not_input, check_output_file, output_group
     from ..io.workspace import open_source
 
     out = check_output_file(out)  # before the work (the report takes a minute)
@@ -110,21 +110,18 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
                                     params=params, rule_set=rule_set)
-    write_output_text(out, html)
+    from ..io.annotations_mcap import annotations_bytes
+
+    mc = out.with_suffix(".annotations.mcap")  # the same annotations for Foxglove
+    mcap = annotations_bytes(source.downlink, data, summary["provenance"])  # the HTML's record: same inputs
+    with output_group() as outputs:  # both files or neither (a full disk, a folder made meanwhile: exit 2)
+        outputs.add_text(out, html)
+        outputs.add_bytes(mc, mcap, "-o (its annotations MCAP beside it)")
     summary["report"] = str(out)
     summary["products_read"] = {k: str(v) for k, v in source.read_from.items()}
     summary["bytes"] = len(html.encode())
     summary["embedded_images"] = html.count("<img ")
-    from ..io.annotations_mcap import write_annotations
-
-    mc = out.with_suffix(".annotations.mcap")  # the same annotations for Foxglove
-    try:
-        write_annotations(source.downlink, data, mc, summary["provenance"])  # the HTML's record: same inputs
-        summary["annotations_mcap"] = str(mc)
-    except OSError as e:  # the path was checked before the work: a full disk, a folder made meanwhile
-        from ..errors import InputError
-
-        raise InputError(str(mc), "-o", f"annotations MCAP not written ({e.strerror or e}); the HTML is at {out}") from None
+    summary["annotations_mcap"] = str(mc)
     if json_out:
         emit_json(summary)
     _print(con, summary)

@@ -268,7 +268,7 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
     ``regenerate`` command; ``error_draw``: :func:`~scipctl.sim.build.build_run`'s."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ..io.atomic import write_output_text
+    from ..io.atomic import output_group
     from ..io.downlink import write_downlink
     from ..io.provenance import sha256_path
     from ..sim.errors import ErrorSettings
@@ -300,10 +300,6 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                             rover=rover, texture=texture, family=family, error_draw=error_draw)
             path = out / (f"{name}.mcap" if container == "mcap" else name)
             bar.update(task, description=f"{name}: writing {path.name}")
-            try:
-                write_downlink(sim.downlink, path, container)
-            except OSError as e:
-                raise InputError(str(path), "-o/--out", f"cannot write: {e.strerror or e}") from None
             rec = dict(sim.record)
             from .. import __version__
 
@@ -312,7 +308,14 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                                                                  image_scale, supersample, extra_args)}
             rec["no_errors"] = bool(no_errors)
             rec_path = out / f"{name}.sim.json"
-            write_output_text(rec_path, record_json(rec), "-o/--out")
+            # the downlink and its truth record together: the record is staged first and goes in after the
+            # downlink (itself written atomically); a failed downlink write leaves neither
+            with output_group() as outputs:
+                outputs.add_text(rec_path, record_json(rec), "-o/--out")
+                try:
+                    write_downlink(sim.downlink, path, container)
+                except OSError as e:
+                    raise InputError(str(path), "-o/--out", f"cannot write: {e.strerror or e}") from None
             bar.update(task, description=f"{name}: done")
             written.append({
                 "run": run_name, "path": str(path), "record": str(rec_path), "container": container,

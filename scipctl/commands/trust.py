@@ -125,7 +125,7 @@ def read_rows(paths: list) -> list:
 def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float, json_out: bool) -> None:
     """Fit the trust model on ``tables`` and write it to ``out``; with ``report``, the leave-one-family-out
     evaluation at ``success_px`` too."""
-    from ..io.atomic import check_output_file, write_output_text
+    from ..io.atomic import check_output_file, output_group
     from ..io.provenance import provenance
     from ..io.trust_model import trust_model_json
     from ..jsonutil import strict_json
@@ -148,16 +148,19 @@ def fit_trust(tables: list, out: Path, report: Optional[Path], success_px: float
         model = fit_trust_model(rows, provenance=prov)
     except ValueError as e:  # no row to fit on, or one outcome only (a constant model)
         raise InputError(", ".join(str(t) for t in tables), "evidence table", str(e)) from None
-    write_output_text(out, trust_model_json(model))
     doc = {"out": str(out), "n_rows": model.provenance["n_rows"], "n_targets": model.provenance["n_targets"],
            "families": model.provenance["training_families"],
            "go_min_p": {f"{f.success_px:g}": f.go_min_p for f in model.fits}}
-    if report is not None:
+    rep = None
+    if report is not None:  # evaluated before anything is written: the model and its report, or neither
         rep = evaluate(rows, success_px, model)
         rep["provenance"] = provenance({f"table{i}": str(t) for i, t in enumerate(tables)})
-        write_output_text(report, json.dumps(strict_json(rep), indent=1, sort_keys=True, allow_nan=False, default=float)
-                          + "\n", "--report")
-        doc["report"] = str(report)
+    with output_group() as outputs:
+        outputs.add_text(out, trust_model_json(model))
+        if report is not None:
+            outputs.add_text(report, json.dumps(strict_json(rep), indent=1, sort_keys=True, allow_nan=False,
+                                                default=float) + "\n", "--report")
+            doc["report"] = str(report)
     if json_out:
         emit_json(doc)
     else:

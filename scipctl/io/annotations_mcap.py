@@ -117,9 +117,3 @@ def annotations_bytes(dl, data, prov=None) -> bytes:
     w.finish()
     return buf.getvalue()
 
-
-def write_annotations(dl, data, path, prov=None) -> None:
-    """Write the annotation MCAP atomically (``prov``: as :func:`annotations_bytes`)."""
-    from .atomic import atomic_write_bytes
-
-    atomic_write_bytes(path, annotations_bytes(dl, data, prov))

@@ -264,6 +264,65 @@ def atomic_write_bytes(path, data: bytes) -> None:
         f.write(data)
 
 
+class OutputGroup:
+    """The files one command writes, staged (each whole and on the disk, under its temporary name beside its target)
+    before any of them replaces its target: :func:`output_group`."""
+
+    def __init__(self):
+        self.staged = []  # (temporary, target)
+
+    def add_bytes(self, path, data: bytes, option: str = "-o") -> None:
+        """Stage ``data`` for ``path``; a failed write is :class:`InputError` naming ``path`` and ``option``."""
+        from ..errors import InputError
+
+        path = Path(path)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale_temporaries(path.parent)
+            fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)
+        except OSError as e:
+            raise InputError(str(path), option, f"cannot write: {e.strerror or e}") from None
+        self.staged.append((Path(tmp), path))
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(tmp, 0o666 & ~_umask())
+        except OSError as e:
+            raise InputError(str(path), option, f"cannot write: {e.strerror or e}") from None
+
+    def add_text(self, path, text: str, option: str = "-o") -> None:
+        self.add_bytes(path, text.encode("utf-8"), option)
+
+
+@contextlib.contextmanager
+def output_group():
+    """All of a command's output files or none: yield an :class:`OutputGroup`; when the block ends without an error,
+    every staged file replaces its target (renames in the order staged, then each folder synced); on an error
+    (a write that failed, an exception of the command's, a signal) every temporary is removed and no target
+    changes. The renames are one step each, not one together: a process killed between two of them leaves the
+    first target new and the next old (each whole).
+
+    Usage::
+
+        with output_group() as g:
+            g.add_text(out, html)
+            g.add_bytes(out.with_suffix(".annotations.mcap"), data, "-o (its annotations MCAP)")
+    """
+    group = OutputGroup()
+    try:
+        yield group
+        for tmp, path in group.staged:
+            os.replace(tmp, path)
+        for folder in dict.fromkeys(path.parent for _, path in group.staged):
+            _sync_folder(folder)
+    finally:
+        for tmp, _ in group.staged:
+            with contextlib.suppress(FileNotFoundError):
+                os.unlink(tmp)
+
+
 def atomic_write_text(path, text: str) -> None:
     atomic_write_bytes(path, text.encode("utf-8"))
 

@@ -89,3 +89,17 @@ def test_check_output_paths(tmp_path, monkeypatch):
     with pytest.raises(InputError, match="--report: cannot write here"):
         check_output_file(ro / "f.txt", "--report")
     shutil.rmtree(tmp_path / "a", ignore_errors=True)
+
+
+def test_fit_trust_writes_its_model_and_report_together(tmp_path, monkeypatch):
+    """--report's folder refuses the write only when it is made (os.access said yes): the model, whose folder is
+    fine, is not written either (before, it was, and the command exited 2 with half its output in place)."""
+    d = tmp_path / "lies"
+    d.mkdir()
+    make_read_only(monkeypatch, d, access_lies=True)
+    small = tmp_path / "small.jsonl.gz"
+    lines = gzip.decompress(TABLE.read_bytes()).splitlines()[:400]
+    small.write_bytes(gzip.compress(b"\n".join(lines) + b"\n"))
+    r = runner.invoke(app, ["fit-trust", str(small), "-o", str(tmp_path / "m.json"), "--report", str(d / "r.json")])
+    _one_line_exit_2(r, d / "r.json", "--report")
+    assert list(d.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["lies", "small.jsonl.gz"]

@@ -277,3 +277,53 @@ def test_writes_reach_the_disk_before_and_after_the_rename(tmp_path, monkeypatch
     synced = {Path(p).name for k, p in events[:i] if k == "fsync"}
     assert {"a.txt", "b.txt", "sub"} <= synced
     assert ("fsync", str(tmp_path)) in events[i + 1:]
+
+
+# ----------------------------------------------------------------------------- a command's several files: all or none
+def test_an_output_group_puts_every_file_in_place_and_leaves_no_temporary(tmp_path):
+    (tmp_path / "a.txt").write_text("old")
+    stale = _temp(tmp_path, "b.bin", _dead_pid())
+    with atomic.output_group() as g:
+        g.add_text(tmp_path / "a.txt", "new")
+        g.add_bytes(tmp_path / "sub" / "b.bin", b"\x00\x01")
+        assert (tmp_path / "a.txt").read_text() == "old" and not (tmp_path / "sub" / "b.bin").exists()  # staged only
+    assert (tmp_path / "a.txt").read_text() == "new" and (tmp_path / "sub" / "b.bin").read_bytes() == b"\x00\x01"
+    assert not stale.exists() and _names(tmp_path) == ["a.txt", "sub"] and _names(tmp_path / "sub") == ["b.bin"]
+    mode = (tmp_path / "sub" / "b.bin").stat().st_mode & 0o777
+    assert mode == 0o666 & ~atomic._umask()  # what open() would give, not mkstemp's 0600
+
+
+def test_an_output_group_changes_no_target_when_a_later_write_fails(tmp_path, monkeypatch):
+    """The second file cannot be written (its folder is a file): the first, already staged, does not replace its
+    target either, the error names the second file and its option, and no temporary is left."""
+    from scipctl.errors import InputError
+
+    (tmp_path / "a.txt").write_text("old")
+    (tmp_path / "notafolder").write_text("x")
+    with pytest.raises(InputError, match=r"notafolder/b\.txt: --report: cannot write"):
+        with atomic.output_group() as g:
+            g.add_text(tmp_path / "a.txt", "new")
+            g.add_text(tmp_path / "notafolder" / "b.txt", "report", "--report")
+    assert (tmp_path / "a.txt").read_text() == "old" and _names(tmp_path) == ["a.txt", "notafolder"]
+
+    calls = []
+
+    def full_disk(fd):  # the second file's bytes do not reach the disk
+        calls.append(fd)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(atomic.os, "fsync", full_disk)
+    with pytest.raises(InputError, match=r"c\.txt: -o: cannot write: No space left on device"):
+        with atomic.output_group() as g:
+            g.add_text(tmp_path / "a.txt", "new")
+            g.add_text(tmp_path / "c.txt", "new")
+    assert (tmp_path / "a.txt").read_text() == "old" and _names(tmp_path) == ["a.txt", "notafolder"]
+
+
+def test_an_output_group_changes_no_target_when_the_command_fails_after_staging(tmp_path):
+    with pytest.raises(RuntimeError, match="the command's own error"):
+        with atomic.output_group() as g:
+            g.add_text(tmp_path / "a.txt", "new")
+            raise RuntimeError("the command's own error")
+    assert _names(tmp_path) == []
