@@ -163,9 +163,13 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
         if bad:
             raise InputError("synth", "--runs", f"unknown run(s) {', '.join(bad)} for scenario {scenario} (known: {', '.join(known)})")
         selected = list(dict.fromkeys(selected))
-    from ..io.atomic import check_output_dir
+    from ..io.atomic import check_output_dir, check_output_file
 
     out = check_output_dir(out, "-o/--out")
+    for run_name in selected:  # each run's files (a folder in the way of one): said before the work
+        check_output_file(out / f"{scenario}-{run_name}.sim.json", "-o/--out")
+        if container == "mcap":
+            check_output_file(out / f"{scenario}-{run_name}.mcap", "-o/--out")
     if error_draw < 0:
         raise InputError("synth", "--error-draw", f"{error_draw}: want an integer >= 0")
     if error_draw and no_errors:

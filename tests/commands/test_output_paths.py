@@ -103,3 +103,36 @@ def test_fit_trust_writes_its_model_and_report_together(tmp_path, monkeypatch):
     r = runner.invoke(app, ["fit-trust", str(small), "-o", str(tmp_path / "m.json"), "--report", str(d / "r.json")])
     _one_line_exit_2(r, d / "r.json", "--report")
     assert list(d.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["lies", "small.jsonl.gz"]
+
+
+def test_synth_refuses_a_folder_in_the_way_of_a_runs_record_before_the_work(tmp_path):
+    (tmp_path / "out" / "paper-s1-straight.sim.json").mkdir(parents=True)
+    r = runner.invoke(app, ["synth", "--scenario", "paper", "--seed", "0", "--runs", "s1-straight", "-o",
+                            str(tmp_path / "out")])
+    _one_line_exit_2(r, tmp_path / "out" / "paper-s1-straight.sim.json", "-o/--out")
+    assert "is a directory" in r.stderr and [p.name for p in (tmp_path / "out").iterdir()] == ["paper-s1-straight.sim.json"]
+
+
+def test_synth_writes_a_downlink_and_its_record_together(tmp_path, monkeypatch):
+    """The truth record's bytes do not reach the disk (a full disk at its fsync): the downlink, rendered and
+    written first before, is not left without its record; exit 2 naming the record, nothing in the folder."""
+    import os
+
+    from scipctl.io import atomic
+
+    real_fsync = os.fsync
+
+    def full_disk_for_records(fd):
+        if ".sim.json." in os.readlink(f"/proc/self/fd/{fd}"):
+            raise OSError(28, "No space left on device")
+        real_fsync(fd)
+
+    monkeypatch.setenv("SCIPCTL_SYNTH_IMAGE_SCALE", "0.125")  # 128 x 128 images: seconds
+    monkeypatch.setattr(atomic.os, "fsync", full_disk_for_records)
+    out = tmp_path / "out"
+    r = runner.invoke(app, ["synth", "--scenario", "paper", "--seed", "0", "--runs", "s1-straight", "-o", str(out)])
+    assert r.exit_code == 2 and "Traceback" not in r.stderr, r.output
+    errors = [line for line in r.stderr.splitlines() if line.startswith("scipctl: error: ")]  # (after the progress bar)
+    assert errors == [f"scipctl: error: {out / 'paper-s1-straight.sim.json'}: -o/--out: cannot write: No space left "
+                      "on device"] and r.stderr.rstrip("\n").endswith(errors[0])
+    assert list(out.iterdir()) == []
