@@ -47,14 +47,21 @@ def test_unwritable_output_exits_2_before_the_work(ro, args, option):
     assert "cannot write here" in r.stderr and list(ro.iterdir()) == []
 
 
-def test_a_write_that_fails_late_is_exit_2_too(tmp_path, monkeypatch):
-    """os.access allowed it (it can: NFS, ACLs), the write itself failed: the same one line, nothing left."""
+def _lying_folder_and_small_table(tmp_path, monkeypatch):
+    """A folder os.access calls writable whose writes fail (tests/io/readonly_fs.py, access_lies), and the first 400
+    rows of the evidence table (fit-trust in a second)."""
     d = tmp_path / "lies"
     d.mkdir()
     make_read_only(monkeypatch, d, access_lies=True)
     small = tmp_path / "small.jsonl.gz"
     lines = gzip.decompress(TABLE.read_bytes()).splitlines()[:400]
     small.write_bytes(gzip.compress(b"\n".join(lines) + b"\n"))
+    return d, small
+
+
+def test_a_write_that_fails_late_is_exit_2_too(tmp_path, monkeypatch):
+    """os.access allowed it (it can: NFS, ACLs), the write itself failed: the same one line, nothing left."""
+    d, small = _lying_folder_and_small_table(tmp_path, monkeypatch)
     r = runner.invoke(app, ["fit-trust", str(small), "-o", str(d / "m.json")])
     _one_line_exit_2(r, d / "m.json", "-o")
     assert list(d.iterdir()) == []
@@ -94,12 +101,7 @@ def test_check_output_paths(tmp_path, monkeypatch):
 def test_fit_trust_writes_its_model_and_report_together(tmp_path, monkeypatch):
     """--report's folder refuses the write only when it is made (os.access said yes): the model, whose folder is
     fine, is not written either (before, it was, and the command exited 2 with half its output in place)."""
-    d = tmp_path / "lies"
-    d.mkdir()
-    make_read_only(monkeypatch, d, access_lies=True)
-    small = tmp_path / "small.jsonl.gz"
-    lines = gzip.decompress(TABLE.read_bytes()).splitlines()[:400]
-    small.write_bytes(gzip.compress(b"\n".join(lines) + b"\n"))
+    d, small = _lying_folder_and_small_table(tmp_path, monkeypatch)
     r = runner.invoke(app, ["fit-trust", str(small), "-o", str(tmp_path / "m.json"), "--report", str(d / "r.json")])
     _one_line_exit_2(r, d / "r.json", "--report")
     assert list(d.iterdir()) == [] and sorted(p.name for p in tmp_path.iterdir()) == ["lies", "small.jsonl.gz"]
