@@ -167,9 +167,10 @@ def synth(scenario: str, seed: int, out: Path, container: str, runs: Optional[st
 
     out = check_output_dir(out, "-o/--out")
     for run_name in selected:  # each run's files (a folder in the way of one): said before the work
-        check_output_file(out / f"{scenario}-{run_name}.sim.json", "-o/--out")
+        downlink_path, record_path = run_paths(out, scenario, run_name, container)
+        check_output_file(record_path, "-o/--out")
         if container == "mcap":
-            check_output_file(out / f"{scenario}-{run_name}.mcap", "-o/--out")
+            check_output_file(downlink_path, "-o/--out")
     if error_draw < 0:
         raise InputError("synth", "--error-draw", f"{error_draw}: want an integer >= 0")
     if error_draw and no_errors:
@@ -261,6 +262,12 @@ def _check_scale(scale: float, sim_rover) -> None:
                                  f"{scale:g}: {name} {spec.width} x {spec.height} x scale is not whole")
 
 
+def run_paths(out: Path, scenario: str, run_name: str, container: str) -> tuple[Path, Path]:
+    """``(downlink, truth record)`` that ``synth`` writes for one run into ``out``."""
+    name = f"{scenario}-{run_name}"
+    return out / (f"{name}.mcap" if container == "mcap" else name), out / f"{name}.sim.json"
+
+
 def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, no_errors: bool,
                image_scale: float = 1.0, supersample: int = 2, show_progress: bool = True,
                rover=None, texture=None, extra_args: str = "", family=None, error_draw: int = 0) -> list[dict]:
@@ -302,7 +309,7 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                 errors = default_errors(scenario)
             sim = build_run(scenario, run_name, seed, errors=errors, image_scale=image_scale, supersample=supersample, progress=cb,
                             rover=rover, texture=texture, family=family, error_draw=error_draw)
-            path = out / (f"{name}.mcap" if container == "mcap" else name)
+            path, rec_path = run_paths(out, scenario, run_name, container)
             bar.update(task, description=f"{name}: writing {path.name}")
             rec = dict(sim.record)
             from .. import __version__
@@ -311,7 +318,6 @@ def synthesize(scenario: str, seed: int, out: Path, container: str, runs: list, 
                                  "regenerate": regenerate_command(scenario, seed, container, run_name, no_errors,
                                                                  image_scale, supersample, extra_args)}
             rec["no_errors"] = bool(no_errors)
-            rec_path = out / f"{name}.sim.json"
             # the downlink and its truth record together: the record is staged first and goes in after the
             # downlink (itself written atomically); a failed downlink write leaves neither
             with output_group() as outputs:

@@ -236,21 +236,36 @@ def _sync_tree(root: Path) -> None:
 
 
 @contextlib.contextmanager
+def _staged_file(path: Path):
+    """Yield ``(file, temporary)``: a binary file open for writing under a temporary name beside ``path`` (stale
+    temporaries in that folder removed first, :func:`remove_stale_temporaries`). When the block ends without an
+    error the bytes are on the disk (fsync) and the file has the permissions ``open()`` would give; on an error the
+    temporary is removed. Nothing replaces ``path`` here."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)  # a valid name
+    try:
+        with os.fdopen(fd, "wb") as f:
+            yield f, Path(tmp)
+            f.flush()
+            os.fsync(f.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the permissions open() would
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+
+
+@contextlib.contextmanager
 def atomic_open(path):
     """Yield a binary file open for writing; on success it replaces ``path``, on error it is removed. Stale
     temporaries in ``path``'s folder are removed first (:func:`remove_stale_temporaries`). The file's bytes reach
     the disk (fsync) before the rename, and the rename before this returns (the folder's fsync): after a power cut
     ``path`` is the old file or the whole new one, never an empty one."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(path.parent)
-    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)  # a valid name
+    with _staged_file(path) as (f, tmp):
+        yield f
     try:
-        with os.fdopen(fd, "wb") as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the permissions open() would
         os.replace(tmp, path)
         _sync_folder(path.parent)
     except BaseException:
@@ -277,20 +292,11 @@ class OutputGroup:
 
         path = Path(path)
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            remove_stale_temporaries(path.parent)
-            fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(path), suffix=".tmp", dir=path.parent)
-        except OSError as e:
-            raise InputError(str(path), option, f"cannot write: {e.strerror or e}") from None
-        self.staged.append((Path(tmp), path))
-        try:
-            with os.fdopen(fd, "wb") as f:
+            with _staged_file(path) as (f, tmp):
                 f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-            os.chmod(tmp, 0o666 & ~_umask())
         except OSError as e:
             raise InputError(str(path), option, f"cannot write: {e.strerror or e}") from None
+        self.staged.append((tmp, path))
 
     def add_text(self, path, text: str, option: str = "-o") -> None:
         self.add_bytes(path, text.encode("utf-8"), option)
