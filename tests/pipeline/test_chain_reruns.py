@@ -139,6 +139,43 @@ def test_chains_scored_again_keep_the_drives_rule_they_ran_with(camp):
         fct.chain_scores([str(camp)], {"always": always})
 
 
+def _step_model_file(tmp_path, **change):
+    """The packaged step model's file with ``change`` applied to its fields, in ``tmp_path``."""
+    d = json.loads((ROOT / "scipctl/data/step_trust_model.json").read_text())
+    d.update(change)
+    path = tmp_path / "step_model.json"
+    path.write_text(json.dumps(d))
+    return path
+
+
+def test_chains_scored_again_by_another_step_model(camp, tmp_path, capsys):
+    """docs/scripts/chain_trust_rescore.py: the model the chains ran with gives every step's p and GO and the verdict
+    back; a model that is more confident raises every tracking step's p, the hazcam handoff's (scip's times its
+    input's) and the closure's through its reference's p."""
+    rs = load("chain_trust_rescore")
+    same = tmp_path / "same.jsonl"
+    model = ROOT / "scipctl/data/step_trust_model.json"
+    assert rs.main(["run", str(camp), "-o", str(same), "--step-model", str(model)]) == 0
+    assert json.loads(capsys.readouterr().err) == {"chains": 2, "reproduced": 2, "moved": 0}
+    rows = {r["target"]: r for r in map(json.loads, same.read_text().splitlines())}
+    assert all(r["new"] == r["recorded"] for r in rows.values())
+    s = rs.score(list(rows.values()))
+    assert s["all"]["new"] == s["all"]["recorded"] and s["all"]["recorded"]["chains"] == 2
+
+    sure = tmp_path / "sure.jsonl"
+    d = json.loads(model.read_text())
+    bolder = _step_model_file(tmp_path, intercept=d["intercept"] + 3.0)
+    assert rs.main(["run", str(camp), "-o", str(sure), "--step-model", str(bolder)]) == 0
+    for r in map(json.loads, sure.read_text().splitlines()):
+        kinds, old, new = r["kinds"], r["recorded"]["steps_p"], r["new"]["steps_p"]
+        tracking = [i for i, k in enumerate(kinds) if not k.startswith("hazcam") and not k.endswith("designate")]
+        assert tracking and all(new[i] > old[i] for i in tracking if r["steps_answered"][i])
+        assert new[0] == old[0]  # the designation's p is its own model's
+        fin = max(i for i, k in enumerate(kinds) if k.startswith("hazcam"))
+        assert r["new"]["final_p"] is not None and r["new"]["final_p"] > r["recorded"]["final_p"]
+        assert new[fin] == r["new"]["final_p"]
+
+
 def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, capsys):
     """Today's chains carry designate's trust on step 0: the script's designate gives it back, and the verdict
     with it is the recorded one. A record made before the designation was scored (its trust stripped) is taken as
@@ -184,6 +221,9 @@ def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, caps
     ("closure_references", ["score", "{tmp}/missing.jsonl"]),
     ("designation_in_chains", ["run", "{tmp}", "{tmp}/o.jsonl"]),
     ("designation_in_chains", ["score", "{tmp}/missing.jsonl"]),
+    ("chain_trust_rescore", ["run", "{tmp}", "-o", "{tmp}/o.jsonl", "--step-model", "scipctl/data/step_trust_model.json"]),
+    ("chain_trust_rescore", ["run", "{camp}", "-o", "{tmp}/o.jsonl", "--step-model", "{tmp}/missing.json"]),
+    ("chain_trust_rescore", ["score", "{tmp}/missing.jsonl"]),
 ])
 def test_bad_input_is_refused_with_exit_2_and_nothing_written(script, args, camp, tmp_path, capsys):
     argv = [a.replace("{tmp}", str(tmp_path)).replace("{camp}", str(camp)) for a in args]
