@@ -25,6 +25,27 @@ MEDIAN_FIND_PLACE_PX = 2.0
 VO_SCALE_MATCH_MIN = 1.5
 
 
+@dataclasses.dataclass
+class _Candidate:
+    """One candidate of :func:`feature_track`: a coarse position and the NCC that refined it. ``loc``: the
+    :class:`~scipctl.core.features.FeatureLocation` (feature match or visual odometry; its ``uv`` in new pixels);
+    ``track``: the :class:`~scipctl.core.tracking.TrackResult` of the template around it (its peak decides
+    confirmation, pooling and the trust evidence); ``plane``: index of its view normal; ``reach``: its keypoint
+    reach (0: the visual-odometry candidate); ``factor``: the feature step factor it was found at;
+    ``relief_kept``: the fraction of the template the relief mask kept (None: no mask); ``masked``: whether the
+    mask was applied; ``place_uv``: the pixel it answers with (the peak, or the peak placed by the template's
+    centre, ``ChainParams.ncc_place_half_px``)."""
+
+    loc: object
+    track: object
+    plane: int
+    reach: float
+    factor: float
+    relief_kept: object
+    masked: bool
+    place_uv: np.ndarray
+
+
 def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, n_site, pred_uv, scale: float,
                   half: int, feats: dict, params, new_stereo=None, vo=None, surface=None):
     """Track the target from ``prev`` into ``prod`` guided by features; ``(TrackResult or None, info dict)``.
@@ -140,11 +161,11 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         if place_half is not None and crop is None:  # (no filtered crop: ChainParams.check refuses the two together)
             place_uv = place_with_centre(tr, tpl, img, loc.uv - (cc - half), place_half, params.ncc_place_radius_px,
                                          keep).uv
-        cands.append((loc, tr, k, reach, factor, kept, keep is not None, place_uv))
+        cands.append(_Candidate(loc, tr, k, reach, factor, kept, keep is not None, place_uv))
 
     def confirmed(cd):
-        loc, tr = cd[0], cd[1]
-        return tr.ok and np.all(np.isfinite(tr.uv)) and np.linalg.norm(tr.uv - loc.uv) <= params.feature_confirm_px
+        tr = cd.track
+        return tr.ok and np.all(np.isfinite(tr.uv)) and np.linalg.norm(tr.uv - cd.loc.uv) <= params.feature_confirm_px
 
     for factor in params.feature_step_factors:
         if any(confirmed(cd) for cd in cands):
@@ -202,36 +223,37 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     # none confirmed -> the inlier-weighted geometric median of the feature matches (reported as such).
     good = [cd for cd in cands if confirmed(cd)]
     if good:
-        best = max(good, key=lambda cd: (cd[1].score, -cd[2], cd[3], cd[4]))
-        near = [cd for cd in good if np.linalg.norm(cd[1].uv - best[1].uv) <= params.feature_agree_px]
-        w = np.array([max(cd[1].score, 1e-3) for cd in near])
-        found_uv = (w[:, None] * np.array([cd[1].uv for cd in near])).sum(0) / w.sum()
-        uv = (w[:, None] * np.array([cd[7] for cd in near])).sum(0) / w.sum()
-        loc, tr, k, reach, factor, kept, masked, _ = best
+        best = max(good, key=lambda cd: (cd.track.score, -cd.plane, cd.reach, cd.factor))
+        near = [cd for cd in good if np.linalg.norm(cd.track.uv - best.track.uv) <= params.feature_agree_px]
+        w = np.array([max(cd.track.score, 1e-3) for cd in near])
+        found_uv = (w[:, None] * np.array([cd.track.uv for cd in near])).sum(0) / w.sum()
+        uv = (w[:, None] * np.array([cd.place_uv for cd in near])).sum(0) / w.sum()
+        winner = best
         info["feature_status"] = "confirmed"
         info["feature_pooled"] = len(near)
-        out = TrackResult(True, "", uv, best[1].score, best[1].second_score, best[1].ratio, best[1].sharpness,
-                          best[1].levels)
+        bt = best.track
+        out = TrackResult(True, "", uv, bt.score, bt.second_score, bt.ratio, bt.sharpness, bt.levels)
     else:
-        pts = np.array([cd[0].uv for cd in cands])
-        w = np.array([max(cd[0].n_inliers, 1) for cd in cands], float)
+        pts = np.array([cd.loc.uv for cd in cands])
+        w = np.array([max(cd.loc.n_inliers, 1) for cd in cands], float)
         uv = found_uv = geometric_median(pts, w)
-        loc, tr, k, reach, factor, kept, masked, _ = min(cands, key=lambda cd: (np.linalg.norm(cd[0].uv - uv),
-                                                                            -cd[0].n_inliers))
+        winner = min(cands, key=lambda cd: (np.linalg.norm(cd.loc.uv - uv), -cd.loc.n_inliers))
         info["feature_status"] = "unconfirmed"
         info["feature_pooled"] = len(cands)
         # the NCC peak found elsewhere is not this position's score: recorded in info only
         out = TrackResult(True, "", uv, float("nan"), float("nan"), float("nan"), float("nan"), 0)
+    loc, tr = winner.loc, winner.track
     info.update({"feature_inliers": loc.n_inliers, "feature_local_inliers": loc.n_local_inliers,
-                 "feature_matches": loc.n_matches, "feature_reach": reach, "feature_plane": k,
-                 "feature_candidates": len(cands), "feature_confirmed": len(good), "feature_step_factor": factor,
-                 **({"feature_vo": bool(reach == 0.0)} if vo is not None else {}),
+                 "feature_matches": loc.n_matches, "feature_reach": winner.reach, "feature_plane": winner.plane,
+                 "feature_candidates": len(cands), "feature_confirmed": len(good),
+                 "feature_step_factor": winner.factor,
+                 **({"feature_vo": bool(winner.reach == 0.0)} if vo is not None else {}),
                  "feature_shift_px": float(np.linalg.norm(found_uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
     if prod.camera in params.ncc_place_half_px and good:
-        info["ncc_placed_uv"] = best[7].tolist() if np.all(np.isfinite(best[7])) else None
+        info["ncc_placed_uv"] = best.place_uv.tolist() if np.all(np.isfinite(best.place_uv)) else None
     if relief:
-        info.update({"relief_kept": _f(kept), "relief_masked": masked})
+        info.update({"relief_kept": _f(winner.relief_kept), "relief_masked": winner.masked})
     return out, info
 
 
