@@ -36,7 +36,7 @@ def rescore(steps: list, step_model, closure_model, max_drives: int) -> list:
     ``closure_model`` for an adopted closure), as ``run_chain`` scores a chain it made."""
     import copy
 
-    from scipctl.pipeline.chain import closure_reference_within
+    from scipctl.pipeline.chain import closure_go
     from scipctl.pipeline.chain_closure import closure_evidence
     from scipctl.pipeline.chain_trust import advice_for, score_hazcam_handoffs, score_steps
 
@@ -61,8 +61,8 @@ def rescore(steps: list, step_model, closure_model, max_drives: int) -> list:
         cl = adopted.extra["closure"]
         p = float(closure_model.probability([closure_evidence(steps, cl)])[0])
         adopted.p_success = p
-        adopted.go = bool(adopted.ok and p >= closure_model.go_min_p
-                          and closure_reference_within(steps, cl.get("reference_step"), max_drives))
+        adopted.go = closure_go(bool(adopted.ok), p, closure_model.go_min_p, steps, cl.get("reference_step"),
+                                max_drives)[0]
         steps[final] = adopted
         adopted.advice = None if adopted.go else advice_for(steps, final)
     return steps

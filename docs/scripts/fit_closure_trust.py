@@ -143,7 +143,7 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
     or GO back, or when ``max_drives`` is not an integer >= 0."""
     from campaign_chains import auc, campaign_chains
     from scipctl.core.closure_trust import ClosureEvidence
-    from scipctl.pipeline.chain import ChainParams, ChainStep, closure_reference_within
+    from scipctl.pipeline.chain import ChainParams, ChainStep, closure_go
     from scipctl.pipeline.chain_trust import chain_verdict
     from scipctl.pipeline.closure_trust_fit import SUCCESS_PX, closure_row
 
@@ -162,7 +162,7 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
         row = closure_row(rec, fam, name) if fin is not None and fin["extra"].get("answer") == "closure" else None
         if row is not None:  # each model's p and GO go into the same steps before the verdict
             steps = [ChainStep.from_dict(d) for d in st]
-            within = closure_reference_within(steps, fin["extra"]["closure"].get("reference_step"), max_drives)
+            ref_step = fin["extra"]["closure"].get("reference_step")
         for n in names:
             if row is None:
                 res[n]["p"].append(0.0 if fin is None or fin["p_success"] is None else float(fin["p_success"]))
@@ -170,9 +170,7 @@ def chain_scores(campaigns: list, models: dict, max_drives=None) -> dict:
                 continue
             m = models[n]
             p = float(m.probability([ClosureEvidence.from_dict(row.evidence)])[0])
-            # as run_chain's _adopt_closure: GO needs point stereo at the closure's pixel (the step's ok) too, and a
-            # reference no more than max_drives drives from the designation
-            go = bool(fin["ok"]) and bool(p >= m.go_min_p) and within
+            go = closure_go(bool(fin["ok"]), p, m.go_min_p, steps, ref_step, max_drives)[0]  # as run_chain's
             if n == names[0] and (abs(p - float(fin["p_success"])) > 1e-9 or go != bool(fin["go"])):
                 raise ValueError(f"{name} {rec.get('target')}: model {n!r} gives p {p} (GO {go}), the record "
                                  f"{fin['p_success']} (GO {fin['go']}): not the model the chains ran with")

@@ -729,21 +729,28 @@ def _adopt_closure(dl: Downlink, steps: list, final: int, make_step, params: Cha
         new.p_success, new.go = None, False
     else:
         p = float(model.probability([closure_evidence(steps, cl)])[0])
-        new.p_success, new.go = p, bool(ok and p >= model.go_min_p)
-        if new.go and not closure_reference_within(steps, cl.get("reference_step"), params.closure_go_max_drives):
-            new.go = False
-            drives = reference_drives(steps, cl.get("reference_step"))
-            note = (f"the closure's reference is {drives} drives from the designation, beyond the closure model's "
-                    f"{params.closure_go_max_drives} (its p does not see the drift of the tracks between)")
+        new.p_success = p
+        new.go, note = closure_go(ok, p, model.go_min_p, steps, cl.get("reference_step"),
+                                  params.closure_go_max_drives)
+        if note:
             new.reason = f"{new.reason}; {note}" if new.reason else note
     steps[final] = new
 
 
-def closure_reference_within(steps: list, reference_step, max_drives: int) -> bool:
-    """The drives rule of a closure's GO (``ChainParams.closure_go_max_drives``): its reference is a step no more
-    than ``max_drives`` drives from the designation (:func:`reference_drives`)."""
+def closure_go(stereo_ok: bool, p_success: float, go_min_p: float, steps: list, reference_step,
+               max_drives: int) -> tuple[bool, str]:
+    """The GO rule of an adopted closure, the one place it is spelled (the chain's ``_adopt_closure`` and the
+    measurement scripts that score recorded chains again call it): ``(go, note)``. GO needs point stereo at the
+    closure's pixel (``stereo_ok``), ``p_success >= go_min_p`` (the closure model's threshold) and a reference step
+    no more than ``max_drives`` drives from the designation (``ChainParams.closure_go_max_drives``,
+    :func:`reference_drives`). ``note`` is non-empty only when the drives rule alone turned a GO down, and says so."""
+    if not (stereo_ok and p_success >= go_min_p):
+        return False, ""
     drives = reference_drives(steps, reference_step)
-    return drives is not None and drives <= max_drives
+    if drives is not None and drives <= max_drives:
+        return True, ""
+    return False, (f"the closure's reference is {drives} drives from the designation, beyond the closure model's "
+                   f"{max_drives} (its p does not see the drift of the tracks between)")
 
 
 def reference_drives(steps: list, reference_step) -> Optional[int]:

@@ -566,6 +566,26 @@ def test_reference_drives_counts_the_stops_between():
     assert reference_drives(steps, None) is None and reference_drives(steps, 5) is None
 
 
+def test_closure_go_needs_stereo_the_threshold_and_a_near_reference():
+    """The closure's GO rule (one function for the chain and the rescoring scripts): each condition alone turns it
+    down, and only the drives rule says why (the other two are the step's own reason and p)."""
+    from scipctl.pipeline.chain import ChainStep, closure_go
+
+    def st(pos):
+        return ChainStep(tuple(pos), "pancam", "p", "track", None, None, None, None, None, None, None, None, None,
+                         True)
+
+    steps = [st((1, 0)), st((1, 1)), st((1, 2)), st((1, 3))]  # the references at 0, 1, 2, 3 drives
+    assert closure_go(True, 0.98, 0.97, steps, 1, 1) == (True, "")
+    assert closure_go(True, 0.97, 0.97, steps, 1, 1) == (True, "")  # the threshold itself is GO
+    assert closure_go(False, 0.99, 0.97, steps, 1, 1) == (False, "")  # no point stereo at the closure's pixel
+    assert closure_go(True, 0.969, 0.97, steps, 1, 1) == (False, "")
+    go, note = closure_go(True, 0.99, 0.97, steps, 2, 1)
+    assert not go and "2 drives" in note and "beyond the closure model's 1" in note
+    go, note = closure_go(True, 0.99, 0.97, steps, None, 3)  # no reference step: never GO
+    assert not go and "None drives" in note
+
+
 def test_chain_params_refuse_an_unknown_answer():
     with pytest.raises(ValueError, match="ChainParams.answer"):
         ChainParams(answer="scip").check()
