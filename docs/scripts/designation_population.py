@@ -5,7 +5,7 @@
 For every marked target of every downlink, designates at its mark in the first two left pancam and navcam images
 whose right image is marked too (``scipctl designate`` without the normal), and compares the point with ideal
 point stereo: the two marks triangulated with the same downlinked models. One JSON row per designation with a
-stereo point: family, downlink, target, product, camera, the match evidence
+stereo point: family, downlink, target, product, camera, the match evidence (with the window range gap)
 (:class:`~scipctl.pipeline.designation_trust.DesignationEvidence`), range, range sigma and the error in percent
 of the ideal range. Rows are appended in the order given (deterministic).
 """

@@ -679,8 +679,12 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
 
         designation_model = load_packaged_trust_model(PACKAGED_DESIGNATION)
     if designation_model is not None:
+        from .designate import with_window_range_gap
         from .designation_trust import assess
 
+        if "window_gap_pct" in {field for field, _ in designation_model.features.values()}:  # its dense stereo costs
+            designation = with_window_range_gap(designation, start, dl.stereo_pair(start),
+                                                params.stereo_window(start.camera))
         a = assess(designation_model, designation)
         steps[0].extra["designation"] = {"p_ok": a.p_ok, "go": a.go, "tolerance_pct": a.tolerance_pct,
                                          "go_min_p": a.go_min_p, "veto": a.veto}

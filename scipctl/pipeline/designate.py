@@ -27,7 +27,7 @@ UNKNOWN_HEADING_WARNING = "the rover's heading is unknown (a position-only pose)
 #: optional ones only when present: the stereo result when the match is good, the surface normal when computed)
 _KNOWN_KEYS = ("id", "product_id", "right_product_id", "camera", "position", "pixel_uv", "band_px", "ok", "reason",
                "match_score", "match_ratio", "uv_right", "epipolar_offset_px", "warnings",
-               "xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose",
+               "xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose", "window_range_gap_pct",
                "surface_normal_rover", "normal_points", "incidence_deg", "p_ok", "ok_tolerance_pct", "go",
                "designated_from", "provenance")
 
@@ -68,6 +68,8 @@ class Designation:
     range_sigma_m: Optional[float] = None
     ray_miss_m: Optional[float] = None
     pose: Optional[dict] = None  # {position_m, orientation_wxyz, source}
+    # point stereo's range against dense stereo's over the window, % of the range (core/window_ranges.py; None: none)
+    window_range_gap_pct: Optional[float] = None
     # the surface normal (written when normal_points is set; incidence_deg only when there is a normal)
     surface_normal_rover: Optional[tuple] = None
     normal_points: Optional[int] = None
@@ -97,6 +99,8 @@ class Designation:
             d.update({"xyz_rover_m": _list(self.xyz_rover_m), "xyz_site_m": list(self.xyz_site_m),
                       "range_m": self.range_m, "range_sigma_m": self.range_sigma_m, "ray_miss_m": self.ray_miss_m,
                       "pose": self.pose})
+            if self.window_range_gap_pct is not None:
+                d["window_range_gap_pct"] = self.window_range_gap_pct
         if self.normal_points is not None:
             d["surface_normal_rover"] = _list(self.surface_normal_rover)
             d["normal_points"] = self.normal_points
@@ -137,6 +141,7 @@ class Designation:
             warnings=tuple(warnings or ()),
             xyz_rover_m=r.vector("xyz_rover_m", 3), xyz_site_m=r.vector("xyz_site_m", 3), range_m=r.number("range_m"),
             range_sigma_m=r.number("range_sigma_m"), ray_miss_m=r.number("ray_miss_m"), pose=r.mapping("pose"),
+            window_range_gap_pct=r.number("window_range_gap_pct"),
             surface_normal_rover=r.vector("surface_normal_rover", 3), normal_points=r.integer("normal_points"),
             incidence_deg=r.number("incidence_deg"), p_ok=r.number("p_ok"),
             ok_tolerance_pct=r.number("ok_tolerance_pct"), go=r.flag("go"), designated_from=r.text("designated_from"),
@@ -247,9 +252,52 @@ def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, ban
                          "orientation_wxyz": left.pose.orientation_wxyz.tolist(), "source": left.pose.source})
 
 
+def designation_dense_stereo(L, R, left: ImageProduct, right: ImageProduct, range_m: float):
+    """Full-resolution dense stereo of the pair ``L``, ``R`` (float images of ``left``, ``right``) over the ranges
+    around a designation at ``range_m`` (0.5x to 2x + 1 m, at least 0.3 m): the surface normal's points and the
+    window range gap's (:func:`window_range_gap_pct`) come from it. Raises what dense stereo raises."""
+    from ..core.dense_stereo import dense_stereo
+
+    return dense_stereo(L, R, left.camera_model, right.camera_model,
+                        min_range_m=max(0.3, 0.5 * range_m), max_range_m=2.0 * range_m + 1.0)
+
+
+def window_range_gap_pct(ds, left: ImageProduct, uv, window_px: int, range_m: float) -> Optional[float]:
+    """The designation's window range gap in percent of ``range_m`` (:func:`~scipctl.core.window_ranges.
+    window_range_gap`): point stereo's range against the median of dense stereo ``ds``'s ranges (from the left
+    camera's ``C``) over the ``window_px`` window around ``uv`` in ``left``; None when too few window pixels have a
+    dense range."""
+    from ..core.window_ranges import window_pixels, window_range_gap
+
+    pix = window_pixels(uv, window_px)
+    inside = (pix[:, 0] >= 0) & (pix[:, 1] >= 0) & (pix[:, 0] <= left.width - 1) & (pix[:, 1] <= left.height - 1)
+    if not inside.any():
+        return None
+    xyz = ds.xyz_at_left_uv(pix[inside])
+    gap, _ = window_range_gap(np.linalg.norm(xyz - left.camera_model.C, axis=1), float(range_m))
+    return None if not math.isfinite(gap) else round(100.0 * gap, 4)
+
+
+def with_window_range_gap(rec: Designation, left: ImageProduct, right: ImageProduct, window_px: int) -> Designation:
+    """``rec`` (a designation with a 3-D point, made in ``left`` against ``right`` with window ``window_px``) with its
+    ``window_range_gap_pct`` from :func:`designation_dense_stereo`, as :func:`designate` measures it (unchanged when
+    ``rec`` has no point; None when dense stereo fails): the chain's designation step, scored as ``designate``'s."""
+    if not rec.has_position or rec.range_m is None:
+        return rec
+    try:
+        ds = designation_dense_stereo(left.pixels_float(), right.pixels_float(), left, right, float(rec.range_m))
+    except Exception:  # evidence only: without it the trust model takes its training mean
+        return replace(rec, window_range_gap_pct=None)
+    return replace(rec, window_range_gap_pct=window_range_gap_pct(ds, left, rec.pixel_uv, window_px, rec.range_m))
+
+
 def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
               params: Optional[PointStereoParams] = None, trust=None) -> Designation:
     """Point stereo at ``uv`` in ``left``; returns the :class:`Designation` (raises InputError).
+
+    When the match is good, dense stereo of the pair around its range (:func:`designation_dense_stereo`) gives the
+    window range gap (``window_range_gap_pct``, evidence for the trust model) and, ``with_normal``, the surface
+    normal.
 
     ``params``: the per-camera band and window (default :class:`PointStereoParams`, checked; an operator's
     ``--band-px`` is :meth:`PointStereoParams.with_band`). ``trust``: the designation trust model
@@ -277,17 +325,18 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
     if sigma_yaw is not None and sigma_yaw >= math.pi:
         warnings.append(UNKNOWN_HEADING_WARNING)
     X_rover = np.asarray(ps.xyz, float)
+    ds, ds_error = None, None
+    try:  # dense stereo is evidence and a diagnostic here; the designation stands without it
+        ds = designation_dense_stereo(L, R, left, right, float(ps.range_m))
+    except Exception as e:
+        ds_error = str(e)
+    rec = replace(rec, window_range_gap_pct=None if ds is None else window_range_gap_pct(ds, left, uv, win, ps.range_m))
     if with_normal:
-        from ..core.dense_stereo import dense_stereo
-
-        try:
-            ds = dense_stereo(L, R, left.camera_model, right.camera_model,
-                              min_range_m=max(0.3, 0.5 * ps.range_m), max_range_m=2.0 * ps.range_m + 1.0)
-            xyz = ds.xyz.reshape(-1, 3)
-            n, npts = surface_normal(xyz, X_rover, radius_m=max(0.05, 0.02 * ps.range_m))
-        except Exception as e:  # dense stereo is a diagnostic here; the designation stands without it
+        if ds is not None:
+            n, npts = surface_normal(ds.xyz.reshape(-1, 3), X_rover, radius_m=max(0.05, 0.02 * ps.range_m))
+        else:
             n, npts = None, 0
-            warnings.append(f"no surface normal (dense stereo failed: {e})")
+            warnings.append(f"no surface normal (dense stereo failed: {ds_error})")
         incidence = None
         if n is None and npts < 10:
             warnings.append("no surface normal (too few dense-stereo points around the target)")

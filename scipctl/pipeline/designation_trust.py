@@ -48,6 +48,9 @@ FEATURES = {
     "log_epipolar_px": ("epipolar_abs_px", "log1p"),
     "log_ray_miss_mm": ("ray_miss_mm", "log1p"),
 }
+#: the same and the window range gap (core/window_ranges.py): the candidate of session 45 (fit script
+#: ``--with-window-gap``; docs/stereo-and-tracking.md, "The window range gap")
+FEATURES_WITH_WINDOW_GAP = dict(FEATURES, log_window_gap=("window_gap_pct", "log1p"))
 
 
 @dataclass(frozen=True)
@@ -61,6 +64,9 @@ class DesignationEvidence:
     navcam: float  # 1.0 for a navcam designation, 0.0 for pancam (other cameras: outside the fitted data)
     epipolar_abs_px: float
     ray_miss_mm: float
+    # |point range - median dense range over the window| in % of the range (core/window_ranges.py): a window that
+    # straddles a depth edge; NaN when not measured (rows and records made before it, too few dense pixels)
+    window_gap_pct: float = math.nan
 
     @classmethod
     def of(cls, rec) -> "DesignationEvidence":
@@ -70,7 +76,7 @@ class DesignationEvidence:
         w = tuple(rec.warnings or ())
         return cls(f(rec.match_score), f(rec.match_ratio), float(SATURATED_WARNING in w),
                    float(LOW_TEXTURE_WARNING in w), float(rec.camera == "navcam"), f(rec.epipolar_offset_px),
-                   f(rec.ray_miss_m, 1000.0))
+                   f(rec.ray_miss_m, 1000.0), f(getattr(rec, "window_range_gap_pct", None)))
 
     def to_dict(self) -> dict:
         return evidence_to_dict(self)
@@ -126,9 +132,11 @@ class DesignationRow:
     error_pct: float
 
 
-def _fit(rows: list[DesignationRow]) -> TrustModel:
-    """One logistic regression per tolerance."""
-    X = feature_matrix([r.evidence for r in rows], FEATURES)
+def _fit(rows: list[DesignationRow], features: Optional[dict] = None) -> TrustModel:
+    """One logistic regression per tolerance on ``features`` (name -> (evidence field, transform); default
+    :data:`FEATURES`)."""
+    features = dict(FEATURES if features is None else features)
+    X = feature_matrix([r.evidence for r in rows], features)
     fill, mean, scale = standardise(X)
     Z = np.clip((np.where(np.isfinite(X), X, fill) - mean) / scale, -CLIP_Z, CLIP_Z)
     err = np.array([r.error_pct for r in rows], float)
@@ -136,31 +144,33 @@ def _fit(rows: list[DesignationRow]) -> TrustModel:
     for tol in RADII_PCT:
         coef, b = fit_logistic(Z, err <= tol)
         fits.append(LogisticFit(float(tol), [round_sig(c) for c in coef], round_sig(b), 1.0))
-    return TrustModel(dict(FEATURES), [round_sig(v) for v in fill], [round_sig(v) for v in mean],
+    return TrustModel(features, [round_sig(v) for v in fill], [round_sig(v) for v in mean],
                       [round_sig(v) for v in scale], fits, clip_z=CLIP_Z)
 
 
-def held_out(rows: list[DesignationRow]) -> dict:
+def held_out(rows: list[DesignationRow], features: Optional[dict] = None) -> dict:
     """Leave one family out: per tolerance, ``[(family, p, error_pct)]`` with ``p`` from a model fitted on the
-    other families."""
+    other families (with ``features``, as :func:`_fit`)."""
     fams = sorted({r.family for r in rows})
     out = defaultdict(list)
     for fam in fams:
         train = [r for r in rows if r.family != fam] if len(fams) > 1 else rows
         test = [r for r in rows if r.family == fam]
-        m = _fit(train)
+        m = _fit(train, features)
         for tol in RADII_PCT:
             p = m.probability([r.evidence for r in test], tol)
             out[tol] += [(fam, float(pi), r.error_pct) for pi, r in zip(p, test)]
     return out
 
 
-def fit_designation_model(rows: list[DesignationRow], provenance: Optional[dict] = None) -> TrustModel:
-    """The model fitted on all ``rows``; each tolerance's GO threshold from leave-one-family-out answers."""
+def fit_designation_model(rows: list[DesignationRow], provenance: Optional[dict] = None,
+                          features: Optional[dict] = None) -> TrustModel:
+    """The model fitted on all ``rows`` with ``features`` (default :data:`FEATURES`); each tolerance's GO threshold
+    from leave-one-family-out answers."""
     if not rows:
         raise ValueError("no designation row to fit on")
-    model = _fit(rows)
-    oof = held_out(rows)
+    model = _fit(rows, features)
+    oof = held_out(rows, features)
     for fit in model.fits:
         pairs = oof[fit.success_px]
         fit.go_min_p = GO_GRID[-1]
@@ -179,7 +189,7 @@ def fit_designation_model(rows: list[DesignationRow], provenance: Optional[dict]
 def report(rows: list[DesignationRow], model: TrustModel) -> dict:
     """Held-out figures per family and pooled at each tolerance: n, share within, Brier (and of the constant
     base rate), GO count, GO precision, miss recall (share of misses NO-GO), with the packaged GO thresholds."""
-    oof = held_out(rows)
+    oof = held_out(rows, model.features)
     out = {}
     for fit in model.fits:
         tol, t = fit.success_px, fit.go_min_p
