@@ -44,7 +44,7 @@ def rows_for(family: str, path: Path):
                 X_ideal_rover = triangulate_rays(oL[0], dL[0], oR[0], dR[0])[0]
                 r_ideal = float(np.linalg.norm(X_ideal_rover - im.camera_model.C))
                 err = float(np.linalg.norm(np.asarray(rec.xyz_rover_m) - X_ideal_rover))
-                yield {"family": family, "downlink": path.name, "target": t.id, "product_id": im.product_id,
+                yield {"family": family, "downlink": f"{path.parent.name}/{path.name}", "target": t.id, "product_id": im.product_id,
                        "camera": cam, "evidence": DesignationEvidence.of(rec).to_dict(), "range_m": rec.range_m,
                        "range_sigma_m": rec.range_sigma_m, "range_ideal_m": r_ideal, "error_pct": 100.0 * err / r_ideal}
 
