@@ -252,14 +252,39 @@ def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, ban
                          "orientation_wxyz": left.pose.orientation_wxyz.tolist(), "source": left.pose.source})
 
 
-def designation_dense_stereo(L, R, left: ImageProduct, right: ImageProduct, range_m: float):
+#: a match this far or farther from its epipolar curve: dense stereo on the pair re-aligned at it
+ALIGN_MIN_PX = 0.5
+
+
+def _range_interval(range_m: float) -> tuple:
+    return max(0.3, 0.5 * range_m), 2.0 * range_m + 1.0
+
+
+def match_offset_px(left: ImageProduct, right: ImageProduct, uv, uv_right, range_m: float) -> Optional[np.ndarray]:
+    """``(2,)`` px from the nearest point of left pixel ``uv``'s epipolar curve (ranges as
+    :func:`designation_dense_stereo`'s) to its match ``uv_right`` in ``right``; None when there is no match."""
+    from ..core.epipolar import epipolar_curve, polyline_foot
+
+    if uv_right is None or not np.all(np.isfinite(np.asarray(uv_right, float))):
+        return None
+    uv_right = np.asarray(uv_right, float)
+    curve, _ = epipolar_curve(left.camera_model, right.camera_model, np.asarray(uv, float), *_range_interval(range_m))
+    return uv_right - polyline_foot(curve, uv_right)[0]
+
+
+def designation_dense_stereo(L, R, left: ImageProduct, right: ImageProduct, range_m: float, shift_uv=None):
     """Full-resolution dense stereo of the pair ``L``, ``R`` (float images of ``left``, ``right``) over the ranges
     around a designation at ``range_m`` (0.5x to 2x + 1 m, at least 0.3 m): the surface normal's points and the
-    window range gap's (:func:`window_range_gap_pct`) come from it. Raises what dense stereo raises."""
+    window range gap's (:func:`window_range_gap_pct`) come from it; ``shift_uv`` ``(2,)``: the right image is
+    first translated by minus that (:func:`~scipctl.core.resample.shifted_image`). Raises what dense stereo raises."""
     from ..core.dense_stereo import dense_stereo
 
-    return dense_stereo(L, R, left.camera_model, right.camera_model,
-                        min_range_m=max(0.3, 0.5 * range_m), max_range_m=2.0 * range_m + 1.0)
+    if shift_uv is not None:
+        from ..core.resample import shifted_image
+
+        R = shifted_image(R, shift_uv)
+    lo, hi = _range_interval(range_m)
+    return dense_stereo(L, R, left.camera_model, right.camera_model, min_range_m=lo, max_range_m=hi)
 
 
 def window_range_gap_pct(ds, left: ImageProduct, uv, window_px: int, range_m: float) -> Optional[float]:
@@ -278,17 +303,38 @@ def window_range_gap_pct(ds, left: ImageProduct, uv, window_px: int, range_m: fl
     return None if not math.isfinite(gap) else round(100.0 * gap, 4)
 
 
+def measure_window_range_gap(L, R, left: ImageProduct, right: ImageProduct, uv, uv_right, range_m: float,
+                             window_px: int) -> tuple:
+    """``(dense stereo, window range gap %)`` of a designation at ``uv`` matched at ``uv_right`` with ``range_m``.
+
+    A pair whose downlinked models are off (the paper saw pancam matches up to ~4 px from their epipolar curves)
+    leaves rectified rows that do not meet, and SGBM, which searches along a row, then finds almost nothing
+    (measured: 2 % of a pancam pair valid at a 2.5 px offset, 64 % once re-aligned). So when the match sits
+    ``ALIGN_MIN_PX`` or more off its curve (:func:`match_offset_px`), dense stereo runs on the pair re-aligned as
+    the match says (the right image shifted so that the match lands on its curve); when that leaves the window too
+    few dense ranges (the match, and so its alignment, may be wrong), the gap is the pair's as downlinked. The
+    dense stereo returned is the first (the normal's points). Raises what dense stereo raises."""
+    off = match_offset_px(left, right, uv, uv_right, range_m)
+    shift = off if off is not None and float(np.linalg.norm(off)) >= ALIGN_MIN_PX else None
+    ds = designation_dense_stereo(L, R, left, right, range_m, shift_uv=shift)
+    gap = window_range_gap_pct(ds, left, uv, window_px, range_m)
+    if gap is None and shift is not None:
+        gap = window_range_gap_pct(designation_dense_stereo(L, R, left, right, range_m), left, uv, window_px, range_m)
+    return ds, gap
+
+
 def with_window_range_gap(rec: Designation, left: ImageProduct, right: ImageProduct, window_px: int) -> Designation:
     """``rec`` (a designation with a 3-D point, made in ``left`` against ``right`` with window ``window_px``) with its
-    ``window_range_gap_pct`` from :func:`designation_dense_stereo`, as :func:`designate` measures it (unchanged when
+    ``window_range_gap_pct`` from :func:`measure_window_range_gap`, as :func:`designate` measures it (unchanged when
     ``rec`` has no point; None when dense stereo fails): the chain's designation step, scored as ``designate``'s."""
     if not rec.has_position or rec.range_m is None:
         return rec
     try:
-        ds = designation_dense_stereo(left.pixels_float(), right.pixels_float(), left, right, float(rec.range_m))
+        _, gap = measure_window_range_gap(left.pixels_float(), right.pixels_float(), left, right, rec.pixel_uv,
+                                          rec.uv_right, float(rec.range_m), window_px)
     except Exception:  # evidence only: without it the trust model takes its training mean
-        return replace(rec, window_range_gap_pct=None)
-    return replace(rec, window_range_gap_pct=window_range_gap_pct(ds, left, rec.pixel_uv, window_px, rec.range_m))
+        gap = None
+    return replace(rec, window_range_gap_pct=gap)
 
 
 def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
@@ -325,12 +371,12 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
     if sigma_yaw is not None and sigma_yaw >= math.pi:
         warnings.append(UNKNOWN_HEADING_WARNING)
     X_rover = np.asarray(ps.xyz, float)
-    ds, ds_error = None, None
+    ds, ds_error, gap = None, None, None
     try:  # dense stereo is evidence and a diagnostic here; the designation stands without it
-        ds = designation_dense_stereo(L, R, left, right, float(ps.range_m))
+        ds, gap = measure_window_range_gap(L, R, left, right, uv, ps.uv_right, float(ps.range_m), win)
     except Exception as e:
         ds_error = str(e)
-    rec = replace(rec, window_range_gap_pct=None if ds is None else window_range_gap_pct(ds, left, uv, win, ps.range_m))
+    rec = replace(rec, window_range_gap_pct=gap)
     if with_normal:
         if ds is not None:
             n, npts = surface_normal(ds.xyz.reshape(-1, 3), X_rover, radius_m=max(0.05, 0.02 * ps.range_m))

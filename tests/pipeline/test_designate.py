@@ -131,6 +131,33 @@ def test_window_range_gap_is_small_where_the_window_is_one_surface(far, camera, 
     assert "window_range_gap_pct" not in replace(rec, window_range_gap_pct=None).to_dict()
 
 
+def test_a_pair_off_its_epipolar_geometry_is_realigned_at_the_match_for_the_window_gap(far):
+    """The right pancam image moved down 3 rows (a pair whose downlinked models are off by 3 px across the rows, as
+    the paper saw up to ~4 px on pancams): point stereo still matches within its 6 px band, 3 px off the curve;
+    dense stereo of the pair as downlinked has no range in the window (SGBM searches along rectified rows that no
+    longer meet); re-aligned at the match it has, and the gap is the one-surface gap within the same bound as an
+    aligned pair's (1 px of disparity, see the test above)."""
+    from scipctl.io.images import encode_png
+    from scipctl.pipeline.designate import designation_dense_stereo, window_range_gap_pct
+
+    _, dl = far
+    rid = "pancam_right_1_0"
+    out = []
+    for im in dl.images:
+        if im.product_id == rid:
+            px = np.concatenate([np.repeat(im.pixels[:1], 3, axis=0), im.pixels[:-3]])  # content 3 rows lower
+            im = replace(im, png=encode_png(px), _pixels=px)
+        out.append(im)
+    moved = replace(dl, images=out)
+    rec, left, _ = _designate_mark(moved, "pancam", "t_flat", with_normal=False)
+    assert rec.ok and 2.5 <= abs(rec.epipolar_offset_px) <= 3.5
+    right = moved.product(rid)
+    as_downlinked = designation_dense_stereo(left.pixels_float(), right.pixels_float(), left, right, rec.range_m)
+    assert window_range_gap_pct(as_downlinked, left, rec.pixel_uv, 21, rec.range_m) is None
+    assert rec.window_range_gap_pct is not None
+    assert rec.window_range_gap_pct <= 4.0 * 100.0 * rec.range_sigma_m / rec.range_m
+
+
 def test_too_few_dense_points_give_no_normal_and_a_warning(near):
     _, dl = near
     rec, _, _ = _designate_mark(dl, "hazcam", "t_slab")  # 256 px hazcam: dense stereo finds nothing near the target
