@@ -252,7 +252,8 @@ def designation_from_stereo(left: ImageProduct, right: ImageProduct, uv, ps, ban
                          "orientation_wxyz": left.pose.orientation_wxyz.tolist(), "source": left.pose.source})
 
 
-#: a match this far or farther from its epipolar curve: dense stereo on the pair re-aligned at it
+#: a match this far or farther from its epipolar curve, whose window the pair as downlinked gives no dense ranges:
+#: dense stereo on the pair re-aligned at it (measure_window_range_gap)
 ALIGN_MIN_PX = 0.5
 
 
@@ -307,19 +308,24 @@ def measure_window_range_gap(L, R, left: ImageProduct, right: ImageProduct, uv, 
                              window_px: int) -> tuple:
     """``(dense stereo, window range gap %)`` of a designation at ``uv`` matched at ``uv_right`` with ``range_m``.
 
-    A pair whose downlinked models are off (the paper saw pancam matches up to ~4 px from their epipolar curves)
-    leaves rectified rows that do not meet, and SGBM, which searches along a row, then finds almost nothing
-    (measured: 2 % of a pancam pair valid at a 2.5 px offset, 64 % once re-aligned). So when the match sits
-    ``ALIGN_MIN_PX`` or more off its curve (:func:`match_offset_px`), dense stereo runs on the pair re-aligned as
-    the match says (the right image shifted so that the match lands on its curve); when that leaves the window too
-    few dense ranges (the match, and so its alignment, may be wrong), the gap is the pair's as downlinked. The
-    dense stereo returned is the first (the normal's points). Raises what dense stereo raises."""
-    off = match_offset_px(left, right, uv, uv_right, range_m)
-    shift = off if off is not None and float(np.linalg.norm(off)) >= ALIGN_MIN_PX else None
-    ds = designation_dense_stereo(L, R, left, right, range_m, shift_uv=shift)
+    Dense stereo of the pair as downlinked first. A pair whose downlinked models are off (the paper saw pancam
+    matches up to ~4 px from their epipolar curves) leaves rectified rows that do not meet, and SGBM, which searches
+    along a row, then finds almost nothing (measured: 2 % of a pancam pair valid at a 2.5 px offset, 64 % once
+    re-aligned). So when the window has too few dense ranges and the match sits ``ALIGN_MIN_PX`` or more off its
+    curve (:func:`match_offset_px`), dense stereo runs again on the pair re-aligned as the match says (the right
+    image shifted so that the match lands on its curve). Only then: the alignment comes from the match the gap is to
+    judge, and a wrong match's offset re-aligns the pair to agree with it (seen once on the fitting rows: 27 % off,
+    gap 27 % as downlinked, 0.2 % re-aligned). The dense stereo returned is the one the gap came from (the normal's
+    points; the first when neither gave a gap). Raises what dense stereo raises."""
+    ds = designation_dense_stereo(L, R, left, right, range_m)
     gap = window_range_gap_pct(ds, left, uv, window_px, range_m)
-    if gap is None and shift is not None:
-        gap = window_range_gap_pct(designation_dense_stereo(L, R, left, right, range_m), left, uv, window_px, range_m)
+    if gap is None:
+        off = match_offset_px(left, right, uv, uv_right, range_m)
+        if off is not None and float(np.linalg.norm(off)) >= ALIGN_MIN_PX:
+            ds_aligned = designation_dense_stereo(L, R, left, right, range_m, shift_uv=off)
+            gap = window_range_gap_pct(ds_aligned, left, uv, window_px, range_m)
+            if gap is not None:
+                ds = ds_aligned
     return ds, gap
 
 
