@@ -8,8 +8,10 @@ evidence (:class:`DesignationEvidence`), of the same form as ``scip``'s (:class:
 trust_model.TrustModel`, evaluated in numpy): its radii are in **percent of the range** (0.5, 1, 2 %), not
 pixels. The tolerance an operator needs is ``DEFAULT_TOLERANCE_PCT`` (1 % of the range: 10 cm at 10 m).
 
-Fitted by ``docs/scripts/fit_designation_trust.py`` on ``tests/data/designation/`` (leave one family out for the
-GO threshold); packaged as ``scipctl/data/designation_model.json``.
+Fitted by ``docs/scripts/fit_designation_trust.py --with-window-gap`` on ``tests/data/designation/`` (leave one family
+out for the GO threshold); packaged as ``scipctl/data/designation_model.json``. Its features are
+:data:`FEATURES_WITH_WINDOW_GAP`: the match's own figures and the window range gap (point stereo's range against
+the median dense-stereo range over its window), which sees a window that straddles a depth edge.
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ FEATURES = {
     "log_epipolar_px": ("epipolar_abs_px", "log1p"),
     "log_ray_miss_mm": ("ray_miss_mm", "log1p"),
 }
-#: the same and the window range gap (core/window_ranges.py): the candidate of session 45 (fit script
+#: the same and the window range gap (core/window_ranges.py): the packaged model's since session 45 (fit script
 #: ``--with-window-gap``; docs/stereo-and-tracking.md, "The window range gap")
 FEATURES_WITH_WINDOW_GAP = dict(FEATURES, log_window_gap=("window_gap_pct", "log1p"))
 

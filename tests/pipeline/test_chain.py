@@ -812,33 +812,21 @@ def test_the_closure_can_start_from_the_pancam_at_the_navcam_point(dl, chains):
     assert via == (["t1"] if _stem(dl) == "paper-s1-straight" else [])
 
 
-def _with_window_gap(model, coef: float):
-    """``model`` (the packaged designation model) with the window range gap as one more feature of weight ``coef``
-    at every tolerance (standardised about a 1 % gap): a stand-in for a model fitted with it."""
-    from scipctl.core.handoff.trust_model import LogisticFit, TrustModel
-    from scipctl.pipeline.designation_trust import FEATURES_WITH_WINDOW_GAP
 
-    return TrustModel(dict(FEATURES_WITH_WINDOW_GAP), model.fill + [0.69], model.mean + [0.69], model.scale + [0.5],
-                      [LogisticFit(f.success_px, list(f.coef) + [coef], f.intercept, f.go_min_p) for f in model.fits],
-                      clip_z=model.clip_z)
+def test_the_chain_measures_the_window_range_gap_its_designation_model_uses(dl, chains):
+    """The packaged designation model uses the window range gap; the chain measures it as ``scipctl designate`` does
+    (the p above is the same) and does not leave it out: without the gap the model gives another p."""
+    from dataclasses import replace
 
-
-def test_a_designation_model_with_the_window_gap_scores_the_chain_as_designate_does():
-    """The chain measures the window range gap only for a model that uses it, from the same dense stereo as
-    ``scipctl designate``: the same p_ok. A heavier weight on the gap moves p (the feature is read)."""
     from scipctl.io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
     from scipctl.pipeline.designate import designate
+    from scipctl.pipeline.designation_trust import assess
 
-    dl = read_downlink(SAMPLES[0])
-    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
-    tid = sorted(EXPECTED_ERROR_PX[_stem(dl)])[0]
-    mk = dl.target(tid).mark_in(start.product_id)
-    packaged = load_packaged_trust_model(PACKAGED_DESIGNATION)
-    model = _with_window_gap(packaged, -2.0)
-    steps = run_chain(dl, start, [mk.u, mk.v], target_id=tid, params=HANDOFF, handoff_at="first",
-                      designation_model=model)
-    d = designate(dl, start, steps[0].tracked_uv, tid, with_normal=False, trust=model)
-    assert d.window_range_gap_pct is not None and d.window_range_gap_pct > 0
-    assert steps[0].p_success == d.p_ok and steps[0].go == d.go
-    plain = designate(dl, start, steps[0].tracked_uv, tid, with_normal=False, trust=packaged)
-    assert d.p_ok != plain.p_ok  # the gap moved p: the chain's p is not the packaged model's by accident
+    model = load_packaged_trust_model(PACKAGED_DESIGNATION)
+    assert "window_gap_pct" in {field for field, _ in model.features.values()}
+    moved = 0
+    for tid, steps in chains.items():
+        d = designate(dl, dl.product(steps[0].product_id), steps[0].tracked_uv, tid, with_normal=False, trust=model)
+        assert d.window_range_gap_pct is not None and steps[0].p_success == d.p_ok
+        moved += assess(model, replace(d, window_range_gap_pct=None)).p_ok != steps[0].p_success
+    assert moved == len(chains)

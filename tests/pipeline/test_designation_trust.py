@@ -30,10 +30,11 @@ def model():
 
 def test_the_packaged_model_is_reproduced_bit_for_bit_by_its_command(tmp_path, model):
     out = tmp_path / "m.json"
-    subprocess.run([sys.executable, str(ROOT / "docs" / "scripts" / "fit_designation_trust.py"), str(TABLE), "-o", str(out)],
-                   check=True, cwd=ROOT)
+    subprocess.run([sys.executable, str(ROOT / "docs" / "scripts" / "fit_designation_trust.py"), str(TABLE), "-o", str(out),
+                    "--with-window-gap"], check=True, cwd=ROOT)
     packaged = (ROOT / "scipctl" / "data" / PACKAGED_DESIGNATION).read_bytes()
     assert out.read_bytes() == packaged
+    assert model.provenance["command"].endswith("--with-window-gap")
     assert model.provenance["radius_unit"] == "percent of range"
     assert model.success_radii_px == (0.5, 1.0, 2.0)
 
@@ -47,7 +48,7 @@ def _rec(**kw):
 
 
 def test_a_clean_match_is_go_and_an_ambiguous_one_is_not(model):
-    clean = assess(model, _rec())
+    clean = assess(model, _rec(window_range_gap_pct=0.1))
     assert clean.go and clean.p_ok >= clean.go_min_p and clean.tolerance_pct == DEFAULT_TOLERANCE_PCT
     # the population's gross mismatches: score 0.6-0.8, second peak almost as high (ratio ~1.1), saturated window
     ambiguous = assess(model, _rec(match_score=0.65, match_ratio=1.1, warnings=("saturated pixels in the window",)))
@@ -55,6 +56,15 @@ def test_a_clean_match_is_go_and_an_ambiguous_one_is_not(model):
     # probabilities do not decrease with the tolerance
     ps = [assess(model, _rec(match_score=0.8, match_ratio=1.4), t).p_ok for t in (0.5, 1.0, 2.0)]
     assert ps == sorted(ps)
+
+
+def test_a_window_whose_dense_ranges_disagree_with_the_match_is_less_likely_right(model):
+    """The window range gap (core/window_ranges.py) is a feature of the packaged model: the same match is less likely
+    within 1 % the farther its window's median dense range is from the point (a clean match and a middling one)."""
+    assert "window_gap_pct" in {field for field, _ in model.features.values()}
+    for kw in ({}, {"match_score": 0.85, "match_ratio": 1.3}):
+        ps = [assess(model, _rec(window_range_gap_pct=g, **kw)).p_ok for g in (0.05, 0.5, 2.0, 10.0, 50.0)]
+        assert all(a > b for a, b in zip(ps, ps[1:])), ps
 
 
 def test_a_window_without_texture_is_no_go_whatever_its_p(model):
