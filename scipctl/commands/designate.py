@@ -94,8 +94,8 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
                             payload=None)  # the JSON record was already emitted above
 
 
-_RESULT_KEYS = ("xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose", "surface_normal_rover",
-                "normal_points", "incidence_deg", "p_ok", "ok_tolerance_pct", "go")
+_RESULT_KEYS = ("xyz_rover_m", "xyz_site_m", "range_m", "range_sigma_m", "ray_miss_m", "pose", "window_range_gap_pct",
+                "surface_normal_rover", "normal_points", "incidence_deg", "p_ok", "ok_tolerance_pct", "go")
 
 
 def _print(rec, saved_to):
@@ -114,6 +114,8 @@ def _print(rec, saved_to):
         t.add_row("trust", f"{'GO' if rec.go else 'NO-GO'}: P(within {rec.ok_tolerance_pct:g} % of the range) {p}")
     eo = rec.epipolar_offset_px
     t.add_row("epipolar offset (px)", "n/a" if eo is None else f"{eo:+.2f}")
+    gap = rec.window_range_gap_pct  # point stereo's range against the window's dense-stereo median
+    t.add_row("window range gap (% of range)", "n/a" if gap is None else f"{gap:.2f}")
     n = rec.surface_normal_rover
     t.add_row("surface normal (rover)", "n/a" if n is None else ", ".join(f"{x:+.2f}" for x in n))
     t.add_row("warnings", "; ".join(rec.warnings) or "none")

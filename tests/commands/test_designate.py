@@ -211,7 +211,7 @@ def test_a_failed_match_prints_strict_json(tmp_path):
     assert rec["ok"] is False and rec["saved_to"] is None and rec["uv_right"] in (None, [None, None])
     # the keys of a match's document are all there (a script reading doc["go"] got a KeyError exactly here)
     assert rec["go"] is False
-    for key in ("xyz_site_m", "xyz_rover_m", "range_m", "range_sigma_m", "p_ok", "pose"):
+    for key in ("xyz_site_m", "xyz_rover_m", "range_m", "range_sigma_m", "p_ok", "pose", "window_range_gap_pct"):
         assert key in rec and rec[key] is None, key
 
 
