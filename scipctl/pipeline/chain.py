@@ -680,9 +680,9 @@ def run_chain(dl: Downlink, start: ImageProduct, start_uv, target_id: Optional[s
         designation_model = load_packaged_trust_model(PACKAGED_DESIGNATION)
     if designation_model is not None:
         from .designate import with_window_range_gap
-        from .designation_trust import assess
+        from .designation_trust import assess, uses_window_gap
 
-        if "window_gap_pct" in {field for field, _ in designation_model.features.values()}:  # its dense stereo costs
+        if uses_window_gap(designation_model):  # its dense stereo costs ~0.5 s: only for a model that reads it
             designation = with_window_range_gap(designation, start, dl.stereo_pair(start),
                                                 params.stereo_window(start.camera))
         a = assess(designation_model, designation)

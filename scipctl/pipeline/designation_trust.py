@@ -78,7 +78,7 @@ class DesignationEvidence:
         w = tuple(rec.warnings or ())
         return cls(f(rec.match_score), f(rec.match_ratio), float(SATURATED_WARNING in w),
                    float(LOW_TEXTURE_WARNING in w), float(rec.camera == "navcam"), f(rec.epipolar_offset_px),
-                   f(rec.ray_miss_m, 1000.0), f(getattr(rec, "window_range_gap_pct", None)))
+                   f(rec.ray_miss_m, 1000.0), f(rec.window_range_gap_pct))
 
     def to_dict(self) -> dict:
         return evidence_to_dict(self)
@@ -86,6 +86,11 @@ class DesignationEvidence:
     @classmethod
     def from_dict(cls, d: dict) -> "DesignationEvidence":
         return evidence_from_dict(cls, d)
+
+
+def uses_window_gap(model: TrustModel) -> bool:
+    """True when ``model`` reads the window range gap (so a caller must measure it: one more dense stereo)."""
+    return "window_gap_pct" in {field for field, _ in model.features.values()}
 
 
 @dataclass(frozen=True)
