@@ -180,7 +180,8 @@ class HandoffCase:
             prepared = prepare_clouds(
                 nav_pts, haz_pts, self.T_haz_nav,
                 # far seeds carry the pose-estimate error (decimetres): start coarser
-                scales_m=(0.08, 0.04, 0.02) if self.label == "near" else (0.32, 0.16, 0.08, 0.04, 0.02),
+                scales_m=(self.params.registration_near_scales_m if self.label == "near"
+                          else self.params.registration_far_scales_m),
                 # hazcam stereo's range uncertainty grows as r^2 (0.25 px: 3 cm at 1.9 m, 21 cm at 5 m)
                 target_noise=(C, self.params.registration_disparity_sigma_px / self.haz.dense.focal_baseline_px_m))
             glob = None

@@ -28,6 +28,11 @@ class HandoffParams:
     # ... and at each ICP scale only the hazcam points whose stereo range uncertainty (this disparity uncertainty,
     # the same a priori figure as point stereo's) is within the scale's correspondence distance
     registration_disparity_sigma_px: float = 0.25
+    # ICP's voxel sizes, coarse to fine, seeded with the mast kinematics (near) or the pose estimate (far: decimetres
+    # off, so it starts coarser). The finest is 1 cm (1.5 cm correspondences): the handoff needs ~1 cm at the target,
+    # and a 2 cm finish left the Mars 2020 rig's near registration 5-15 px off (docs/handoff.md, "A 1 cm ICP scale")
+    registration_near_scales_m: tuple = (0.08, 0.04, 0.02, 0.01)
+    registration_far_scales_m: tuple = (0.32, 0.16, 0.08, 0.04, 0.02, 0.01)
     dense_downsample: int = 1  # shared dense stereo: 1 full resolution (accurate), 2 half (fast)
     coarse_template_half_px: int = 40
     fine_search_px: float = 4.0
@@ -64,6 +69,12 @@ class HandoffParams:
                      "geometric_max_residual_px", "far_plane_radius_m"):
             if not getattr(self, name) > 0:
                 bad(name, "must be > 0")
+        for name in ("registration_near_scales_m", "registration_far_scales_m"):
+            v = getattr(self, name)
+            if not (isinstance(v, tuple) and v and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                        and math.isfinite(x) and x > 0 for x in v)
+                    and all(a > b for a, b in zip(v, v[1:]))):
+                bad(name, "must be a non-empty tuple of voxel sizes > 0, coarse to fine (strictly decreasing)")
         if not 0 < self.haz_point_stereo_range_frac < 1:
             bad("haz_point_stereo_range_frac", "must be in (0, 1)")
         if not -1 <= self.refined_min_score <= 1:
