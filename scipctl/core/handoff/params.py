@@ -29,10 +29,12 @@ class HandoffParams:
     # the same a priori figure as point stereo's) is within the scale's correspondence distance
     registration_disparity_sigma_px: float = 0.25
     # ICP's voxel sizes, coarse to fine, seeded with the mast kinematics (near) or the pose estimate (far: decimetres
-    # off, so it starts coarser). The finest is 1 cm (1.5 cm correspondences): the handoff needs ~1 cm at the target,
-    # and a 2 cm finish left the Mars 2020 rig's near registration 5-15 px off (docs/handoff.md, "A 1 cm ICP scale")
+    # off, so it starts coarser). Near ends at 1 cm (1.5 cm correspondences): the handoff needs ~1 cm at the target,
+    # and a 2 cm finish left the Mars 2020 rig's near registration 5-15 px off; both clouds' stereo noise is within
+    # reach there (near navcams <= 2.5 m away). Far ends at 2 cm: its navcam points, 4-6 m away, are noisier than
+    # 1.5 cm, and only the hazcam cloud is gated (docs/handoff.md, "A 1 cm ICP scale for the near registration")
     registration_near_scales_m: tuple = (0.08, 0.04, 0.02, 0.01)
-    registration_far_scales_m: tuple = (0.32, 0.16, 0.08, 0.04, 0.02, 0.01)
+    registration_far_scales_m: tuple = (0.32, 0.16, 0.08, 0.04, 0.02)
     dense_downsample: int = 1  # shared dense stereo: 1 full resolution (accurate), 2 half (fast)
     coarse_template_half_px: int = 40
     fine_search_px: float = 4.0
