@@ -54,6 +54,10 @@ def test_threaded_registration_equals_serial(make_handoff_scene):
     ({"dense_downsample": 1.5}, "dense_downsample"), ({"far_window_warp": "affine"}, "far_window_warp"),
     ({"haz_point_stereo_range_frac": 1.0}, "haz_point_stereo_range_frac"),
     ({"consensus_agree_px": float("nan")}, "consensus_agree_px"), ({"refined_min_score": 2.0}, "refined_min_score"),
+    ({"registration_near_scales_m": (0.04, 0.08)}, "registration_near_scales_m"),
+    ({"registration_near_scales_m": ()}, "registration_near_scales_m"),
+    ({"registration_far_scales_m": (0.32, 0.0)}, "registration_far_scales_m"),
+    ({"registration_far_scales_m": [0.32, 0.16]}, "registration_far_scales_m"),
 ])
 def test_params_check_names_the_bad_parameter(change, name):
     with pytest.raises(ValueError, match=rf"HandoffParams\.{name} "):
@@ -81,3 +85,24 @@ def test_haz_point_with_a_range_hint_beyond_the_hazcam_window_is_none(handoff_sc
     assert case.haz_point(np.asarray(t.haz_uv) + 0.5, range_hint_m=0.1) is None  # below the window: likewise
     X = case.haz_point(np.asarray(t.haz_uv) + 1.0)  # no hint: the point is found
     assert X is not None and np.all(np.isfinite(X))
+
+
+def test_the_registrations_use_the_params_scales(make_handoff_scene, monkeypatch):
+    """Each case's ICP runs over its own scales from HandoffParams (one home): near and far, as given."""
+    from dataclasses import replace
+
+    import scipctl.core.registration as registration
+
+    seen = []
+    real = registration.prepare_clouds
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs["scales_m"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(registration, "prepare_clouds", spy)
+    params = replace(HandoffParams(), registration_near_scales_m=(0.08, 0.03), registration_far_scales_m=(0.3, 0.1, 0.03))
+    scene = make_handoff_scene(params)
+    scene.cases["near"].whole_registration()
+    scene.cases["far"].whole_registration()
+    assert seen == [(0.08, 0.03), (0.3, 0.1, 0.03)]
