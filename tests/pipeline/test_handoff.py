@@ -322,9 +322,8 @@ def test_shared_setups_reuse_cases_only_for_the_same_products_and_params():
     assert other.cases["near"] is not a.cases["near"]
 
 
-def _near_registration_errors(params=None) -> np.ndarray:
-    dl = read_downlink(M2020_NEAR)
-    setup = build_setup(dl, params)
+def _near_registration_errors(dl, params=None) -> np.ndarray:
+    setup = build_setup(dl, params)  # not shared: each params gets its own cases
     recs = run_targets(dl, setup, marked_targets(dl, setup), methods=("mesh-registration",), navcams=("near",))
     errs = [r.error_px for r in recs]
     assert len(errs) == 9 and all(e is not None for e in errs)  # 3 marked + 6 extra targets, every one answered
@@ -333,15 +332,17 @@ def _near_registration_errors(params=None) -> np.ndarray:
 
 def test_the_near_registration_of_the_mars_2020_rig_ends_at_1_cm():
     """The Mars 2020 rig with default errors (tests/data/README.md): the near registration's 1 cm finest scale puts
-    every target within 4 px, the success radius (measured: max 1.9 px, a 2x margin; Open3D ICP's run-to-run rounding
-    is <= 1e-9 relative, docs/campaign.md). Ending at 2 cm, as before
-    session 46, the registration stops 1.5-4.5 cm short at the targets: 2 of 9 within 4 px, median 8.2 px."""
+    every target within 4 px, the success radius. Measured max 1.9 px, a 2x margin; Open3D ICP's run-to-run rounding
+    is <= 1e-9 relative (docs/campaign.md), and the margin is for what another OpenCV/Open3D build does to the dense
+    stereo and the ICP (measured on this machine's builds only). Ending at 2 cm, as before session 46, the
+    registration stops 1.5-4.5 cm short at the targets: 2 of 9 within 4 px, median 8.2 px."""
     from dataclasses import replace
 
     from scipctl.core.handoff import HandoffParams
 
+    dl = read_downlink(M2020_NEAR)
     assert HandoffParams().registration_near_scales_m[-1] == 0.01
-    errs = _near_registration_errors()
+    errs = _near_registration_errors(dl)
     assert np.all(errs <= 4.0), errs
-    old = _near_registration_errors(replace(HandoffParams(), registration_near_scales_m=(0.08, 0.04, 0.02)))
+    old = _near_registration_errors(dl, replace(HandoffParams(), registration_near_scales_m=(0.08, 0.04, 0.02)))
     assert np.median(old) > 4.0, old  # the failure the 1 cm scale mends (a check that this file still shows it)
