@@ -3,9 +3,13 @@ folders (their handoff records, each with its downlink's family): within 4 px, m
 misses NO-GO, Brier score (docs/handoff.md, "Families never used in the fit", and the blind populations).
 
     python docs/scripts/scip_family_summary.py OUT/*.json
-    python docs/scripts/scip_family_summary.py CAMPAIGN [CAMPAIGN ...]
+    python docs/scripts/scip_family_summary.py CAMPAIGN [CAMPAIGN ...] [--misses]
+
+``--misses`` also lists, on stderr, every answer off by more than 4 px or with no answer, GO or NO-GO (family,
+downlink, target, error, p, the verdict, the navcams and methods it came from).
 """
 
+import argparse
 import json
 import statistics
 import sys
@@ -39,15 +43,43 @@ def scip_results(path: Path):
             yield family, r
 
 
-def main():
-    by_family = {}
-    for f in sys.argv[1:]:
-        for family, r in scip_results(Path(f)):
+def miss_line(family: str, r: dict, success_px: float = 4.0) -> str:
+    """One line for an answer off by more than ``success_px`` (or none), whatever its verdict."""
+    e = r["error_px"]
+    p = r["p_success"]
+    chosen = ",".join((r.get("diagnostics") or {}).get("chosen") or [])
+    return (f"{family:16s} {r.get('downlink', '?'):28s} {r.get('target', '?'):4s} "
+            f"{'no answer' if e is None else f'{e:8.2f} px'} p {'-' if p is None else f'{p:.3f}'} "
+            f"{'GO' if r['go'] else 'NO-GO':5s} {r.get('navcam', '?')} {chosen}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("paths", nargs="+", help="simulate-handoff --json outputs (FAMILY-SEED.json) or campaign folders")
+    ap.add_argument("--misses", action="store_true", help="list the answers off by more than 4 px on stderr")
+    args = ap.parse_args(argv)
+    by_family, misses = {}, []
+    for f in args.paths:
+        path = Path(f)
+        if not path.exists() or (path.is_dir() and not (path / "records").is_dir()):
+            ap.error(f"{f}: neither a simulate-handoff output nor a campaign folder (no records/)")
+        try:
+            found = list(scip_results(path))
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            ap.error(f"{f}: not a simulate-handoff --json output or a campaign's records ({type(e).__name__}: {e})")
+        for family, r in found:
             if r["method"] == "scip" and r.get("truth_uv") is not None:
                 by_family.setdefault(family, []).append((r["error_px"], r["p_success"], r["go"]))
+                if r["error_px"] is None or r["error_px"] > 4.0:
+                    misses.append(miss_line(family, r))
+    if not by_family:
+        ap.error("no scip answer with a truth pixel in " + ", ".join(args.paths))
     out = {fam: summary(rows) for fam, rows in sorted(by_family.items())}
     out["all"] = summary([x for rows in by_family.values() for x in rows])
     print(json.dumps(out, indent=1))
+    if args.misses:
+        for line in misses:
+            print(line, file=sys.stderr)
 
 
 if __name__ == "__main__":
