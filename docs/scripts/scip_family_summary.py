@@ -15,8 +15,10 @@ import statistics
 import sys
 from pathlib import Path
 
+SUCCESS_PX = 4.0  # the issue's success radius, hazcam px
 
-def summary(rows, success_px=4.0):
+
+def summary(rows, success_px=SUCCESS_PX):
     n = len(rows)
     within = [e is not None and e <= success_px for e, _, _ in rows]
     go = [g for _, _, g in rows]
@@ -43,8 +45,8 @@ def scip_results(path: Path):
             yield family, r
 
 
-def miss_line(family: str, r: dict, success_px: float = 4.0) -> str:
-    """One line for an answer off by more than ``success_px`` (or none), whatever its verdict."""
+def miss_line(family: str, r: dict) -> str:
+    """One line for an answer off by more than the success radius (or none), whatever its verdict."""
     e = r["error_px"]
     p = r["p_success"]
     chosen = ",".join((r.get("diagnostics") or {}).get("chosen") or [])
@@ -63,15 +65,14 @@ def main(argv=None):
         path = Path(f)
         if not path.exists() or (path.is_dir() and not (path / "records").is_dir()):
             ap.error(f"{f}: neither a simulate-handoff output nor a campaign folder (no records/)")
-        try:
-            found = list(scip_results(path))
+        try:  # a file or record without the fields read here is a usage error too, not a traceback
+            for family, r in scip_results(path):
+                if r["method"] == "scip" and r.get("truth_uv") is not None:
+                    by_family.setdefault(family, []).append((r["error_px"], r["p_success"], r["go"]))
+                    if r["error_px"] is None or r["error_px"] > SUCCESS_PX:
+                        misses.append(miss_line(family, r))
         except (OSError, ValueError, KeyError, TypeError) as e:
             ap.error(f"{f}: not a simulate-handoff --json output or a campaign's records ({type(e).__name__}: {e})")
-        for family, r in found:
-            if r["method"] == "scip" and r.get("truth_uv") is not None:
-                by_family.setdefault(family, []).append((r["error_px"], r["p_success"], r["go"]))
-                if r["error_px"] is None or r["error_px"] > 4.0:
-                    misses.append(miss_line(family, r))
     if not by_family:
         ap.error("no scip answer with a truth pixel in " + ", ".join(args.paths))
     out = {fam: summary(rows) for fam, rows in sorted(by_family.items())}
