@@ -1,18 +1,18 @@
-"""The packaged scip trust model against a refit on its four tables with some draws' rows made again.
+"""The packaged scip trust model against a refit on its tables with some draws' rows made again.
 
     python docs/scripts/trust_redraw_compare.py REDRAWN_DIR BLIND_DIR [--tables-out DIR]
 
 REDRAWN_DIR holds ``scipctl trust-evidence`` tables named ``<group without .mcap>.jsonl`` (``m2020-401-s1-straight
-.jsonl``...): each replaces the rows of that group (downlink) in whichever of ``tests/data/trust``'s four tables
+.jsonl``...): each replaces the rows of that group (downlink) in whichever of ``tests/data/trust``'s tables
 holds it, in place (the tables stay in group order). Printed, at 4 px, GO threshold as the fit chooses:
 
-* held out by family, on the four tables as they are and with the rows replaced: pooled, marked targets, hidden
+* held out by family, on the tables as they are and with the rows replaced: pooled, marked targets, hidden
   targets, and per family;
 * on BLIND_DIR's tables (downlinks neither model saw): the packaged model and the refit on the new tables, for the
   visible targets, those of groups whose name starts ``m2020`` and the others, the hidden targets; then every target
   whose answer or verdict differs, or that either answers GO wrongly.
 
-``--tables-out DIR`` writes the four new tables there (``gzip -n -9`` bytes, as tests/data/README.md makes them).
+``--tables-out DIR`` writes the new tables there (``gzip -n -9`` bytes, as tests/data/README.md makes them).
 Used for docs/handoff.md, "The Mars 2020 draws made again upright (session 37; measured, not adopted)".
 """
 
@@ -47,7 +47,7 @@ def fmt(s: dict) -> str:
 
 
 def replaced_tables(redrawn: str, out_dir: str) -> list:
-    """The four tables with every group that has a table in ``redrawn`` replaced by it; their paths in ``out_dir``."""
+    """The tables of ``tests/data/trust`` with every group that has a table in ``redrawn`` replaced by it; their paths in ``out_dir``."""
     paths, used = [], set()
     for src in sorted(glob.glob(os.path.join(TABLES, "*.jsonl.gz"))):
         lines = gzip.decompress(open(src, "rb").read()).decode("utf-8").splitlines()
@@ -66,7 +66,7 @@ def replaced_tables(redrawn: str, out_dir: str) -> list:
         paths.append(dst)
     unused = sorted(set(glob.glob(os.path.join(redrawn, "*.jsonl"))) - used)
     if unused:
-        raise InputError(unused[0], "redrawn table", "its group is in none of the four tables")
+        raise InputError(unused[0], "redrawn table", "its group is in none of the tables")
     return paths
 
 
@@ -85,7 +85,7 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("redrawn_dir")
     ap.add_argument("blind_dir")
-    ap.add_argument("--tables-out", help="write the four new tables here")
+    ap.add_argument("--tables-out", help="write the new tables here")
     args = ap.parse_args(argv)
     for p in (args.redrawn_dir, args.blind_dir):
         if not os.path.isdir(p):
@@ -96,7 +96,7 @@ def main(argv=None) -> None:
             os.makedirs(out_dir, exist_ok=True)
             new_tables = replaced_tables(args.redrawn_dir, out_dir)
             old_tables = sorted(glob.glob(os.path.join(TABLES, "*.jsonl.gz")))
-            held_out("four tables as they are", old_tables)
+            held_out("the tables as they are", old_tables)
             held_out("with the rows replaced", new_tables)
             refit = tf.fit_trust_model(tf.fit_rows(read_rows(new_tables)))
         packaged = load_trust_model(PACKAGED)

@@ -75,7 +75,7 @@ def test_fit_trust_bad_table_is_exit_2(tmp_path):
 
 
 def test_packaged_model_is_reproduced_by_its_command(tmp_path, monkeypatch):
-    """Issue #14 item 6: the command in the packaged model's provenance (`scipctl fit-trust` on the four tables of
+    """Issue #14 item 6: the command in the packaged model's provenance (`scipctl fit-trust` on the five tables of
     tests/data/trust/, `-o scipctl/data/trust_model.json`) makes the packaged file again: run from the repository root
     with the same arguments, only the output path differs, and it is not recorded in the fit."""
     packaged = ROOT / "scipctl/data/trust_model.json"

@@ -47,5 +47,5 @@ def test_a_redrawn_table_of_no_group_is_refused(tmp_path, monkeypatch):
     redrawn = tmp_path / "redrawn"
     redrawn.mkdir()
     (redrawn / "q-9-s1.jsonl").write_text(_row("q-9-s1.mcap", "t1", 1.0) + "\n")
-    with pytest.raises(InputError, match="q-9-s1.jsonl.*none of the four tables"):
+    with pytest.raises(InputError, match="q-9-s1.jsonl.*none of the tables"):
         rc.replaced_tables(str(redrawn), str(tmp_path))
