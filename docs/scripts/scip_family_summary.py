@@ -58,7 +58,7 @@ def miss_line(family: str, r: dict) -> str:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("paths", nargs="+", help="simulate-handoff --json outputs (FAMILY-SEED.json) or campaign folders")
-    ap.add_argument("--misses", action="store_true", help="list the answers off by more than 4 px on stderr")
+    ap.add_argument("--misses", action="store_true", help=f"list the answers off by more than {SUCCESS_PX:g} px on stderr")
     args = ap.parse_args(argv)
     by_family, misses = {}, []
     for f in args.paths:

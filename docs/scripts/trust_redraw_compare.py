@@ -46,10 +46,16 @@ def fmt(s: dict) -> str:
             f"Brier {s['brier']:.4f}")
 
 
+def packaged_tables() -> list:
+    """The paths of the packaged model's tables (``tests/data/trust/*.jsonl.gz``), sorted."""
+    return sorted(glob.glob(os.path.join(TABLES, "*.jsonl.gz")))
+
+
 def replaced_tables(redrawn: str, out_dir: str) -> list:
-    """The tables of ``tests/data/trust`` with every group that has a table in ``redrawn`` replaced by it; their paths in ``out_dir``."""
+    """The tables of :func:`packaged_tables` with every group that has a table in ``redrawn`` replaced by it; their
+    paths in ``out_dir``."""
     paths, used = [], set()
-    for src in sorted(glob.glob(os.path.join(TABLES, "*.jsonl.gz"))):
+    for src in packaged_tables():
         lines = gzip.decompress(open(src, "rb").read()).decode("utf-8").splitlines()
         out = []
         for group, chunk in itertools.groupby(lines, key=lambda s: json.loads(s)["group"]):
@@ -95,7 +101,7 @@ def main(argv=None) -> None:
             out_dir = args.tables_out or tmp
             os.makedirs(out_dir, exist_ok=True)
             new_tables = replaced_tables(args.redrawn_dir, out_dir)
-            old_tables = sorted(glob.glob(os.path.join(TABLES, "*.jsonl.gz")))
+            old_tables = packaged_tables()
             held_out("the tables as they are", old_tables)
             held_out("with the rows replaced", new_tables)
             refit = tf.fit_trust_model(tf.fit_rows(read_rows(new_tables)))
