@@ -99,6 +99,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     g = np.arange(-half, half + 1, dtype=float)
     c = np.round(np.asarray(pred_uv, float))
     cands, seen, reasons = [], [], []
+    closest = None  # (inliers, matches, what was tried): the failed feature model that came nearest to one
 
     def refine(loc, Gi, k, reach, factor):
         """NCC of the template rendered at the pixels ``Gi`` (real pixels of prod -> pose-estimate pixels) maps prod's
@@ -197,6 +198,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                                          local_radius_px=params.feature_local_px / step_px, knn=knn)
                 if not loc.ok:
                     reasons.append(f"x{factor:g} plane {k} reach {reach:g}: {loc.reason}")
+                    if closest is None or (loc.n_inliers, loc.n_matches) > closest[:2]:
+                        closest = (loc.n_inliers, loc.n_matches, reasons[-1])
                     continue
                 if any(np.linalg.norm(loc.uv - q) < 1.0 for q in seen):
                     continue
@@ -214,7 +217,8 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                 refine(vo_loc, np.linalg.inv(vo_loc.transform), 0, 0.0, 1.0)
     if not cands:
         info["feature_status"] = "failed"
-        info["feature_reason"] = "; ".join(reasons) or "no usable feature model"
+        info["feature_tries"] = list(reasons)
+        info["feature_reason"] = failure_summary(reasons, None if closest is None else closest[2])
         return None, info
     # Several candidates (planes, reaches, resolutions) measure the same position. A candidate is confirmed when
     # NCC refines it to a peak near its feature match. The answer pools the candidates instead of taking the
@@ -255,6 +259,18 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     if relief:
         info.update({"relief_kept": _f(winner.relief_kept), "relief_masked": winner.masked})
     return out, info
+
+
+def failure_summary(tries: list, closest) -> str:
+    """One clause for a feature step that found no model: ``tries`` (each try's "x<view> plane <k> reach <r>:
+    <why>", in the order tried) and ``closest`` (the try whose failed model had the most inliers, then matches; None
+    when no model was fitted at all). A single try, or none with a model, is said as it is; more read "no feature
+    model in N tries; closest: <that try>" (the whole list is the step's ``feature_tries``)."""
+    if not tries:
+        return "no usable feature model"
+    if len(tries) == 1 or closest is None:
+        return "; ".join(tries)
+    return f"no feature model in {len(tries)} tries; closest: {closest}"
 
 
 def place_with_centre(found, template, image, centre_in_template_uv, place_half: int, radius_px: float, mask=None):

@@ -830,3 +830,27 @@ def test_the_chain_measures_the_window_range_gap_its_designation_model_uses(dl, 
         assert d.window_range_gap_pct is not None and steps[0].p_success == d.p_ok
         moved += assess(model, replace(d, window_range_gap_pct=None)).p_ok != steps[0].p_success
     assert moved == len(chains)
+
+
+def test_a_failed_feature_step_says_in_one_clause_how_close_it_came(dl, chains):
+    """s1-straight t1's 4.5 m pancam track finds no feature model at any view, plane or reach: its reason names the
+    number of tries and the one that came closest (most inliers), and the step keeps every try in
+    ``feature_tries`` (what an operator reads first is one clause, not the list)."""
+    from scipctl.pipeline.feature_track import failure_summary
+
+    if _stem(dl) != "paper-s1-straight":
+        pytest.skip("the failed feature step is s1-straight t1's")
+    pan = chains["t1"][1]
+    tries = pan.extra["feature_tries"]
+    assert pan.extra["feature_status"] == "failed" and len(tries) > 1
+    reason = pan.extra["feature_reason"]
+    assert reason.startswith(f"no feature model in {len(tries)} tries; closest: ")
+    closest = reason.split("closest: ", 1)[1]
+    assert closest in tries
+    inliers = [int(t.split("(")[1].split(" ")[0]) for t in tries if "inliers <" in t]
+    assert inliers and f"({max(inliers)} inliers <" in closest  # the most inliers of the tries that fitted a model
+    assert "; x" not in pan.reason  # the step's reason carries the one clause, not the list
+    assert failure_summary([], None) == "no usable feature model"
+    assert failure_summary(["plane 0: the previous view does not cover the prediction"], None) == \
+        "plane 0: the previous view does not cover the prediction"
+    assert failure_summary(["a", "b"], None) == "a; b"
