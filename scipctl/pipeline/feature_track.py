@@ -99,7 +99,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
     g = np.arange(-half, half + 1, dtype=float)
     c = np.round(np.asarray(pred_uv, float))
     cands, seen, reasons = [], [], []
-    closest = None  # (inliers, matches, what was tried): the failed feature model that came nearest to one
+    closest = None  # (inliers, matches, what was tried): the failed keypoint match that came nearest a model
 
     def refine(loc, Gi, k, reach, factor):
         """NCC of the template rendered at the pixels ``Gi`` (real pixels of prod -> pose-estimate pixels) maps prod's
@@ -263,9 +263,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
 
 def failure_summary(tries: list, closest) -> str:
     """One clause for a feature step that found no model: ``tries`` (each try's "x<view> plane <k> reach <r>:
-    <why>", in the order tried) and ``closest`` (the try whose failed model had the most inliers, then matches; None
-    when no model was fitted at all). A single try, or none with a model, is said as it is; more read "no feature
-    model in N tries; closest: <that try>" (the whole list is the step's ``feature_tries``)."""
+    <why>", in the order tried) and ``closest`` (of the tries that matched keypoints, the one nearest a model: most
+    RANSAC inliers, then matches; None when no try got that far, e.g. every view missed the prediction). A single
+    try, or none with a ``closest``, is said as it is; more read "no feature model in N tries; closest: <that try>"
+    (the whole list is the step's ``feature_tries``)."""
     if not tries:
         return "no usable feature model"
     if len(tries) == 1 or closest is None:
