@@ -11,6 +11,9 @@ is drawn from the earlier image (the true camera models and poses, so no pose or
 * ``surface``: the simulator's scene mesh (each template pixel's ray cast on it): a perfect warp;
 * ``plane``: the plane through the true target point with the normal the chain takes from the earlier image's
   half-resolution dense stereo (:func:`~scipctl.pipeline.plane_warp.local_normals_site`, then ``render_planes``);
+* ``plane-fit-centre``, ``plane-fit-window``: the plane through the true target point whose normal is fitted (least
+  squares) to the true surface points of the template's central box, or of the whole template: the best a plane
+  could do with a perfect normal;
 * ``stereo``: the later pair's half-resolution dense stereo as measured (each pixel's range along its true ray;
   the plane where it has none);
 * ``stereo-levelled``: the same, shifted in range to the plane's at the template's central box;
@@ -31,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-TEMPLATES = ("surface", "plane", "stereo", "stereo-levelled", "stereo-full-levelled")
+TEMPLATES = ("surface", "plane", "plane-fit-centre", "plane-fit-window", "stereo", "stereo-levelled",
+             "stereo-full-levelled")
 
 
 def sim_record_path(downlink: Path) -> Path:
@@ -109,12 +113,22 @@ def target_rows(dl, scene, half: int, radius_px: float) -> list:
         with np.errstate(divide="ignore", invalid="ignore"):
             P_plane = o + (((X - o) @ n) / (d @ n))[:, None] * d
         centre = np.abs(uv - c).max(axis=1) <= max(1, half // 4)
+        P_true = scene.cast(o, d).points
         out = {}
         for name in TEMPLATES:
             if name == "surface":
-                P = scene.cast(o, d).points
+                P = P_true
             elif name == "plane":
                 P = P_plane
+            elif name.startswith("plane-fit"):
+                sel = np.isfinite(P_true).all(1) & (centre if name == "plane-fit-centre" else True)
+                if sel.sum() < 3:
+                    out[name] = None
+                    continue
+                Q = P_true[sel] - P_true[sel].mean(0)
+                nf = np.linalg.svd(Q, full_matrices=False)[2][-1]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    P = o + (((X - o) @ nf) / (d @ nf))[:, None] * d
             else:
                 st = stereo_q[1 if name == "stereo-full-levelled" else 2]
                 if st is None:
