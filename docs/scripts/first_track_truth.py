@@ -59,20 +59,6 @@ def scene_of(sim: dict):
     return scene_for(plan_run(sim["scenario"], sim["run"], int(sim["seed"]), rover), family_texture(fam), fam)
 
 
-def _stereo(dl, prod, range_m: float, downsample: int):
-    from scipctl.core.dense_stereo import dense_stereo
-
-    right = dl.stereo_pair(prod)
-    if right is None:
-        return None
-    try:
-        return dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
-                            min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5,
-                            downsample=downsample)
-    except Exception:  # the chain's own near_dense_stereo treats a failed stereo as none
-        return None
-
-
 def target_rows(dl, scene, half: int, radius_px: float) -> list:
     """One dict per marked target: ``{"target", "templates": {name: [du, dv, peak] or None}}``."""
     from scipctl.core.expected import bilinear_sample
@@ -87,7 +73,7 @@ def target_rows(dl, scene, half: int, radius_px: float) -> list:
     if tp is None or tq is None:
         raise ValueError("no truth for its pancam images (not a simulated downlink)")
     Mp, Mq = tp.camera_model.transformed(tp.pose.T_site_rover), tq.camera_model.transformed(tq.pose.T_site_rover)
-    stereo_p = None
+    stereo_p = None  # the earlier pair's stereo, made once, around the first target's range
     rows = []
     for t in dl.targets:
         mp, mq = t.mark_in(p.product_id), t.mark_in(q.product_id)
@@ -101,11 +87,12 @@ def target_rows(dl, scene, half: int, radius_px: float) -> list:
         # downlink's; the normal is carried into the true site frame through the stop's two attitudes)
         X_p = tp.pose.T_site_rover.inverse().apply(X)
         rng_p = float(np.linalg.norm(X_p - p.camera_model.C))
-        stereo_p = stereo_p or near_dense_stereo(dl, p, rng_p)
+        if stereo_p is None:
+            stereo_p = near_dense_stereo(dl, p, rng_p)
         _, n_est = render_planes(p, *local_normals_site(p, X_p, rng_p, stereo_p))
         n = tp.pose.T_site_rover.rotate(p.pose.T_site_rover.inverse().rotate(n_est))
         rng_q = float(np.linalg.norm(tq.pose.T_site_rover.inverse().apply(X) - q.camera_model.C))
-        stereo_q = {2: _stereo(dl, q, rng_q, 2), 1: _stereo(dl, q, rng_q, 1)}
+        stereo_q = {ds: near_dense_stereo(dl, q, rng_q, downsample=ds) for ds in (2, 1)}
         c = np.round([mq.u, mq.v])
         g = np.arange(-half, half + 1, dtype=float)
         uv = np.stack(np.meshgrid(c[0] + g, c[1] + g), -1).reshape(-1, 2)

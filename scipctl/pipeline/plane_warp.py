@@ -10,10 +10,10 @@ import numpy as np
 from ..model import Downlink, ImageProduct
 
 
-def near_dense_stereo(dl: Downlink, prod: ImageProduct, range_m: float):
-    """Half-resolution dense stereo of ``prod``'s pair around a target ``range_m`` from its camera (ranges
-    ``max(0.3, 0.6 range)`` to ``1.6 range + 0.5`` m): a :class:`~scipctl.core.dense_stereo.DenseStereo`, or None
-    when ``prod`` has no right eye or stereo fails."""
+def near_dense_stereo(dl: Downlink, prod: ImageProduct, range_m: float, downsample: int = 2):
+    """Dense stereo of ``prod``'s pair around a target ``range_m`` from its camera (ranges ``max(0.3, 0.6 range)``
+    to ``1.6 range + 0.5`` m), at half resolution (``downsample``; the chain's, and its default): a
+    :class:`~scipctl.core.dense_stereo.DenseStereo`, or None when ``prod`` has no right eye or stereo fails."""
     from ..core.dense_stereo import dense_stereo
 
     right = dl.stereo_pair(prod)
@@ -21,7 +21,8 @@ def near_dense_stereo(dl: Downlink, prod: ImageProduct, range_m: float):
         return None
     try:
         return dense_stereo(prod.pixels_float(), right.pixels_float(), prod.camera_model, right.camera_model,
-                            min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5, downsample=2)
+                            min_range_m=max(0.3, 0.6 * range_m), max_range_m=1.6 * range_m + 0.5,
+                            downsample=downsample)
     except Exception:
         return None
 
