@@ -73,7 +73,6 @@ def target_rows(dl, scene, half: int, radius_px: float) -> list:
     if tp is None or tq is None:
         raise ValueError("no truth for its pancam images (not a simulated downlink)")
     Mp, Mq = tp.camera_model.transformed(tp.pose.T_site_rover), tq.camera_model.transformed(tq.pose.T_site_rover)
-    stereo_p = None  # the earlier pair's stereo, made once, around the first target's range
     rows = []
     for t in dl.targets:
         mp, mq = t.mark_in(p.product_id), t.mark_in(q.product_id)
@@ -87,9 +86,8 @@ def target_rows(dl, scene, half: int, radius_px: float) -> list:
         # downlink's; the normal is carried into the true site frame through the stop's two attitudes)
         X_p = tp.pose.T_site_rover.inverse().apply(X)
         rng_p = float(np.linalg.norm(X_p - p.camera_model.C))
-        if stereo_p is None:
-            stereo_p = near_dense_stereo(dl, p, rng_p)
-        _, n_est = render_planes(p, *local_normals_site(p, X_p, rng_p, stereo_p))
+        # around this target's own range, as the chain makes it
+        _, n_est = render_planes(p, *local_normals_site(p, X_p, rng_p, near_dense_stereo(dl, p, rng_p)))
         n = tp.pose.T_site_rover.rotate(p.pose.T_site_rover.inverse().rotate(n_est))
         rng_q = float(np.linalg.norm(tq.pose.T_site_rover.inverse().apply(X) - q.camera_model.C))
         stereo_q = {ds: near_dense_stereo(dl, q, rng_q, downsample=ds) for ds in (2, 1)}
