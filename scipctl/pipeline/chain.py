@@ -120,6 +120,11 @@ class ChainParams:
     # none better on the fresh population (28 -> 27 of 49) and one chain lost beyond 20 px on the dev ones, so off
     ncc_place_half_px: dict = field(default_factory=dict)
     ncc_place_radius_px: float = 2.0
+    # optical flow places the feature step's answer for these cameras (core/flow_place.py): each candidate's NCC
+    # peak still finds the target and decides (confirmation, pooling, the trust evidence); the dense flow from its
+    # template, placed there, to the image, read at the target, moves it by the relief the plane template misses
+    # (docs/stereo-and-tracking.md, "Optical flow places the first pancam track"). () : the NCC peak answers
+    ncc_place_flow: tuple = ()
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
     # image's keypoints, placed in 3-D by its stereo, matched to the new image's; PnP RANSAC within vo_threshold_px,
@@ -276,6 +281,16 @@ class ChainParams:
         if self.ncc_place_half_px and (self.ncc_median_prev_px is not None or self.ncc_matched_blur):
             raise ValueError("ChainParams.ncc_place_half_px: places on the unfiltered image only, not with "
                              "ncc_median_prev_px or ncc_matched_blur")
+        pf = self.ncc_place_flow
+        if not (isinstance(pf, (tuple, list)) and all(isinstance(c, str) for c in pf)):
+            raise ValueError(f"ChainParams.ncc_place_flow: must be a tuple of camera names, got {pf!r}")
+        if pf and (self.ncc_median_prev_px is not None or self.ncc_matched_blur):
+            raise ValueError("ChainParams.ncc_place_flow: places on the unfiltered image only, not with "
+                             "ncc_median_prev_px or ncc_matched_blur")
+        both = sorted(set(pf) & set(self.ncc_place_half_px))
+        if both:
+            raise ValueError(f"ChainParams.ncc_place_flow and ncc_place_half_px: one placement per camera, both name "
+                             f"{', '.join(both)}")
         r = self.ncc_place_radius_px
         if not (isinstance(r, (int, float)) and not isinstance(r, bool) and np.isfinite(r) and r > 0):
             raise ValueError(f"ChainParams.ncc_place_radius_px: must be a number > 0, got {r!r}")

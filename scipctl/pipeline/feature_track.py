@@ -11,6 +11,7 @@ import numpy as np
 
 from ..jsonutil import finite_or_none as _f
 from ..model import ImageProduct
+from ..core.flow_place import flow_place
 from ..core.matched_blur import blurred_crop, footprint_cov, gaussian_kernel
 from ..core.windows import filtered_crop, median_image
 from .plane_warp import (plane_points_site, plane_warped_view, prev_pixels_through_plane, render_through_plane,
@@ -162,6 +163,10 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
         if place_half is not None and crop is None:  # (no filtered crop: ChainParams.check refuses the two together)
             place_uv = place_with_centre(tr, tpl, img, loc.uv - (cc - half), place_half, params.ncc_place_radius_px,
                                          keep).uv
+        elif prod.camera in params.ncc_place_flow and crop is None and tr.ok:
+            flowed = flow_place(tpl, img, tr.uv, loc.uv - (cc - half))
+            if flowed is not None:
+                place_uv = flowed
         cands.append(_Candidate(loc, tr, k, reach, factor, kept, keep is not None, place_uv))
 
     def confirmed(cd):
@@ -254,7 +259,7 @@ def feature_track(prev: ImageProduct, prod: ImageProduct, X_site, view_normals, 
                  **({"feature_vo": bool(winner.reach == 0.0)} if vo is not None else {}),
                  "feature_shift_px": float(np.linalg.norm(found_uv - pred_uv)), "coarse_uv": loc.uv.tolist(),
                  "ncc_uv": tr.uv.tolist() if np.all(np.isfinite(tr.uv)) else None, "ncc_score": _f(tr.score)})
-    if prod.camera in params.ncc_place_half_px and good:
+    if (prod.camera in params.ncc_place_half_px or prod.camera in params.ncc_place_flow) and good:
         info["ncc_placed_uv"] = best.place_uv.tolist() if np.all(np.isfinite(best.place_uv)) else None
     if relief:
         info.update({"relief_kept": _f(winner.relief_kept), "relief_masked": winner.masked})

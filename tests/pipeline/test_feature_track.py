@@ -418,3 +418,44 @@ def test_the_two_stage_ncc_is_an_option_of_the_navcam_tracks(dl):
     assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
     assert np.linalg.norm(np.subtract(s.extra["ncc_placed_uv"], s.extra["ncc_uv"])) <= params.ncc_place_radius_px
     assert np.linalg.norm(np.subtract(s.tracked_uv, s0.tracked_uv)) <= params.ncc_place_radius_px
+
+
+# ----------------------------------------------------------------------------- optical-flow placement (ncc_place_flow)
+@pytest.mark.parametrize("value", ["pancam", ("pancam", 3), {"pancam": 1}, None])
+def test_chain_params_refuse_a_bad_flow_placement(value):
+    with pytest.raises(ValueError, match="ChainParams.ncc_place_flow"):
+        ChainParams(ncc_place_flow=value).check()
+
+
+@pytest.mark.parametrize("other", [{"ncc_median_prev_px": 1.0}, {"ncc_matched_blur": True},
+                                   {"ncc_place_half_px": {"pancam": 7}}])
+def test_chain_params_refuse_a_flow_placement_with_a_filtered_ncc_or_a_second_placement(other):
+    """The flow runs on the unfiltered image (with the median or the matched blur it would be skipped silently),
+    and one camera's answer has one placement."""
+    with pytest.raises(ValueError, match="ChainParams.ncc_place_flow"):
+        ChainParams(ncc_place_flow=("pancam",), **other).check()
+    assert ChainParams(ncc_place_flow=("navcam",), ncc_place_half_px={"pancam": 7}).check()
+
+
+def test_the_flow_placement_moves_only_the_answer_of_the_cameras_named(dl):
+    """With ncc_place_flow=("pancam",) the first step that differs from the default chain is the first pancam track
+    (a feature step; t2 of the straight sol, whose first pancam track the features confirm): its status, confirmed
+    and pooled candidates, the winner's NCC peak, feature position and pose shift (the trust models' evidence) are
+    the default's, bit for bit; the winner's placed pixel is recorded and only the answer moves. The steps before
+    it are the same."""
+    assert ChainParams().ncc_place_flow == ()
+    if Path(dl.source).stem != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains)")
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target("t2").mark_in(start.product_id)
+    base, steps = (run_chain(dl, start, [mk.u, mk.v], target_id="t2", params=ChainParams(answer="handoff", **f))
+                   for f in ({}, {"ncc_place_flow": ("pancam",)}))
+    first = next(i for i, (s, s0) in enumerate(zip(steps, base)) if s.tracked_uv != s0.tracked_uv)
+    s, s0 = steps[first], base[first]
+    assert all(a.tracked_uv == b.tracked_uv for a, b in zip(steps[:first], base[:first]))
+    assert s.camera == "pancam" and s.kind == "track" and s.extra.get("coarse") == "features"
+    assert s.extra["feature_status"] == "confirmed" and "ncc_placed_uv" not in s0.extra
+    decided = ("feature_status", "feature_confirmed", "feature_pooled", "feature_candidates", "ncc_uv", "ncc_score",
+               "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
+    assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
+    assert s.extra["ncc_placed_uv"] != s.extra["ncc_uv"]
