@@ -123,7 +123,11 @@ class ChainParams:
     # optical flow places the feature step's answer for these cameras (core/flow_place.py): each candidate's NCC
     # peak still finds the target and decides (confirmation, pooling, the trust evidence); the dense flow from its
     # template, placed there, to the image, read at the target, moves it by the relief the plane template misses
-    # (docs/stereo-and-tracking.md, "Optical flow places the first pancam track"). () : the NCC peak answers
+    # (docs/stereo-and-tracking.md, "Optical flow places the first pancam track" and "... the cross-drive navcam
+    # handoff"). () : the NCC peak answers (the default). Measured in session 51: ("pancam",) put more first pancam
+    # tracks within 4 mm (+3 net on two populations) but left whole chains at 35 of 47 on a fresh one; ("navcam",)
+    # put more cross-drive navcam handoffs within 1 px (59 -> 68 of 116) and whole chains 35 -> 37 of 46 on a fresh
+    # population (asked +3), no wrong GO, so off
     ncc_place_flow: tuple = ()
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
