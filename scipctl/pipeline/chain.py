@@ -125,7 +125,7 @@ class ChainParams:
     # template, placed there, to the image, read at the target, moves it by the relief the plane template misses
     # (docs/stereo-and-tracking.md, "Optical flow places the first pancam track" and "... the cross-drive navcam
     # handoff"). () : the NCC peak answers (the default). Measured in session 51: ("pancam",) put more first pancam
-    # tracks within 4 mm (+3 net on two populations) but left whole chains at 35 of 47 on a fresh one; ("navcam",)
+    # tracks within 4 mm (+3 net on two populations) but left whole chains at 35 of 50 on a fresh one; ("navcam",)
     # put more cross-drive navcam handoffs within 1 px (59 -> 68 of 116) and whole chains 35 -> 37 of 46 on a fresh
     # population (asked +3), no wrong GO, so off
     ncc_place_flow: tuple = ()
