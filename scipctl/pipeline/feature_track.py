@@ -35,7 +35,7 @@ class _Candidate:
     reach (0: the visual-odometry candidate); ``factor``: the feature step factor it was found at;
     ``relief_kept``: the fraction of the template the relief mask kept (None: no mask); ``masked``: whether the
     mask was applied; ``place_uv``: the pixel it answers with (the peak, or the peak placed by the template's
-    centre, ``ChainParams.ncc_place_half_px``)."""
+    centre, ``ChainParams.ncc_place_half_px``, or by the optical flow, ``ChainParams.ncc_place_flow``)."""
 
     loc: object
     track: object
