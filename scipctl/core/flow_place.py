@@ -57,10 +57,14 @@ def flow_place(template, image, found_uv, centre_in_template_uv, margin_px: int 
     """
     import cv2
 
-    tpl = np.asarray(template, np.float32)
-    img = np.asarray(image)
-    if tpl.ndim != 2 or img.ndim != 2:
-        raise ValueError(f"flow_place: template and image must be 2-D, got {tpl.shape} and {img.shape}")
+    from .image import as_float_image
+
+    tpl = as_float_image(template, "flow_place: template")
+    img = as_float_image(image, "flow_place: image")
+    presets = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+               "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
+    if preset not in presets:
+        raise ValueError(f"flow_place: preset must be one of {', '.join(presets)}, got {preset!r}")
     found = np.asarray(found_uv, float).reshape(2)
     tc = np.asarray(centre_in_template_uv, float).reshape(2)
     if not (np.all(np.isfinite(found)) and np.all(np.isfinite(tc)) and np.all(np.isfinite(tpl))):
@@ -70,7 +74,7 @@ def flow_place(template, image, found_uv, centre_in_template_uv, margin_px: int 
     c = np.round(found).astype(int)
     if c[0] - hw < 0 or c[1] - hh < 0 or c[0] + hw >= img.shape[1] or c[1] + hh >= img.shape[0]:
         return None
-    patch = img[c[1] - hh:c[1] + hh + 1, c[0] - hw:c[0] + hw + 1].astype(np.float32)
+    patch = img[c[1] - hh:c[1] + hh + 1, c[0] - hw:c[0] + hw + 1].copy()
     size = (2 * hw + 1, 2 * hh + 1)
     at = found - (c - np.array([hw, hh]))  # the tracked point in the patch
     shift = np.float32([[1, 0, at[0] - tc[0]], [0, 1, at[1] - tc[1]]])
@@ -82,8 +86,6 @@ def flow_place(template, image, found_uv, centre_in_template_uv, margin_px: int 
     # the image's window in the template's units (mean and spread over the pixels the template covers)
     patch = (patch - b.mean()) / b.std() * a.std() + a.mean()
     lo, hi = np.percentile(a, [0.5, 99.5])
-    presets = {"ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST, "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
-               "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
     dis = cv2.DISOpticalFlow_create(presets[preset])
     dis.setFinestScale(int(finest_scale))
     flow = dis.calc(_to_uint8(placed, lo, hi), _to_uint8(patch, lo, hi), None)

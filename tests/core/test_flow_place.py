@@ -84,3 +84,9 @@ def test_what_cannot_be_placed_is_none():
     assert flow_place(np.ones_like(tpl), view, X0, [HALF, HALF]) is None
     with pytest.raises(ValueError, match="flow_place"):
         flow_place(tpl[None], view, X0, [HALF, HALF])
+
+
+def test_an_unknown_preset_is_refused_by_name():
+    tpl, view, _ = _scene(2.0, 10.0, 5)
+    with pytest.raises(ValueError, match="flow_place: preset must be one of"):
+        flow_place(tpl, view, X0, [HALF, HALF], preset="slow")
