@@ -124,11 +124,13 @@ class ChainParams:
     # peak still finds the target and decides (confirmation, pooling, the trust evidence); the dense flow from its
     # template, placed there, to the image, read at the target, moves it by the relief the plane template misses
     # (docs/stereo-and-tracking.md, "Optical flow places the first pancam track" and "... the cross-drive navcam
-    # handoff"). () : the NCC peak answers (the default). Measured in session 51: ("pancam",) put more first pancam
-    # tracks within 4 mm (+3 net on two populations) but left whole chains at 35 of 50 on a fresh one; ("navcam",)
-    # put more cross-drive navcam handoffs within 1 px (59 -> 68 of 116) and whole chains 35 -> 37 of 46 on a fresh
-    # population (asked +3), no wrong GO, so off
-    ncc_place_flow: tuple = ()
+    # handoff"). () : the NCC peak answers. Measured in session 51: ("pancam",) put more first pancam tracks within
+    # 4 mm (+3 net on two populations) but left whole chains at 35 of 50 on a fresh one, so not for the pancam;
+    # ("navcam",) put more cross-drive navcam handoffs within 1 px (59 -> 68 of 116) and whole chains 35 -> 37 of 46
+    # on a fresh population (asked +3). The default since session 52, judged on two more fresh populations by the
+    # rule written before them: 71 -> 76 of 96 chains (won 6, lost 1), no chain GO, every miss NO-GO in time, final
+    # Brier 0.085 -> 0.086 and 0.112 -> 0.082
+    ncc_place_flow: tuple = ("navcam",)
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
     # image's keypoints, placed in 3-D by its stereo, matched to the new image's; PnP RANSAC within vo_threshold_px,
@@ -244,6 +246,8 @@ class ChainParams:
             raise ValueError(f"ChainParams.ncc_median_find: must be True or False, got {self.ncc_median_find!r}")
         if self.ncc_median_find and n is None:
             raise ValueError("ChainParams.ncc_median_find: needs ncc_median_prev_px (the median that finds the peak)")
+        if not isinstance(self.ncc_matched_blur, bool):
+            raise ValueError(f"ChainParams.ncc_matched_blur: must be true or false, got {self.ncc_matched_blur!r}")
         if n is not None and self.ncc_matched_blur:
             raise ValueError("ChainParams.ncc_median_prev_px and ncc_matched_blur: one filter of the NCC's image at a time")
         r = self.relief_max_parallax_px
@@ -289,12 +293,13 @@ class ChainParams:
         if not (isinstance(pf, (tuple, list)) and all(isinstance(c, str) for c in pf)):
             raise ValueError(f"ChainParams.ncc_place_flow: must be a tuple of camera names, got {pf!r}")
         if pf and (self.ncc_median_prev_px is not None or self.ncc_matched_blur):
-            raise ValueError("ChainParams.ncc_place_flow: places on the unfiltered image only, not with "
-                             "ncc_median_prev_px or ncc_matched_blur")
+            raise ValueError(f"ChainParams.ncc_place_flow: places on the unfiltered image only, not with "
+                             f"ncc_median_prev_px or ncc_matched_blur (it is {tuple(pf)!r}; "
+                             f"ncc_place_flow=() turns it off)")
         both = sorted(set(pf) & set(self.ncc_place_half_px))
         if both:
             raise ValueError(f"ChainParams.ncc_place_flow and ncc_place_half_px: one placement per camera, both name "
-                             f"{', '.join(both)}")
+                             f"{', '.join(both)} (ncc_place_flow=() turns the flow off)")
         r = self.ncc_place_radius_px
         if not (isinstance(r, (int, float)) and not isinstance(r, bool) and np.isfinite(r) and r > 0):
             raise ValueError(f"ChainParams.ncc_place_radius_px: must be a number > 0, got {r!r}")
@@ -305,8 +310,6 @@ class ChainParams:
         if not isinstance(self.closure_pancam_from_navcam, bool):
             raise ValueError(f"ChainParams.closure_pancam_from_navcam: must be true or false, got "
                              f"{self.closure_pancam_from_navcam!r}")
-        if not isinstance(self.ncc_matched_blur, bool):
-            raise ValueError(f"ChainParams.ncc_matched_blur: must be true or false, got {self.ncc_matched_blur!r}")
         if not isinstance(self.render_antialias, bool):
             raise ValueError(f"ChainParams.render_antialias: must be true or false, got {self.render_antialias!r}")
         t = self.texture_retry_sigma_px

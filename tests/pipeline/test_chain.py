@@ -603,7 +603,7 @@ def test_chain_params_refuse_an_unknown_answer():
 def test_chain_params_refuse_an_ncc_median_that_cannot_run(kw, match):
     with pytest.raises(ValueError, match=match):
         ChainParams(**kw).check()
-    assert ChainParams(ncc_median_prev_px=3, ncc_median_find=True).check()
+    assert ChainParams(ncc_median_prev_px=3, ncc_median_find=True, ncc_place_flow=()).check()
 
 
 @pytest.mark.parametrize("bad", [2, -1, 3.0, True])

@@ -79,8 +79,8 @@ def test_the_ncc_median_options_on_the_first_track(camp, tmp_path, capsys):
     feature model either way (the option only changes the NCC of a candidate)."""
     ft = load("first_track_rerun")
     out = tmp_path / "rows.jsonl"
-    assert ft.main(["run", str(camp), str(out), 'm3={"params": {"ncc_median_prev_px": 3}}',
-                    'find={"params": {"ncc_median_prev_px": 3, "ncc_median_find": true}}']) == 0
+    assert ft.main(["run", str(camp), str(out), 'm3={"params": {"ncc_median_prev_px": 3, "ncc_place_flow": []}}',
+                    'find={"params": {"ncc_median_prev_px": 3, "ncc_median_find": true, "ncc_place_flow": []}}']) == 0
     assert json.loads(capsys.readouterr().err)["moved"] == 0
     rows = {r["target"]: r for r in map(json.loads, out.read_text().splitlines())}
     t2 = rows["t2"]

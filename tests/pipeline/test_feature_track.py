@@ -285,7 +285,7 @@ def test_matched_blur_flag_must_be_a_bool():
 
     with pytest.raises(ValueError, match="ncc_matched_blur"):
         replace(ChainParams(), ncc_matched_blur=1).check()
-    assert replace(ChainParams(), ncc_matched_blur=True).check().ncc_matched_blur is True
+    assert replace(ChainParams(), ncc_matched_blur=True, ncc_place_flow=()).check().ncc_matched_blur is True
 
 
 def test_render_antialias_flag_must_be_a_bool():
@@ -385,8 +385,8 @@ def test_chain_params_refuse_a_placing_crop_with_a_filtered_ncc(other):
     """The placement runs on the unfiltered image; with the median or the matched blur it would be skipped silently,
     so the pair is refused."""
     with pytest.raises(ValueError, match="ChainParams.ncc_place_half_px: places on the unfiltered image only"):
-        ChainParams(ncc_place_half_px={"navcam": 7}, **other).check()
-    assert ChainParams(**other).check()
+        ChainParams(ncc_place_half_px={"navcam": 7}, ncc_place_flow=(), **other).check()
+    assert ChainParams(ncc_place_flow=(), **other).check()
 
 
 @pytest.mark.parametrize("radius", [0.0, -1.0, float("nan"), True])
@@ -396,18 +396,20 @@ def test_chain_params_refuse_a_bad_placing_radius(radius):
 
 
 def test_the_two_stage_ncc_is_an_option_of_the_navcam_tracks(dl):
-    """Off by default; with ncc_place_half_px={"navcam": 7} the pancam steps are the same bit for bit and the first
-    step that differs is a feature step into a navcam image (here the handoff from the pancam). The whole template
+    """Off by default; with ncc_place_half_px={"navcam": 7} (and the navcam's default flow placement off: one
+    placement per camera) the pancam steps are the same bit for bit as without either, and the first step that
+    differs is a feature step into a navcam image (here the handoff from the pancam). The whole template
     still decides that step: its status, how many candidates were confirmed and pooled, the winner's NCC peak and
     feature position and the pose shift (the trust models' evidence) are the one-stage step's, bit for bit; only the
     answer moves, by at most the placing radius (each pooled candidate's placed pixel lies within the radius of its
     peak, and the answer is their weighted mean with the one-stage weights)."""
-    assert ChainParams().ncc_place_half_px == {} and ChainParams(ncc_place_half_px={"navcam": 7}).check()
+    assert ChainParams().ncc_place_half_px == {}
+    assert ChainParams(ncc_place_half_px={"navcam": 7}, ncc_place_flow=()).check()
     if Path(dl.source).stem != "paper-s1-straight":
         pytest.skip("one sol is enough (two whole chains)")
-    base = _first_target_chain(dl)
-    params = ChainParams(answer="handoff", ncc_place_half_px={"navcam": 7})
-    steps = _first_target_chain(dl, ncc_place_half_px={"navcam": 7})
+    base = _first_target_chain(dl, ncc_place_flow=())
+    params = ChainParams(answer="handoff", ncc_place_half_px={"navcam": 7}, ncc_place_flow=())
+    steps = _first_target_chain(dl, ncc_place_half_px={"navcam": 7}, ncc_place_flow=())
     diff = [(s, s0) for s, s0 in zip(steps, base) if s.tracked_uv != s0.tracked_uv]
     assert diff and all(s.tracked_uv == s0.tracked_uv for s, s0 in zip(steps, base) if s.camera == "pancam")
     s, s0 = diff[0]
@@ -437,19 +439,27 @@ def test_chain_params_refuse_a_flow_placement_with_a_filtered_ncc_or_a_second_pl
     assert ChainParams(ncc_place_flow=("navcam",), ncc_place_half_px={"pancam": 7}).check()
 
 
+@pytest.mark.parametrize("other", [{"ncc_median_prev_px": 1.0}, {"ncc_matched_blur": True}])
+def test_a_filtered_ncc_is_refused_with_the_default_flow_and_says_how_to_turn_it_off(other):
+    """The navcam's flow placement is on by default (session 52), so the filtered NCCs (measured and not adopted)
+    run with ncc_place_flow=() only; the refusal says so."""
+    with pytest.raises(ValueError, match=r"ChainParams.ncc_place_flow: .*\('navcam',\).*ncc_place_flow=\(\) turns it off"):
+        ChainParams(**other).check()
+    assert ChainParams(ncc_place_flow=(), **other).check()
+
+
 def test_the_flow_placement_moves_only_the_answer_of_the_cameras_named(dl):
-    """With ncc_place_flow=("pancam",) the first step that differs from the default chain is the first pancam track
-    (a feature step; t2 of the straight sol, whose first pancam track the features confirm): its status, confirmed
-    and pooled candidates, the winner's NCC peak, feature position and pose shift (the trust models' evidence) are
-    the default's, bit for bit; the winner's placed pixel is recorded and only the answer moves. The steps before
-    it are the same."""
-    assert ChainParams().ncc_place_flow == ()
+    """With ncc_place_flow=("pancam",) the first step that differs from the chain without the flow is the first
+    pancam track (a feature step; t2 of the straight sol, whose first pancam track the features confirm): its
+    status, confirmed and pooled candidates, the winner's NCC peak, feature position and pose shift (the trust
+    models' evidence) are those without the flow, bit for bit; the winner's placed pixel is recorded and only the
+    answer moves. The steps before it are the same."""
     if Path(dl.source).stem != "paper-s1-straight":
         pytest.skip("one sol is enough (two whole chains)")
     start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
     mk = dl.target("t2").mark_in(start.product_id)
     base, steps = (run_chain(dl, start, [mk.u, mk.v], target_id="t2", params=ChainParams(answer="handoff", **f))
-                   for f in ({}, {"ncc_place_flow": ("pancam",)}))
+                   for f in ({"ncc_place_flow": ()}, {"ncc_place_flow": ("pancam",)}))
     first = next(i for i, (s, s0) in enumerate(zip(steps, base)) if s.tracked_uv != s0.tracked_uv)
     s, s0 = steps[first], base[first]
     assert all(a.tracked_uv == b.tracked_uv for a, b in zip(steps[:first], base[:first]))
@@ -459,3 +469,36 @@ def test_the_flow_placement_moves_only_the_answer_of_the_cameras_named(dl):
                "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
     assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
     assert s.extra["ncc_placed_uv"] != s.extra["ncc_uv"]
+
+
+def test_the_flow_places_the_navcam_by_default_and_moves_only_its_answers(dl):
+    """The default places the navcam's feature steps by the flow (adopted in session 52, docs/stereo-and-tracking.md
+    "Optical flow places the cross-drive navcam handoff"). Against the chain without it (t1 of the straight sol,
+    whose first pancam track fails and whose handoff across the drive is a confirmed feature step): the steps
+    before the first navcam step are the same, and that step keeps what the NCC peak decided (status, candidates,
+    the winner's peak and feature evidence) bit for bit; every navcam feature step (the later ones start from the
+    moved answers, so their evidence moves too) records its winner's placed pixel and answers otherwise than
+    without the flow (the answer pools the confirmed candidates' placed pixels); no other camera's
+    step records a placed pixel."""
+    assert ChainParams().ncc_place_flow == ("navcam",)
+    if Path(dl.source).stem != "paper-s1-straight":
+        pytest.skip("one sol is enough (two whole chains)")
+    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
+    mk = dl.target("t1").mark_in(start.product_id)
+    base, steps = (run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(answer="handoff", **f))
+                   for f in ({"ncc_place_flow": ()}, {}))
+    first = next(i for i, (s, s0) in enumerate(zip(steps, base)) if s.tracked_uv != s0.tracked_uv)
+    assert steps[first].camera == "navcam" and steps[first].kind == "handoff"
+    assert all(a.tracked_uv == b.tracked_uv for a, b in zip(steps[:first], base[:first]))
+    decided = ("feature_status", "feature_confirmed", "feature_pooled", "feature_candidates", "ncc_uv", "ncc_score",
+               "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
+    navcam_features = [i for i, s in enumerate(base) if s.camera == "navcam" and s.extra.get("coarse") == "features"]
+    assert first in navcam_features and len(navcam_features) == 3
+    s, s0 = steps[first], base[first]
+    assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
+    for i in navcam_features:
+        s, s0 = steps[i], base[i]
+        assert s.extra["feature_status"] == "confirmed" and "ncc_placed_uv" not in s0.extra
+        assert s.extra["ncc_placed_uv"] != s.extra["ncc_uv"]
+        assert s.tracked_uv != s0.tracked_uv
+    assert not any("ncc_placed_uv" in s.extra for s in steps if s.camera != "navcam")
