@@ -129,7 +129,8 @@ class ChainParams:
     # ("navcam",) put more cross-drive navcam handoffs within 1 px (59 -> 68 of 116) and whole chains 35 -> 37 of 46
     # on a fresh population (asked +3). The default since session 52, judged on two more fresh populations by the
     # rule written before them: 71 -> 76 of 96 chains (won 6, lost 1), no chain GO, every miss NO-GO in time, final
-    # Brier 0.085 -> 0.086 and 0.112 -> 0.082
+    # Brier 0.085 -> 0.086 and 0.112 -> 0.082; on the two populations rendered after the decision 61 -> 62 of 92
+    # (won 4, lost 3), safe the same way
     ncc_place_flow: tuple = ("navcam",)
     # visual odometry (core/visual_odometry.py, feature_track.vo_correction): for tracking steps of these cameras
     # (() : none, the default), the new camera's pose error is also estimated from the whole image (the previous
