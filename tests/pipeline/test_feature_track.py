@@ -90,6 +90,12 @@ def test_chain_params_refuse_bad_vo_settings(field, bad):
 _CHAINS: dict = {}
 
 
+# what the NCC peak of a feature step decides (status, candidates, the winner's peak, the feature evidence the trust
+# models read): a placement option must leave these bit for bit and move only the answer
+_DECIDED = ("feature_status", "feature_confirmed", "feature_pooled", "feature_candidates", "ncc_uv", "ncc_score",
+            "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
+
+
 def _first_target_chain(dl, **fields):
     """``run_chain`` of the sol's first target from its first pancam mark, answer "handoff" (every step tracked),
     with these ``ChainParams`` fields; each run once per module (the options' tests compare against the same
@@ -415,9 +421,7 @@ def test_the_two_stage_ncc_is_an_option_of_the_navcam_tracks(dl):
     s, s0 = diff[0]
     assert s.camera == "navcam" and s.extra.get("coarse") == "features"
     assert s.extra["feature_status"] == "confirmed" and "ncc_placed_uv" not in s0.extra
-    decided = ("feature_status", "feature_confirmed", "feature_pooled", "feature_candidates", "ncc_uv", "ncc_score",
-               "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
-    assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
+    assert {k: s.extra.get(k) for k in _DECIDED} == {k: s0.extra.get(k) for k in _DECIDED}
     assert np.linalg.norm(np.subtract(s.extra["ncc_placed_uv"], s.extra["ncc_uv"])) <= params.ncc_place_radius_px
     assert np.linalg.norm(np.subtract(s.tracked_uv, s0.tracked_uv)) <= params.ncc_place_radius_px
 
@@ -465,9 +469,7 @@ def test_the_flow_placement_moves_only_the_answer_of_the_cameras_named(dl):
     assert all(a.tracked_uv == b.tracked_uv for a, b in zip(steps[:first], base[:first]))
     assert s.camera == "pancam" and s.kind == "track" and s.extra.get("coarse") == "features"
     assert s.extra["feature_status"] == "confirmed" and "ncc_placed_uv" not in s0.extra
-    decided = ("feature_status", "feature_confirmed", "feature_pooled", "feature_candidates", "ncc_uv", "ncc_score",
-               "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
-    assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
+    assert {k: s.extra.get(k) for k in _DECIDED} == {k: s0.extra.get(k) for k in _DECIDED}
     assert s.extra["ncc_placed_uv"] != s.extra["ncc_uv"]
 
 
@@ -483,19 +485,14 @@ def test_the_flow_places_the_navcam_by_default_and_moves_only_its_answers(dl):
     assert ChainParams().ncc_place_flow == ("navcam",)
     if Path(dl.source).stem != "paper-s1-straight":
         pytest.skip("one sol is enough (two whole chains)")
-    start = min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
-    mk = dl.target("t1").mark_in(start.product_id)
-    base, steps = (run_chain(dl, start, [mk.u, mk.v], target_id="t1", params=ChainParams(answer="handoff", **f))
-                   for f in ({"ncc_place_flow": ()}, {}))
+    base, steps = _first_target_chain(dl, ncc_place_flow=()), _first_target_chain(dl)  # t1, the sol's first target
     first = next(i for i, (s, s0) in enumerate(zip(steps, base)) if s.tracked_uv != s0.tracked_uv)
     assert steps[first].camera == "navcam" and steps[first].kind == "handoff"
     assert all(a.tracked_uv == b.tracked_uv for a, b in zip(steps[:first], base[:first]))
-    decided = ("feature_status", "feature_confirmed", "feature_pooled", "feature_candidates", "ncc_uv", "ncc_score",
-               "coarse_uv", "feature_shift_px", "feature_inliers", "feature_local_inliers")
     navcam_features = [i for i, s in enumerate(base) if s.camera == "navcam" and s.extra.get("coarse") == "features"]
     assert first in navcam_features and len(navcam_features) == 3
     s, s0 = steps[first], base[first]
-    assert {k: s.extra.get(k) for k in decided} == {k: s0.extra.get(k) for k in decided}
+    assert {k: s.extra.get(k) for k in _DECIDED} == {k: s0.extra.get(k) for k in _DECIDED}
     for i in navcam_features:
         s, s0 = steps[i], base[i]
         assert s.extra["feature_status"] == "confirmed" and "ncc_placed_uv" not in s0.extra
