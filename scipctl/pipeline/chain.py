@@ -89,7 +89,10 @@ class ChainParams:
     # None (the default): every pixel counts. Measured on 187 held-out chains (docs/stereo-and-tracking.md,
     # "Relief"): with 1.0 px the tracking steps are right a little more often, the final answer is not (122 -> 124
     # within 4 px, its median better on one population and worse on the other), for a dense stereo pair per step
-    # (0.15-0.20 CPU s each); the closure check never uses it (it confirmed more wrong closures)
+    # (0.15-0.20 CPU s each); the closure check never uses it (it confirmed more wrong closures). Session 53, on
+    # today's chain: 78 -> 84 of 98 chains on two populations, but calibration failed its rule; on two fresh ones,
+    # with the trust models refitted to it, 65 -> 67 of 97 (won 5, lost 3): not adopted ("The relief mask on
+    # today's chain"); ~40 % more chain CPU
     relief_max_parallax_px: Optional[float] = None
     relief_disparity_error_px: float = 0.45
     # ... unless fewer than this part of the template is kept (then every pixel counts)
