@@ -5,13 +5,13 @@ chain's verdict. The chain's answers do not depend on the step model (the closur
 not by p), so this is exact.
 
     python docs/scripts/chain_trust_rescore.py run CAMP [CAMP ...] -o ROWS.jsonl --step-model NEW.json [--recorded-model OLD.json]
-    python docs/scripts/chain_trust_rescore.py score ROWS.jsonl [--radius-mm R] [--json]
+    python docs/scripts/chain_trust_rescore.py score ROWS.jsonl [ROWS.jsonl ...] [--radius-mm R] [--by family] [--json]
 
 ``run``: each chain is first scored with ``--recorded-model`` (the step model its campaign ran with; default the
 packaged one) and must give back every recorded step p, GO and the verdict (``reproduced``/``moved`` on stderr,
 exit 1 if any moved), then with ``--step-model``. One JSON line per chain: its family, the final answer's error
 (hazcam px; null: none), and per arm (``recorded``, ``new``) the final p, the chain's GO and NO-GO step, the step
-p and GO. ``score``: per campaign and over all, per arm, the final answer's Brier score (a chain without a hazcam
+p and GO. ``score``: per campaign (``--by family``: per scene family) and over all, per arm, the final answer's Brier score (a chain without a hazcam
 answer counting p = 0), chain GO (wrong), misses NO-GO at or before their first tracking step beyond ``R`` mm
 (default 7.73, the step radius before session 43) and GO tracking steps. Bad input: one line, exit code 2.
 """
@@ -124,11 +124,14 @@ def _first_bad(row: dict, radius_mm: float):
     return None
 
 
-def score(rows: list, radius_mm: float = 7.73) -> dict:
-    """The figures of ``score`` (see the module docstring): ``{campaign or "all": {arm: figures}}``."""
+def score(rows: list, radius_mm: float = 7.73, by: str = "campaign") -> dict:
+    """The figures of ``score`` (see the module docstring): ``{campaign (or family, by="family") or "all": {arm:
+    figures}}``."""
+    if by not in ("campaign", "family"):
+        raise ValueError(f"by: campaign or family, not {by!r}")
     out = {}
-    for camp in sorted({r["campaign"] for r in rows}) + ["all"]:
-        sel = [r for r in rows if camp == "all" or r["campaign"] == camp]
+    for camp in sorted({r[by] for r in rows}) + ["all"]:
+        sel = [r for r in rows if camp == "all" or r[by] == camp]
         y = np.array([r["final_px"] is not None and r["final_px"] <= SUCCESS_PX for r in sel], bool)
         out[camp] = {}
         for arm in ("recorded", "new"):
@@ -169,8 +172,9 @@ def main(argv=None) -> int:
     r.add_argument("--step-model", required=True)
     r.add_argument("--recorded-model", default=None)
     s = sub.add_parser("score")
-    s.add_argument("rows")
+    s.add_argument("rows", nargs="+")
     s.add_argument("--radius-mm", type=float, default=7.73)
+    s.add_argument("--by", choices=("campaign", "family"), default="campaign")
     s.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
     if a.cmd == "run":
@@ -188,11 +192,13 @@ def main(argv=None) -> int:
         atomic_write_text(a.out, "".join(json.dumps(x) + "\n" for x in rows))
         print(json.dumps({"chains": len(rows), "reproduced": same, "moved": moved}), file=sys.stderr)
         return 1 if moved else 0
-    try:
-        rows = [json.loads(x) for x in Path(a.rows).read_text(encoding="utf-8").splitlines() if x.strip()]
-    except (OSError, ValueError) as e:
-        ap.error(f"{a.rows}: {e}")
-    s = score(rows, a.radius_mm)
+    rows = []
+    for f in a.rows:
+        try:
+            rows += [json.loads(x) for x in Path(f).read_text(encoding="utf-8").splitlines() if x.strip()]
+        except (OSError, ValueError) as e:
+            ap.error(f"{f}: {e}")
+    s = score(rows, a.radius_mm, a.by)
     if a.json:
         print(json.dumps(s, indent=1))
     else:

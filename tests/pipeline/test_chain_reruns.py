@@ -176,6 +176,29 @@ def test_chains_scored_again_by_another_step_model(camp, tmp_path, capsys):
         assert new[fin] == r["new"]["final_p"]
 
 
+def test_rescored_chains_are_scored_by_family_and_from_several_files(camp, tmp_path, capsys):
+    """chain_trust_rescore.py score --by family: one group per scene family whose chains and successes add up to the
+    whole; rows from several files are scored together; any other grouping is refused."""
+    rs = load("chain_trust_rescore")
+    rows_path = tmp_path / "rows.jsonl"
+    assert rs.main(["run", str(camp), "-o", str(rows_path), "--step-model",
+                    str(ROOT / "scipctl/data/step_trust_model.json")]) == 0
+    capsys.readouterr()
+    rows = list(map(json.loads, rows_path.read_text().splitlines()))
+    a, b = (dict(r, family=fam) for r, fam in zip(rows, ("sand-sheet", "low-sun")))
+    (tmp_path / "a.jsonl").write_text(json.dumps(a) + "\n")
+    (tmp_path / "b.jsonl").write_text(json.dumps(b) + "\n")
+    s = rs.score([a, b], by="family")
+    assert sorted(s) == ["all", "low-sun", "sand-sheet"]
+    for key in ("chains", "within_4px", "misses", "chain_go"):
+        assert s["low-sun"]["new"][key] + s["sand-sheet"]["new"][key] == s["all"]["new"][key]
+    assert s["all"]["new"] == rs.score(rows)["all"]["new"]  # the grouping moves no figure of the whole
+    assert rs.main(["score", str(tmp_path / "a.jsonl"), str(tmp_path / "b.jsonl"), "--by", "family", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == json.loads(json.dumps(s))
+    with pytest.raises(ValueError):
+        rs.score(rows, by="downlink")
+
+
 def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, capsys):
     """Today's chains carry designate's trust on step 0: the script's designate gives it back, and the verdict
     with it is the recorded one. A record made before the designation was scored (its trust stripped) is taken as
