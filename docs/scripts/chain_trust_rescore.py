@@ -11,9 +11,10 @@ not by p), so this is exact.
 packaged one) and must give back every recorded step p, GO and the verdict (``reproduced``/``moved`` on stderr,
 exit 1 if any moved), then with ``--step-model``. One JSON line per chain: its family, the final answer's error
 (hazcam px; null: none), and per arm (``recorded``, ``new``) the final p, the chain's GO and NO-GO step, the step
-p and GO. ``score``: per campaign (``--by family``: per scene family) and over all, per arm, the final answer's Brier score (a chain without a hazcam
-answer counting p = 0), chain GO (wrong), misses NO-GO at or before their first tracking step beyond ``R`` mm
-(default 7.73, the step radius before session 43) and GO tracking steps. Bad input: one line, exit code 2.
+p and GO. ``score``: per campaign (``--by family``: per scene family) and over all, per arm, the final answer's
+Brier score (a chain without a hazcam answer counting p = 0), chain GO (wrong), misses NO-GO at or before their first
+tracking step beyond ``R`` mm (default 7.73, the step radius before session 43) and GO tracking steps. Bad input (a
+row file that is not JSON lines, or a row without the field a figure needs): one line, exit code 2.
 """
 
 from __future__ import annotations
@@ -130,10 +131,10 @@ def score(rows: list, radius_mm: float = 7.73, by: str = "campaign") -> dict:
     if by not in ("campaign", "family"):
         raise ValueError(f"by: campaign or family, not {by!r}")
     out = {}
-    for camp in sorted({r[by] for r in rows}) + ["all"]:
-        sel = [r for r in rows if camp == "all" or r[by] == camp]
+    for group in sorted({r[by] for r in rows}) + ["all"]:
+        sel = [r for r in rows if group == "all" or r[by] == group]
         y = np.array([r["final_px"] is not None and r["final_px"] <= SUCCESS_PX for r in sel], bool)
-        out[camp] = {}
+        out[group] = {}
         for arm in ("recorded", "new"):
             a = [r[arm] for r in sel]
             p = np.array([x["final_p"] or 0.0 for x in a])
@@ -145,7 +146,7 @@ def score(rows: list, radius_mm: float = 7.73, by: str = "campaign") -> dict:
                     caught += (not x["go"]) and (x["nogo_step"] is None or fb is None or x["nogo_step"] <= fb)
             steps_go = sum(g for r, x in zip(sel, a) for g, k in zip(x["steps_go"], r["kinds"])
                            if not k.startswith("hazcam") and not k.endswith("designate"))
-            out[camp][arm] = {"chains": len(sel), "within_4px": int(y.sum()),
+            out[group][arm] = {"chains": len(sel), "within_4px": int(y.sum()),
                               "final_brier": float(np.mean((p - y) ** 2)) if len(sel) else None,
                               "chain_go": int(go.sum()), "chain_go_wrong": int((go & ~y).sum()),
                               "misses": int((~y).sum()), "misses_caught": int(caught), "go_tracking_steps": int(steps_go)}
@@ -198,13 +199,16 @@ def main(argv=None) -> int:
             rows += [json.loads(x) for x in Path(f).read_text(encoding="utf-8").splitlines() if x.strip()]
         except (OSError, ValueError) as e:
             ap.error(f"{f}: {e}")
-    s = score(rows, a.radius_mm, a.by)
+    try:
+        s = score(rows, a.radius_mm, a.by)
+    except (KeyError, TypeError) as e:
+        ap.error(f"{', '.join(a.rows)}: a row without the field {e} (rows as `run` writes them)")
     if a.json:
         print(json.dumps(s, indent=1))
     else:
-        for camp, arms in s.items():
+        for group, arms in s.items():
             for arm, f in arms.items():
-                print(f"{Path(camp).name:16s} {arm:8s} chains {f['chains']} within 4 px {f['within_4px']} final Brier "
+                print(f"{Path(group).name:16s} {arm:8s} chains {f['chains']} within 4 px {f['within_4px']} final Brier "
                       f"{f['final_brier']:.4f} chain GO {f['chain_go']} (wrong {f['chain_go_wrong']}) misses caught "
                       f"{f['misses_caught']} of {f['misses']} GO tracking steps {f['go_tracking_steps']}")
     return 0

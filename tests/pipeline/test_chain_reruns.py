@@ -199,6 +199,17 @@ def test_rescored_chains_are_scored_by_family_and_from_several_files(camp, tmp_p
         rs.score(rows, by="downlink")
 
 
+def test_a_row_without_the_grouping_field_is_refused_with_exit_2(tmp_path, capsys):
+    """chain_trust_rescore.py score --by family on a row that has no family: one line naming the file, exit 2."""
+    rows = tmp_path / "rows.jsonl"
+    rows.write_text(json.dumps({"campaign": "c", "target": "t1", "final_px": 1.0}) + "\n")
+    with pytest.raises(SystemExit) as e:
+        load("chain_trust_rescore").main(["score", str(rows), "--by", "family"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("chain_trust_rescore.py: error:") and str(rows) in err and "'family'" in err
+
+
 def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, capsys):
     """Today's chains carry designate's trust on step 0: the script's designate gives it back, and the verdict
     with it is the recorded one. A record made before the designation was scored (its trust stripped) is taken as
