@@ -289,6 +289,7 @@ def campaign(
     closure: bool = typer.Option(False, "--closure", help="Record each chain's closure check with --chain-answer handoff too (with the default answer it always runs; docs/stereo-and-tracking.md, 'Closure')."),
     chain_answer: Optional[str] = typer.Option(None, "--chain-answer", help="The chain's final hazcam answer: closure (the default: the closure's pixel when it is confirmed, skipping the navcam tracks, else the handoff's) or handoff (scip's handoff of the chain's navcam pixel); docs/stereo-and-tracking.md, 'Closure as the answer'."),
     predict_route: str = typer.Option("plan", "--predict-route", help="The approach predicted: plan (the planner's, as sequence uplinks it) or downlink (the downlink's own later stops, which its chain ran over: for scoring the prediction against the chain)."),
+    stereo_selfcal: bool = typer.Option(False, "--stereo-selfcal", help="Re-align every stereo pair's right eye from the pair's own feature matches before anything runs (docs/stereo-and-tracking.md, 'Stereo self-calibration')."),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: scip only, as simulate-handoff; 'all' for every method of the paper and ours)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo for the handoff (as simulate-handoff --fast)."),
@@ -305,7 +306,7 @@ def campaign(
 
     command.campaign(srcs, out, synth, seeds, runs, families, no_errors, handoff, chain, predict, methods, success_px,
         fast, scheduler, workers, memory_limit, summarize, json_out, predict_route, closure, chain_answer,
-        error_draws=error_draws)
+        error_draws=error_draws, stereo_selfcal=stereo_selfcal)
 
 
 def main() -> None:

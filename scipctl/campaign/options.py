@@ -23,7 +23,9 @@ class CampaignOptions:
     prediction is made for (``PredictParams.route``: ``plan``, what ``sequence`` uplinks, or ``downlink``, the
     downlink's own later stops, which its chain ran over); ``success_px``: a handoff (and a chain's
     final answer) within this many hazcam pixels of the mark is a success; ``closure``: each chain also runs its
-    closure check (recorded on its final step); ``chain_answer``: the chain's final answer (``ChainParams.answer``).
+    closure check (recorded on its final step); ``chain_answer``: the chain's final answer (``ChainParams.answer``);
+    ``stereo_selfcal``: every stereo pair's right eye re-aligned from the pair's own matches before anything runs
+    (pipeline/stereo_selfcal.py).
     """
 
     handoff: bool = True
@@ -36,6 +38,7 @@ class CampaignOptions:
     predict_route: str = "plan"  # PredictParams.route: "plan" (the planner's approach) or "downlink" (its own stops)
     closure: bool = False  # the chain's closure check (ChainParams.closure, pipeline/chain_closure.py) on every chain
     chain_answer: str = DEFAULT_CHAIN_ANSWER  # ChainParams.answer: the chain's final answer, "closure" or "handoff"
+    stereo_selfcal: bool = False  # pipeline.stereo_selfcal.self_calibrate_downlink on each downlink first
 
     def check(self) -> "CampaignOptions":
         if not (self.handoff or self.chain or self.predict):
@@ -72,6 +75,8 @@ class CampaignOptions:
             d["closure"] = True
         if self.chain_answer != "handoff":  # likewise: campaigns before the closure answer were "handoff" ones
             d["chain_answer"] = self.chain_answer
+        if self.stereo_selfcal:  # likewise: only when on
+            d["stereo_selfcal"] = True
         return d
 
     @classmethod
@@ -79,7 +84,8 @@ class CampaignOptions:
         return cls(bool(d["handoff"]), bool(d["chain"]), bool(d["predict"]), tuple(d["methods"]),
                    tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]),
                    str(d.get("predict_route", "plan")), bool(d.get("closure", False)),
-                   str(d.get("chain_answer", "handoff")))  # a record without it was made before the option
+                   str(d.get("chain_answer", "handoff")),  # a record without it was made before the option
+                   bool(d.get("stereo_selfcal", False)))
 
     def key(self) -> str:
         """SHA-256 of everything here that changes an answer, and of the tool's version."""

@@ -44,6 +44,7 @@ class DownlinkResult:
     downlink_sha256: Optional[str] = None  # as the worker read it (files), to check against the job's
     provenance: dict = field(default_factory=dict)  # io.provenance: tool version, command line, input hashes
     truth_targets: dict = field(default_factory=dict)  # target id -> [x, y, z] site m, where the downlink has truth
+    stereo_selfcal: list = field(default_factory=list)  # PairSelfCal.to_dict() per stereo pair, when the option is on
 
     def fail(self, stage: str, exc: BaseException) -> None:
         """Record ``exc`` as ``stage``'s one-line error; the downlink is failed."""
@@ -63,6 +64,7 @@ class DownlinkResult:
                 "cpu_s_by_stage": self.cpu_s_by_stage, "worker": self.worker,
                 "downlink_sha256": self.downlink_sha256, "provenance": self.provenance,
                 "truth_targets": self.truth_targets,
+                **({"stereo_selfcal": self.stereo_selfcal} if self.stereo_selfcal else {}),
                 "counts": {k: len(self._records(k)) for k in KINDS}}
 
     def _records(self, kind: str) -> list:
@@ -86,7 +88,8 @@ class DownlinkResult:
                   table1=h.get("table1") or [], products=h.get("products") or {}, seconds=h.get("seconds") or {},
                   cpu_s=h.get("cpu_s"), cpu_s_by_stage=h.get("cpu_s_by_stage") or {}, worker=h.get("worker") or {},
                   downlink_sha256=h.get("downlink_sha256"),
-                  provenance=h.get("provenance") or {}, truth_targets=h.get("truth_targets") or {})
+                  provenance=h.get("provenance") or {}, truth_targets=h.get("truth_targets") or {},
+                  stereo_selfcal=h.get("stereo_selfcal") or [])
         for x in lines[1:]:
             if x.get("kind") in KINDS:
                 res._records(x["kind"]).append(x["record"])

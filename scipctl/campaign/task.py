@@ -173,6 +173,17 @@ def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int =
         res.truth_targets = {t.id: [float(x) for x in t.xyz_site_m] for t in dl.truth_targets}
         if job.path is not None and dl.source_sha256 not in (None, job.input_sha256):
             res.fail("load", InputError(job.path, "sha256", "the file changed after the campaign hashed it"))
+        if options.stereo_selfcal:
+            t0, c0 = time.perf_counter(), time.process_time()
+            try:
+                from ..pipeline.stereo_selfcal import self_calibrate_downlink
+
+                dl, pairs = self_calibrate_downlink(dl)
+                res.stereo_selfcal = [p.to_dict() for p in pairs]
+            except Exception as e:  # noqa: BLE001 -- recorded; the stages run on the downlinked models
+                res.fail("stereo_selfcal", e)
+            res.seconds["stereo_selfcal"] = time.perf_counter() - t0
+            res.cpu_s_by_stage["stereo_selfcal"] = time.process_time() - c0
         stages = (("handoff", options.handoff, lambda: _handoff(dl, job, options, res)),
                   ("chain", options.chain, lambda: _chain(dl, job, res, options.closure, options.chain_answer)),
                   ("predict", options.predict, lambda: _predict(dl, options, res)))

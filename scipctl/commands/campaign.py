@@ -17,8 +17,9 @@ from .output import emit_json, note, stderr_console
 
 
 def _options(handoff, chain, predict, methods, success_px, fast, predict_route="plan", closure=False,
-             chain_answer=None):
+             chain_answer=None, stereo_selfcal=False):
     from ..campaign.options import CampaignOptions
+    from ..pipeline.chain import DEFAULT_CHAIN_ANSWER
     from .handoff import _parse_methods
 
     if methods is not None and not handoff:
@@ -27,7 +28,8 @@ def _options(handoff, chain, predict, methods, success_px, fast, predict_route="
         raise InputError("campaign", "--chain-answer", "is the chain's answer: not with --no-chain")
     names, _, pairs = _parse_methods(methods) if handoff else ([], [], set())
     return CampaignOptions(handoff, chain, predict, tuple(names), tuple(sorted(pairs)), success_px, fast,
-                           predict_route, closure, *([] if chain_answer is None else [chain_answer])).check()
+                           predict_route, closure, DEFAULT_CHAIN_ANSWER if chain_answer is None else chain_answer,
+                           stereo_selfcal).check()
 
 
 def _jobs(srcs, synth, seeds, runs, families, no_errors, error_draws=None):
@@ -125,7 +127,7 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
              methods: Optional[str], success_px: float, fast: bool, scheduler: Optional[str], workers: Optional[int],
              memory_limit: Optional[str], summarize_dir: Optional[Path], json_out: bool,
              predict_route: str = "plan", closure: bool = False, chain_answer: Optional[str] = None,
-             error_draws: Optional[str] = None) -> None:
+             error_draws: Optional[str] = None, stereo_selfcal: bool = False) -> None:
     """``scipctl campaign``: run (or with ``summarize_dir`` only re-aggregate) and write the summary."""
     from ..campaign.cluster import ClusterSpec
     from ..campaign.store import CampaignStore
@@ -147,7 +149,8 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
         raise InputError("campaign", "SRC", "give downlinks (files, folders, globs) or --synth SCENARIO")
     if out is None:
         raise InputError("campaign", "-o/--out", "give the output folder")
-    options = _options(handoff, chain, predict, methods, success_px, fast, predict_route, closure, chain_answer)
+    options = _options(handoff, chain, predict, methods, success_px, fast, predict_route, closure, chain_answer,
+                       stereo_selfcal)
     cluster = ClusterSpec(scheduler, workers, memory_limit).check()
     jobs = _jobs(srcs, synth, seeds, runs, families, no_errors, error_draws)
     store = CampaignStore(out)

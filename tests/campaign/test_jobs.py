@@ -150,6 +150,39 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
         assert seen and all(s == want for s in seen), (closure, answer, seen)
 
 
+def test_stereo_selfcal_is_in_the_key_only_when_on_and_runs_before_the_stages(monkeypatch):
+    """campaign --stereo-selfcal: campaigns without it keep their key; with it, the stages see the re-aligned
+    right models (pipeline/stereo_selfcal.py, tested in tests/pipeline/test_stereo_selfcal.py) and the header
+    records each pair's fit."""
+    from scipctl.campaign import task
+    from scipctl.campaign.options import job_key
+
+    off = CampaignOptions(handoff=False, chain=True, predict=False)
+    on = CampaignOptions(handoff=False, chain=True, predict=False, stereo_selfcal=True).check()
+    assert "stereo_selfcal" not in off.to_dict() and on.to_dict()["stereo_selfcal"] is True
+    assert on.key() != off.key() and CampaignOptions.from_dict(on.to_dict()) == on
+    assert CampaignOptions.from_dict(off.to_dict()) == off
+    seen = {}
+
+    def fake_chain(dl, job, res, closure=False, answer=None):
+        seen.update({im.product_id: im.camera_model for im in dl.images})
+
+    monkeypatch.setattr(task, "_chain", fake_chain)
+    job = file_jobs([SOLS / "mcap" / "paper-s1-arc.mcap"])[0]
+    res = task.run_job(job, on, job_key(job.input_sha256, on.key()))
+    assert res.status == "ok", res.error
+    applied = [p for p in res.stereo_selfcal if p["applied"]]
+    assert len(res.stereo_selfcal) == 6 and applied
+    from scipctl.io.downlink import read_downlink
+
+    given = {im.product_id: im.camera_model for im in read_downlink(SOLS / "mcap" / "paper-s1-arc.mcap").images}
+    for p in applied:
+        assert not seen[p["right"]].almost_equal(given[p["right"]], tol=1e-12)
+        assert seen[p["left"]].almost_equal(given[p["left"]], tol=0)
+    back = DownlinkResult.from_jsonl(res.to_jsonl())
+    assert back.stereo_selfcal == json.loads(json.dumps(res.stereo_selfcal))
+
+
 @pytest.mark.parametrize("family", ["errors-double", "errors-none", "sand-sheet"])
 def test_a_synthetic_job_renders_what_synth_renders_for_its_family(family):
     """campaign --synth --families F and `synth --family F` give the same downlink: the family's error scale

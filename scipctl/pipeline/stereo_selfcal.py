@@ -1,0 +1,56 @@
+"""Every stereo pair of a downlink re-aligned from its own matches before any stereo runs on it.
+
+:func:`self_calibrate_downlink` fits each pair's right-eye misalignment (:mod:`scipctl.core.stereo_selfcal`) and
+returns a copy of the downlink whose right-eye products carry the turned models; point stereo, dense stereo, visual
+odometry and the handoffs then read the corrected models through the products as before. A pair whose fit has too
+little support keeps its downlinked model (its :class:`PairSelfCal` says why). The downlink given is not changed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from ..core.stereo_selfcal import StereoRotationFit, StereoSelfCalParams, fit_right_rotation, rotated_model, stereo_matches
+from ..model import Downlink
+
+__all__ = ["PairSelfCal", "self_calibrate_downlink"]
+
+
+@dataclass(frozen=True)
+class PairSelfCal:
+    """One pair's outcome: its products, camera, the fit, and whether the right model was replaced."""
+
+    left_product_id: str
+    right_product_id: str
+    camera: str
+    fit: StereoRotationFit
+    applied: bool
+
+    def to_dict(self) -> dict:
+        return {"left": self.left_product_id, "right": self.right_product_id, "camera": self.camera,
+                "applied": self.applied, **self.fit.to_dict()}
+
+
+def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSelfCalParams()
+                            ) -> tuple[Downlink, list[PairSelfCal]]:
+    """``(downlink with re-aligned right models, one PairSelfCal per stereo pair)``; pairs in product order.
+
+    A right product paired with several left ones (it should not be) is fitted once, with the first.
+    """
+    params.check()
+    out: list[PairSelfCal] = []
+    new_models: dict = {}
+    for left in dl.images:
+        if left.eye != "left":
+            continue
+        right = dl.stereo_pair(left)
+        if right is None or right.product_id in new_models or any(p.right_product_id == right.product_id for p in out):
+            continue
+        uv_l, uv_r = stereo_matches(left.pixels_float(), right.pixels_float(), params)
+        fit = fit_right_rotation(left.camera_model, right.camera_model, uv_l, uv_r, params)
+        if fit.ok:
+            new_models[right.product_id] = rotated_model(right.camera_model, fit.rotvec_rad)
+        out.append(PairSelfCal(left.product_id, right.product_id, left.camera, fit, fit.ok))
+    images = [replace(im, camera_model=new_models[im.product_id]) if im.product_id in new_models else im
+              for im in dl.images]
+    return replace(dl, images=images), out
