@@ -96,11 +96,16 @@ class StereoRotationFit:
     residual_px_after: float
 
     def to_dict(self) -> dict:
+        """JSON-ready (a value that is not finite, as when too few matches left nothing to measure, is None)."""
+        def num(x):
+            x = float(x)
+            return x if np.isfinite(x) else None
+
         return {"ok": self.ok, "reason": self.reason, "rotvec_rad": [float(x) for x in self.rotvec_rad],
                 "rows_px": float(self.rows_px), "roll_px": float(self.roll_px),
-                "sigma_px": [float(x) for x in self.sigma_px], "n_matches": self.n_matches, "n_used": self.n_used,
-                "n_inliers": self.n_inliers, "residual_px_before": float(self.residual_px_before),
-                "residual_px_after": float(self.residual_px_after)}
+                "sigma_px": [num(x) for x in self.sigma_px], "n_matches": self.n_matches, "n_used": self.n_used,
+                "n_inliers": self.n_inliers, "residual_px_before": num(self.residual_px_before),
+                "residual_px_after": num(self.residual_px_after)}
 
 
 def stereo_matches(left_px: np.ndarray, right_px: np.ndarray, params: StereoSelfCalParams = StereoSelfCalParams()):

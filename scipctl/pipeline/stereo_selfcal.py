@@ -40,12 +40,14 @@ def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSe
     params.check()
     out: list[PairSelfCal] = []
     new_models: dict = {}
+    fitted: set = set()  # right product ids
     for left in dl.images:
         if left.eye != "left":
             continue
         right = dl.stereo_pair(left)
-        if right is None or right.product_id in new_models or any(p.right_product_id == right.product_id for p in out):
+        if right is None or right.product_id in fitted:
             continue
+        fitted.add(right.product_id)
         uv_l, uv_r = stereo_matches(left.pixels_float(), right.pixels_float(), params)
         fit = fit_right_rotation(left.camera_model, right.camera_model, uv_l, uv_r, params)
         if fit.ok:

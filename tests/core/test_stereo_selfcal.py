@@ -119,6 +119,8 @@ def test_too_few_matches_is_not_ok_and_changes_nothing():
     fit = fit_right_rotation(left, right, uvL, uvR, StereoSelfCalParams(min_inliers=40))
     assert not fit.ok and "fewer than 40" in fit.reason
     assert np.all(fit.rotvec_rad == 0.0)
+    d = fit.to_dict()  # nothing measured: None, not NaN, in the record (strict JSON)
+    assert d["sigma_px"] == [None, None] and d["residual_px_before"] is None
     far = uvR + np.array([0.0, 40.0])  # every match far off its curve: nothing within the prior
     fit = fit_right_rotation(left, right, uvL, far, StereoSelfCalParams(min_inliers=10))
     assert not fit.ok and "within 15 px" in fit.reason

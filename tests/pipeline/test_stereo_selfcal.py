@@ -67,3 +67,18 @@ def test_records_are_json_ready(calibrated):
     _, _, _, pairs = calibrated
     d = json.loads(json.dumps([p.to_dict() for p in pairs]))
     assert d[0]["left"].endswith("-L") and d[0]["applied"] is True and len(d[0]["rotvec_rad"]) == 3
+
+
+def test_a_pair_without_texture_keeps_its_model():
+    """A right image with nothing to match (flat grey): the fit is refused with its reason, the model stays."""
+    from dataclasses import replace
+
+    dl = read_downlink(SAMPLE)
+    left = next(im for im in dl.images if im.camera == "hazcam" and im.eye == "left")
+    right = dl.stereo_pair(left)
+    flat = replace(right, _pixels=np.full((right.height, right.width), 900, np.uint16))
+    one_pair = replace(dl, images=[left, flat])
+    out, pairs = self_calibrate_downlink(one_pair)
+    assert len(pairs) == 1 and not pairs[0].applied and not pairs[0].fit.ok
+    assert "fewer than" in pairs[0].fit.reason
+    assert out.images[1].camera_model is right.camera_model
