@@ -97,3 +97,25 @@ def test_a_synthetic_campaign_renders_on_the_workers_and_summarizes(tmp_path, mo
     again = json.loads(r.stdout)
     assert again["run"] is None and again["overall"] == doc["overall"] and again["counts"] == doc["counts"]
     assert json.loads((out / "summary.json").read_text())["overall"] == json.loads(before)["overall"]
+
+
+def test_the_stereo_selfcal_flag_reaches_the_options(tmp_path, monkeypatch):
+    """--stereo-selfcal (off by default) is what CampaignOptions.stereo_selfcal says; its effect on a downlink is
+    tested in tests/campaign/test_jobs.py."""
+    import scipctl.campaign.run as run_mod
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def fake_run(jobs, options, store, cluster, on_start=None, on_result=None):
+        seen.append(options)
+        raise Stop
+
+    monkeypatch.setattr(run_mod, "run_campaign", fake_run)
+    for extra, want in (([], False), (["--stereo-selfcal"], True)):
+        r = runner.invoke(app, ["campaign", str(SOL), "--no-handoff", "--no-predict", "-o", str(tmp_path / f"o{want}")]
+                          + extra)
+        assert "internal error (Stop)" in r.output  # the run was reached (and stopped there)
+        assert seen[-1].stereo_selfcal is want
