@@ -140,6 +140,20 @@ def _planes(left: CameraModel, right: CameraModel, uv_left: np.ndarray, uv_right
     return n, rR, float(right.hs)
 
 
+def _turn_residual_px(n: np.ndarray, rR: np.ndarray, hs: float, axes: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``n . (R(w) r_R) * hs`` ``(N,)`` for ``w = x @ axes``: ``n``, ``rR`` ``(N, 3)`` (plane normals, right rays),
+    ``axes`` ``(K, 3)`` unit axes, ``x`` ``(K,)`` angles (rad)."""
+    R = rotvec_to_matrix(x @ axes)
+    return np.einsum("ij,ij->i", n, rR @ R.T) * hs
+
+
+def _turn_jacobian_px(n: np.ndarray, rR: np.ndarray, hs: float, axes: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``(N, K)``: d/dx_k of :func:`_turn_residual_px`, as ``n . (a_k x (R r)) * hs`` to first order in a small step
+    about the current rotation (exact at ``x = 0``, a Gauss-Newton approximation elsewhere; the step is a few mrad)."""
+    Rr = rR @ rotvec_to_matrix(x @ axes).T
+    return np.stack([np.einsum("ij,ij->i", n, np.cross(a, Rr)) for a in axes], axis=1) * hs
+
+
 def _check_uv(uv_left, uv_right):
     uv_left = np.asarray(uv_left, float)
     uv_right = np.asarray(uv_right, float)
@@ -205,15 +219,10 @@ def fit_right_rotation(left: CameraModel, right: CameraModel, uv_left, uv_right,
     prior_w = params.loss_scale_px / (params.prior_px / hs)
 
     def residual(x):
-        R = rotvec_to_matrix(x @ axes)
-        return np.append(np.einsum("ij,ij->i", n, rR @ R.T) * hs, x[2] * prior_w)
+        return np.append(_turn_residual_px(n, rR, hs, axes, x), x[2] * prior_w)
 
     def jac(x):
-        # d/dx_k of n . (R(w) r) at the current R: n . (a_k x (R r)) to first order in a small step about the
-        # current rotation (exact at x = 0, a Gauss-Newton approximation elsewhere; the step is a few mrad)
-        Rr = rR @ rotvec_to_matrix(x @ axes).T
-        J = np.stack([np.einsum("ij,ij->i", n, np.cross(a, Rr)) for a in axes], axis=1) * hs
-        return np.vstack([J, [0.0, 0.0, prior_w]])
+        return np.vstack([_turn_jacobian_px(n, rR, hs, axes, x), [0.0, 0.0, prior_w]])
 
     sol = least_squares(residual, np.zeros(3), jac=jac, loss="soft_l1", f_scale=params.loss_scale_px, method="trf")
     applied = np.array([sol.x[0], sol.x[1], 0.0])
