@@ -343,6 +343,18 @@ def with_window_range_gap(rec: Designation, left: ImageProduct, right: ImageProd
     return replace(rec, window_range_gap_pct=gap)
 
 
+def check_designation_input(dl: Downlink, left: ImageProduct, uv) -> ImageProduct:
+    """The right product :func:`designate` pairs ``left`` with; InputError when ``uv`` ``(2,)`` is outside the
+    image or ``left`` has no stereo pair (what a command checks before any work)."""
+    uv = np.asarray(uv, float)
+    if not (-0.5 <= uv[0] <= left.width - 0.5 and -0.5 <= uv[1] <= left.height - 0.5):
+        raise InputError(left.product_id, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the {left.width}x{left.height} image")
+    right = dl.stereo_pair(left)
+    if right is None:
+        raise InputError(left.product_id, "eye", f"no right-eye {left.camera} image taken with it: cannot do stereo")
+    return right
+
+
 def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_normal: bool = True,
               params: Optional[PointStereoParams] = None, trust=None) -> Designation:
     """Point stereo at ``uv`` in ``left``; returns the :class:`Designation` (raises InputError).
@@ -359,11 +371,7 @@ def designate(dl: Downlink, left: ImageProduct, uv, target_id: str = "t1", with_
 
     params = (params or PointStereoParams()).check()
     uv = np.asarray(uv, float)
-    if not (-0.5 <= uv[0] <= left.width - 0.5 and -0.5 <= uv[1] <= left.height - 0.5):
-        raise InputError(left.product_id, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the {left.width}x{left.height} image")
-    right = dl.stereo_pair(left)
-    if right is None:
-        raise InputError(left.product_id, "eye", f"no right-eye {left.camera} image taken with it: cannot do stereo")
+    right = check_designation_input(dl, left, uv)
     band = float(params.band(left.camera))
     win = params.window(left.camera)
     L = left.pixels_float()

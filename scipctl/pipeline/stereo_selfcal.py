@@ -9,6 +9,7 @@ little support keeps its downlinked model (its :class:`PairSelfCal` says why). T
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable, Optional
 
 from ..core.stereo_selfcal import StereoRotationFit, StereoSelfCalParams, fit_right_rotation, rotated_model, stereo_matches
 from ..model import Downlink
@@ -31,10 +32,13 @@ class PairSelfCal:
                 "applied": self.applied, **self.fit.to_dict()}
 
 
-def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSelfCalParams()
-                            ) -> tuple[Downlink, list[PairSelfCal]]:
-    """``(downlink with re-aligned right models, one PairSelfCal per stereo pair)``; pairs in product order.
+def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSelfCalParams(),
+                            only: Optional[Callable] = None) -> tuple[Downlink, list[PairSelfCal]]:
+    """``(downlink with re-aligned right models, one PairSelfCal per stereo pair fitted)``; pairs in product order.
 
+    ``only``: a predicate on a left product (:class:`scipctl.model.ImageProduct`); the pairs whose left product it rejects
+    are neither fitted nor changed (a command fits the pairs it reads: each pair's fit depends on that pair alone,
+    so a pair's answer is the same whichever others are fitted). None: every pair.
     A right product paired with several left ones (it should not be) is fitted once, with the first.
     """
     params.check()
@@ -42,7 +46,7 @@ def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSe
     new_models: dict = {}
     fitted: set = set()  # right product ids
     for left in dl.images:
-        if left.eye != "left":
+        if left.eye != "left" or (only is not None and not only(left)):
             continue
         right = dl.stereo_pair(left)
         if right is None or right.product_id in fitted:

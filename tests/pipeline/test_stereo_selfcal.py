@@ -82,3 +82,20 @@ def test_a_pair_without_texture_keeps_its_model():
     assert len(pairs) == 1 and not pairs[0].applied and not pairs[0].fit.ok
     assert "fewer than" in pairs[0].fit.reason
     assert out.images[1].camera_model is right.camera_model
+
+
+def test_only_the_chosen_pairs_are_fitted_and_each_fit_is_its_pair_alone(calibrated):
+    """``only`` (what a command reads): the rejected pairs are neither fitted nor changed, and a chosen pair's new
+    model is bit for bit the one the all-pairs run gives (a pair's fit reads that pair alone), so a command that
+    fits fewer pairs answers as a campaign that fits them all."""
+    dl, models, out_all, _ = calibrated
+    out, pairs = self_calibrate_downlink(dl, only=lambda im: im.camera in ("navcam", "hazcam"))
+    assert {p.camera for p in pairs} == {"navcam", "hazcam"} and len(pairs) == 4
+    fitted = {p.right_product_id for p in pairs}
+    for im, im_all in zip(out.images, out_all.images):
+        if im.product_id in fitted:
+            assert im.camera_model.almost_equal(im_all.camera_model, tol=0)
+        else:
+            assert im.camera_model is models[im.product_id]
+    _, none = self_calibrate_downlink(dl, only=lambda im: False)
+    assert none == []

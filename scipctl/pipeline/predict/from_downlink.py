@@ -44,19 +44,42 @@ def resolve_target(dl, target_id: str, designations, with_normal: bool = True) -
     from ...io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
     from ..designate import designate
 
+    found = _marked_left(dl, marks)
+    if found is None:
+        raise InputError(target_id, "marks", "the target is marked in no left pancam/navcam image with a stereo pair")
+    im, mk = found
+    # the mark is only the pixel an operator would click: the designation gets the same verdict (p_ok, go) as
+    # `designate` and the chain give it
+    rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal,
+                    trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
+    return replace(rec, designated_from="mark"), True
+
+
+def _marked_left(dl, marks) -> Optional[tuple]:
+    """``(left image, mark)`` a marked target is designated from: its mark in the first left pancam image with a
+    stereo pair (navcam when the downlink has no left pancam); None when there is none."""
     for cam in ("pancam", "navcam"):
         lefts = sorted((im for im in dl.images if im.camera == cam and im.eye == "left"), key=lambda i: i.time_s)
         for im in lefts:
             mk = marks.mark_in(im.product_id)
             if mk is not None and dl.stereo_pair(im) is not None:
-                # the mark is only the pixel an operator would click: the designation gets the same verdict
-                # (p_ok, go) as `designate` and the chain give it
-                rec = designate(dl, im, [mk.u, mk.v], target_id=target_id, with_normal=with_normal,
-                                trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
-                return replace(rec, designated_from="mark"), True
+                return im, mk
         if lefts:
             break
-    raise InputError(target_id, "marks", "the target is marked in no left pancam/navcam image with a stereo pair")
+    return None
+
+
+def designation_position(dl, target_id: str, designations) -> Optional[tuple]:
+    """The rover position (``ImageProduct.position``) of the product :func:`resolve_target` designates
+    ``target_id`` from: today's stop, whose stereo pairs the prediction reads. None when :func:`resolve_target`
+    would refuse the id (or a saved designation names a product the downlink lacks)."""
+    for rec in designations or []:
+        if rec.id == target_id:
+            im = next((i for i in dl.images if i.product_id == rec.product_id), None)
+            return None if im is None else im.position
+    marks = next((t for t in dl.targets if t.id == target_id), None)
+    found = None if marks is None else _marked_left(dl, marks)
+    return None if found is None else found[0].position
 
 
 def terrain_sources(dl, position, cameras=STEREO_CAMERAS, downsample: int = 2, target_range_m: Optional[float] = None):
