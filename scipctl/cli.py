@@ -53,6 +53,14 @@ def _rules_option():
         "scipctl/data/rules.yaml; docs/sequence.md).")
 
 
+def _selfcal_option(which: str = "every stereo pair it reads"):
+    return typer.Option(
+        True, "--stereo-selfcal/--no-stereo-selfcal",
+        help=f"Re-align {which} (the right eye) from the pair's own feature matches before any stereo runs; "
+        "--no-stereo-selfcal uses the downlinked camera models as they are (docs/stereo-and-tracking.md, "
+        "'Stereo self-calibration').")
+
+
 def _version_cb(value: bool):
     if value:
         sys.stdout.write(f"scipctl {__version__}\n")
@@ -140,6 +148,7 @@ def designate(
     target_id: Optional[str] = typer.Option(None, "--id", help="Target name: letters, digits, _ . - (default: d<N>, the first free one)."),
     replace_id: bool = typer.Option(False, "--replace", help="Designate --id anew although it is already a saved designation or a marked target."),
     band_px: Optional[float] = typer.Option(None, "--band-px", help="Half-width of the epipolar search band."),
+    stereo_selfcal: bool = _selfcal_option("the product's stereo pair"),
     products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Machine-readable result on stdout."),
 ):
@@ -147,7 +156,7 @@ def designate(
     from .commands import designate as command
 
     command.designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=products_dir,
-                      replace_id=replace_id)
+                      replace_id=replace_id, stereo_selfcal=stereo_selfcal)
 
 
 @app.command("simulate-handoff", cls=NonEmptyCommand)
@@ -166,6 +175,7 @@ def simulate_handoff(
     chain_answer: Optional[str] = typer.Option(None, "--chain-answer", help="With --chain: the chain's final hazcam answer, closure (the default: the closure's pixel when it is confirmed, else the handoff's) or handoff (scip's handoff of the chain's navcam pixel); docs/stereo-and-tracking.md, 'Closure as the answer'."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo: ~2.5x faster, less accurate (docs/handoff.md)."),
     trust_model: Optional[Path] = typer.Option(None, "--trust-model", help="scip's trust model (scipctl fit-trust; default: the packaged one)."),
+    stereo_selfcal: bool = _selfcal_option("each navcam and hazcam pair (with --chain every pair)"),
     products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="One JSON document on stdout."),
 ):
@@ -176,7 +186,7 @@ def simulate_handoff(
     from .commands import handoff as command
 
     command.simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out, fast=fast,
-        products_root=products_dir, trust_model=trust_model, chain_answer=chain_answer)
+        products_root=products_dir, trust_model=trust_model, chain_answer=chain_answer, stereo_selfcal=stereo_selfcal)
 
 
 @app.command("trust-evidence", cls=NonEmptyCommand)
@@ -185,13 +195,14 @@ def trust_evidence(
     srcs: List[Path] = typer.Argument(..., metavar="SRC", help="Downlinks or workspaces with marks in the hazcam."),
     out: Path = typer.Option(..., "-o", "--out", help="Evidence table to write (JSON lines)."),
     family: Optional[str] = typer.Option(None, "--family", help="Scene family name (default: the .sim.json's)."),
+    stereo_selfcal: bool = _selfcal_option("each navcam and hazcam pair, as simulate-handoff"),
     products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="A summary on stdout."),
 ):
     """Evidence of every scip candidate answer of every marked target, with its true error (trust-model data)."""
     from .commands import trust as command
 
-    command.trust_evidence(srcs, out, family, json_out, products_root=products_dir)
+    command.trust_evidence(srcs, out, family, json_out, products_root=products_dir, stereo_selfcal=stereo_selfcal)
 
 
 @app.command("fit-trust", cls=NonEmptyCommand)
@@ -237,6 +248,7 @@ def sequence(
         "scip", "--handoff", help="The navcam->hazcam handoff the sequence commands: scip (the recommended handoff, "
         "near and far navcams, NO-GO halts before the arm) | best-single (one paper method, chosen by the saved "
         "near-navcam results of simulate-handoff, else the paper's Table 1)."),
+    stereo_selfcal: bool = _selfcal_option("the stereo pairs of today's stop (the designation's)"),
     products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Rule-check summary as JSON on stdout."),
 ):
@@ -244,7 +256,7 @@ def sequence(
     from .commands import sequence as command
 
     command.sequence(src, target, out, fmt, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
-        products_root=products_dir, rules_path=rules, handoff_choice=handoff,
+        products_root=products_dir, rules_path=rules, handoff_choice=handoff, stereo_selfcal=stereo_selfcal,
         rule_options={"--min-p-success": min_p_success, "--min-p-simulated": min_p_simulated,
                       "--rock-keep-out-m": rock_keep_out_m,
                       "--target-keep-out-m": target_keep_out_m, "--max-drive-m": max_drive_m,
@@ -261,6 +273,7 @@ def report(
     sigma_yaw_deg: Optional[float] = typer.Option(
         None, "--sigma-yaw-deg", help="Pose-estimate 1-sigma heading noise per stop, relative to the previous stop, degrees (default: the rules file's default_sigma_yaw_deg)."),
     rules: Optional[Path] = _rules_option(),
+    stereo_selfcal: bool = _selfcal_option(),
     products_dir: Optional[str] = _products_dir_option(),
     json_out: bool = typer.Option(False, "--json", help="Summary as JSON on stdout."),
 ):
@@ -268,7 +281,7 @@ def report(
     from .commands import report as command
 
     command.report(src, out, json_out, sigma_position_m=sigma_position_m, sigma_yaw_deg=sigma_yaw_deg,
-        products_root=products_dir, rules_path=rules)
+        products_root=products_dir, rules_path=rules, stereo_selfcal=stereo_selfcal)
 
 
 @app.command(cls=NonEmptyCommand)
@@ -289,7 +302,7 @@ def campaign(
     closure: bool = typer.Option(False, "--closure", help="Record each chain's closure check with --chain-answer handoff too (with the default answer it always runs; docs/stereo-and-tracking.md, 'Closure')."),
     chain_answer: Optional[str] = typer.Option(None, "--chain-answer", help="The chain's final hazcam answer: closure (the default: the closure's pixel when it is confirmed, skipping the navcam tracks, else the handoff's) or handoff (scip's handoff of the chain's navcam pixel); docs/stereo-and-tracking.md, 'Closure as the answer'."),
     predict_route: str = typer.Option("plan", "--predict-route", help="The approach predicted: plan (the planner's, as sequence uplinks it) or downlink (the downlink's own later stops, which its chain ran over: for scoring the prediction against the chain)."),
-    stereo_selfcal: bool = typer.Option(False, "--stereo-selfcal", help="Re-align every stereo pair's right eye from the pair's own feature matches before anything runs (docs/stereo-and-tracking.md, 'Stereo self-calibration')."),
+    stereo_selfcal: bool = _selfcal_option("every stereo pair of each downlink"),
     methods: Optional[str] = typer.Option(None, "--methods", help="Comma-separated handoff methods, as simulate-handoff (default: scip only, as simulate-handoff; 'all' for every method of the paper and ours)."),
     success_px: float = typer.Option(4.0, "--success-px", help="Success threshold in hazcam pixels."),
     fast: bool = typer.Option(False, "--fast", help="Half-resolution shared dense stereo for the handoff (as simulate-handoff --fast)."),

@@ -25,7 +25,7 @@ class CampaignOptions:
     final answer) within this many hazcam pixels of the mark is a success; ``closure``: each chain also runs its
     closure check (recorded on its final step); ``chain_answer``: the chain's final answer (``ChainParams.answer``);
     ``stereo_selfcal``: every stereo pair's right eye re-aligned from the pair's own matches before anything runs
-    (pipeline/stereo_selfcal.py).
+    (pipeline/stereo_selfcal.py); on by default since session 57, as in every command.
     """
 
     handoff: bool = True
@@ -38,7 +38,7 @@ class CampaignOptions:
     predict_route: str = "plan"  # PredictParams.route: "plan" (the planner's approach) or "downlink" (its own stops)
     closure: bool = False  # the chain's closure check (ChainParams.closure, pipeline/chain_closure.py) on every chain
     chain_answer: str = DEFAULT_CHAIN_ANSWER  # ChainParams.answer: the chain's final answer, "closure" or "handoff"
-    stereo_selfcal: bool = False  # pipeline.stereo_selfcal.self_calibrate_downlink on each downlink first
+    stereo_selfcal: bool = True  # pipeline.stereo_selfcal.self_calibrate_downlink on each downlink first
 
     def check(self) -> "CampaignOptions":
         if not (self.handoff or self.chain or self.predict):
@@ -75,8 +75,8 @@ class CampaignOptions:
             d["closure"] = True
         if self.chain_answer != "handoff":  # likewise: campaigns before the closure answer were "handoff" ones
             d["chain_answer"] = self.chain_answer
-        if self.stereo_selfcal:  # likewise: only when on
-            d["stereo_selfcal"] = True
+        if self.stereo_selfcal:  # only when on: a record without it was made with the downlinked models (before
+            d["stereo_selfcal"] = True  # the option, or with it off), and keeps its key
         return d
 
     @classmethod
@@ -85,7 +85,7 @@ class CampaignOptions:
                    tuple(tuple(p) for p in d["pairs"]), float(d["success_px"]), bool(d["fast"]),
                    str(d.get("predict_route", "plan")), bool(d.get("closure", False)),
                    str(d.get("chain_answer", "handoff")),  # a record without it was made before the option
-                   bool(d.get("stereo_selfcal", False)))
+                   bool(d.get("stereo_selfcal", False)))  # absent: made without it (off, or before it existed)
 
     def key(self) -> str:
         """SHA-256 of everything here that changes an answer, and of the tool's version."""

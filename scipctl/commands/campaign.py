@@ -17,7 +17,7 @@ from .output import emit_json, note, stderr_console
 
 
 def _options(handoff, chain, predict, methods, success_px, fast, predict_route="plan", closure=False,
-             chain_answer=None, stereo_selfcal=False):
+             chain_answer=None, stereo_selfcal=True):
     from ..campaign.options import CampaignOptions
     from ..pipeline.chain import DEFAULT_CHAIN_ANSWER
     from .handoff import _parse_methods
@@ -127,7 +127,7 @@ def campaign(srcs, out: Optional[Path], synth: Optional[str], seeds: Optional[st
              methods: Optional[str], success_px: float, fast: bool, scheduler: Optional[str], workers: Optional[int],
              memory_limit: Optional[str], summarize_dir: Optional[Path], json_out: bool,
              predict_route: str = "plan", closure: bool = False, chain_answer: Optional[str] = None,
-             error_draws: Optional[str] = None, stereo_selfcal: bool = False) -> None:
+             error_draws: Optional[str] = None, stereo_selfcal: bool = True) -> None:
     """``scipctl campaign``: run (or with ``summarize_dir`` only re-aggregate) and write the summary."""
     from ..campaign.cluster import ClusterSpec
     from ..campaign.store import CampaignStore

@@ -8,16 +8,19 @@ from ..errors import CommandFailed, InputError
 from .output import emit_json, note, stderr_console
 
 
-def designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=None, replace_id=False):
+def designate(src, product, camera, pixel, target_id, band_px, json_out, products_root=None, replace_id=False,
+              stereo_selfcal: bool = True):
     """``scipctl designate``: the 3-D target at ``pixel`` of a left product, added to ``targets.json``. An id that
-    is already a saved designation or one of the downlink's marked targets is refused unless ``replace_id``."""
+    is already a saved designation or one of the downlink's marked targets is refused unless ``replace_id``.
+    ``stereo_selfcal``: the product's stereo pair re-aligned from its own matches first (commands/selfcal.py)."""
     from dataclasses import replace
 
     from ..io.provenance import provenance
     from ..io.workspace import open_source
-    from ..pipeline.designate import (check_target_id, designate as designate_target, designations_from_doc,
-                                      parse_pixel, pick_left_product)
+    from ..pipeline.designate import (check_designation_input, check_target_id, designate as designate_target,
+                                      designations_from_doc, parse_pixel, pick_left_product)
     from .params import designation_params
+    from .selfcal import self_calibrate, with_fits
 
     uv = parse_pixel(pixel)
     if target_id is not None:
@@ -26,6 +29,7 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     source.check_writable()  # before the work: say now if the products cannot be saved anywhere
     dl = source.downlink
     left = pick_left_product(dl, product, camera)
+    check_designation_input(dl, left, uv)  # before the work: a pixel outside the image costs nothing
     explicit_id = target_id is not None
 
     def saved_ids(doc) -> set:
@@ -56,9 +60,11 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     params = designation_params(band_px)
     from ..io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
 
-    rec = designate_target(dl, left, uv, target_id=target_id, params=params,
+    fits = self_calibrate(source, stereo_selfcal, only=lambda im: im.product_id == left.product_id)
+    dl = source.downlink
+    rec = designate_target(dl, dl.product(left.product_id), uv, target_id=target_id, params=params,
                            trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
-    rec = replace(rec, provenance=provenance({"downlink": str(src)}))
+    rec = replace(rec, provenance=with_fits(provenance({"downlink": str(src)}), fits))
     if not rec.ok:
         # not saved; the same keys as a designation's document (null where there is no value; go false), so that
         # a script reading doc["go"] or doc["range_m"] gets an answer, not a KeyError

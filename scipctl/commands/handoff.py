@@ -71,9 +71,11 @@ def _note_replaced(source, recs) -> None:
 
 
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
-                     fast=False, products_root=None, trust_model=None, chain_answer=None):
+                     fast=False, products_root=None, trust_model=None, chain_answer=None, stereo_selfcal: bool = True):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
-    (and the chains with ``chain``); one JSON document on stdout with ``json_out``."""
+    (and the chains with ``chain``); one JSON document on stdout with ``json_out``. ``stereo_selfcal``: each
+    downlink's stereo pairs re-aligned from their own matches first (commands/selfcal.py): the navcam and hazcam
+    pairs, and with ``chain`` every pair."""
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 
     from ..io.provenance import provenance
@@ -82,6 +84,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..pipeline.chain_targets import run_marked_chains
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
+    from .selfcal import HANDOFF_CAMERAS, cameras, self_calibrate, with_fits
     from .sources import distinct_sources, source_names
 
     success_px = success_threshold(success_px)
@@ -110,6 +113,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                   TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
         task = prog.add_task("handoff", total=n_work)
         for src, source, name in zip(srcs, sources, source_names(srcs)):
+            fits = self_calibrate(source, stereo_selfcal, only=None if chain else cameras(HANDOFF_CAMERAS))
             dl = source.downlink
             setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far, shared=True)
             if from_product is not None:
@@ -142,14 +146,16 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
             # saved after every source has run: a bad --near/--far/--hazcam/--target found at a later source
             # (exit 2) must not leave the earlier sources' handoff.json replaced
             pending.append((source, recs, {
-                "provenance": provenance(_inputs({"downlink": str(src)}, trust_model)), "success_px": success_px,
+                "provenance": with_fits(provenance(_inputs({"downlink": str(src)}, trust_model)), fits),
+                "success_px": success_px,
                 "results": [r.to_dict() for r in recs], "table1": table1(recs),
             }))
             per_dl.append({"downlink": name, "hazcam": setup.hazcam.product_id,
                            "near": setup.near.product_id if setup.near else None,
                            "far": setup.far.product_id if setup.far else None,
                            "dense_stereo_s": {k: round(c.nav.dense_seconds, 3) for k, c in setup.cases.items()},
-                           "input_sha256": dl.source_sha256, "saved_to": None})
+                           "input_sha256": dl.source_sha256, "stereo_selfcal": False if fits is None else fits,
+                           "saved_to": None})
             if chain:
                 chains.extend(run_marked_chains(dl, name, target, answer=chain_answer))
             del done

@@ -9,9 +9,11 @@ from ..errors import InputError
 from .output import emit_json, stderr_console
 
 
-def build(source, progress=None, params=None, rule_set=None):
+def build(source, progress=None, params=None, rule_set=None, selfcal_fits=None):
     """(html text, summary dict, data) for an opened source. No file is written. ``rule_set``: the
-    :class:`~scipctl.pipeline.rules.RuleSet` the sequences are checked with (None: the package default)."""
+    :class:`~scipctl.pipeline.rules.RuleSet` the sequences are checked with (None: the package default);
+    ``selfcal_fits``: the stereo self-calibration ``source.downlink`` carries (commands/selfcal.py; None: none),
+    recorded in the provenance."""
     from ..io.provenance import provenance
     from ..io.report_html import render_report
     from ..pipeline.designate import designations_from_doc
@@ -46,7 +48,9 @@ def build(source, progress=None, params=None, rule_set=None):
     inputs = dict({"downlink": dl.source_sha256}, **{name: path for name, path in source.read_from.items()})
     if rule_set is not None:
         inputs["rules_file"] = rule_set.sha256
-    prov = provenance(inputs)
+    from .selfcal import with_fits
+
+    prov = with_fits(provenance(inputs), selfcal_fits)
     html = render_report(data, sequences, PAPER_TABLE1, prov)
     summary = _summary(data, sequences)
     summary["provenance"] = prov  # the record the HTML embeds
@@ -88,9 +92,10 @@ def _summary(data, sequences) -> dict:
     }
 
 
-def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None):
+def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None, rules_path=None,
+           stereo_selfcal: bool = True):
     """``scipctl report``: write the HTML report (and its annotations MCAP beside it); summary on stderr
-    (and stdout with ``--json``)."""
+    (and stdout with ``--json``). ``stereo_selfcal``: every stereo pair re-aligned first (commands/selfcal.py)."""
     from ..io.atomic import check_not_input, check_output_file, output_group
     from ..io.workspace import open_source
 
@@ -106,10 +111,13 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     if rules_path is None:  # none named: the built-in chosen from the downlink's rover
         rule_set = load_rule_set(None, None, sigma_position_m, sigma_yaw_deg, dl=source.downlink)
     params = report_params(sigma_position_m, sigma_yaw_deg, rule_set)
+    from .selfcal import self_calibrate
+
+    fits = self_calibrate(source, stereo_selfcal)
     con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
-                                    params=params, rule_set=rule_set)
+                                    params=params, rule_set=rule_set, selfcal_fits=fits)
     from ..io.annotations_mcap import annotations_bytes
 
     mc = out.with_suffix(".annotations.mcap")  # the same annotations for Foxglove

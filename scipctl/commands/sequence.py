@@ -12,14 +12,14 @@ FORMATS = ("seqn", "seqjson", "json", "text")
 
 
 def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_deg=None, products_root=None,
-             rules_path=None, rule_options=None, handoff_choice: str = "scip"):
+             rules_path=None, rule_options=None, handoff_choice: str = "scip", stereo_selfcal: bool = True):
     """``scipctl sequence``: write the sequence (``out`` or stdout) and print the rule checks; CommandFailed
     (exit 1, no sequence) when a flight rule is broken. ``rules_path``: the rules file (None: the package
     default); ``rule_options``: ``{option: value}`` overriding it (``scipctl.pipeline.rules.OPTIONS``)."""
     from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, HANDOFF_CHOICES, broken
-    from ..pipeline.target_sequence import make_sequence
+    from ..pipeline.target_sequence import make_sequence, today_position
     from .params import rule_set as load_rule_set
 
     fmt = (fmt or "seqn").lower()
@@ -36,9 +36,13 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     source = open_source(src, products_root=products_root)
     if rules_path is None:
         rule_set = load_rule_set(None, rule_options, sigma_position_m, sigma_yaw_deg, dl=source.downlink)
+    from .selfcal import self_calibrate, with_fits
+
+    position = today_position(source, target)  # None: make_sequence says why the target is unknown
+    fits = self_calibrate(source, stereo_selfcal, only=lambda im: im.position == position)
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
                                               rules_used=rule_set.to_dict(), render_views=False,
-                                              handoff_choice=handoff_choice)
+                                              handoff_choice=handoff_choice, selfcal_fits=fits)
     summary = {
         "target": target, "designated_now": record.designated_from == "mark",
         "confidence": pred.confidence, "p_simulated": pred.p_simulated, "calibration": pred.calibration,
@@ -51,8 +55,9 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     from ..io.provenance import provenance
 
     # every --json document carries how it was made, the NO-GO one (exit 1, no sequence) included
-    summary["provenance"] = provenance(dict({"downlink": source.downlink.source_sha256, "rules_file": rule_set.sha256},
-                                            **{name: path for name, path in source.read_from.items()}))
+    summary["provenance"] = with_fits(provenance(dict({"downlink": source.downlink.source_sha256,
+                                                       "rules_file": rule_set.sha256},
+                                                      **{name: path for name, path in source.read_from.items()})), fits)
     bad = broken(checks)
     stderr_console().print(f"rules: {rule_set.source}" + (f" ({rule_set.chosen_by})" if rule_set.chosen_by else ""),
                            highlight=False, markup=False)

@@ -37,13 +37,17 @@ def family_of_record(rec: dict) -> str:
     return str(fam or rec.get("scenario") or "unknown")
 
 
-def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool, products_root=None) -> None:
+def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool, products_root=None,
+                   stereo_selfcal: bool = True) -> None:
     """Write the evidence rows of every marked target of ``srcs`` to ``out`` (JSON lines, atomically): first a
-    ``{"provenance": ...}`` line (tool version, command line, each input's SHA-256), then one row per line."""
+    ``{"provenance": ...}`` line (tool version, command line, each input's SHA-256, the stereo self-calibration),
+    then one row per line. ``stereo_selfcal``: the navcam and hazcam pairs re-aligned first, as
+    ``simulate-handoff`` does (commands/selfcal.py)."""
     from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.provenance import provenance, sha256_file
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
+    from .selfcal import HANDOFF_CAMERAS, cameras, self_calibrate
     from .sources import distinct_sources, source_names
 
     out = check_output_file(out)
@@ -55,10 +59,11 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
             raise InputError(str(out), "-o", f"would overwrite the input {sim} (the simulator's record of a downlink); "
                              "give a file outside the inputs")
     sources = [open_source(s, products_root=products_root) for s in srcs]  # every input checked before any work
-    rows = []
+    rows, all_fits = [], []
     con = stderr_console()
     for src, source, name in zip(srcs, sources, source_names(srcs)):
         rec = _sim_record(Path(src))
+        all_fits.append(self_calibrate(source, stereo_selfcal, only=cameras(HANDOFF_CAMERAS)))
         fam = family or family_of_record(rec)
         meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
         meta["downlink_sha256"] = source.downlink.source_sha256
@@ -77,6 +82,8 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
         sim = _sim_record_path(Path(src))
         if sim.is_file():  # the record gave the rows their family and occluded flags: an input too
             prov["inputs"][f"sim_record{i}"] = {"path": str(sim), "sha256": sha256_file(sim)}
+    # per downlink, in input order: the pairs' fits, or false with --no-stereo-selfcal
+    prov["stereo_selfcal"] = [False if f is None else f for f in all_fits]
     head = json.dumps({"provenance": prov}, sort_keys=True, allow_nan=False) + "\n"
     write_output_text(out, head + "".join(json.dumps(r.to_dict(), sort_keys=True, allow_nan=False) + "\n" for r in rows))
     if json_out:

@@ -7,7 +7,7 @@ from ..errors import CommandFailed
 
 
 def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None,
-                  render_views: bool = True, handoff_choice: str = "scip"):
+                  render_views: bool = True, handoff_choice: str = "scip", selfcal_fits=None):
     """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
     :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
     :func:`sequence_for` on its downlink."""
@@ -22,11 +22,24 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
     handoff_doc = source.load_json("handoff.json")
     rows = table1_rows_from_doc(handoff_doc, str(source.read_from.get("handoff.json", "handoff.json")))
     return sequence_for(source.downlink, target, designations, rows, params=params, rules=rules, pred=pred,
-                        record=record, rules_used=rules_used, render_views=render_views, handoff_choice=handoff_choice)
+                        record=record, rules_used=rules_used, render_views=render_views, handoff_choice=handoff_choice,
+                        selfcal_fits=selfcal_fits)
+
+
+def today_position(source, target: str):
+    """The rover position of the product ``target`` is designated from in ``source`` (its ``targets.json``, else
+    its mark): the stop whose images :func:`make_sequence` reads. None when the target cannot be resolved."""
+    from .designate import designations_from_doc
+    from .predict.from_downlink import designation_position
+
+    doc = source.load_json("targets.json")
+    designations = designations_from_doc(doc, str(source.read_from.get("targets.json", "targets.json")))
+    return designation_position(source.downlink, target, designations)
 
 
 def sequence_for(dl, target: str, designations=None, table1_rows=None, params=None, rules=None, pred=None,
-                 record=None, rules_used=None, render_views: bool = True, handoff_choice: str = "scip"):
+                 record=None, rules_used=None, render_views: bool = True, handoff_choice: str = "scip",
+                 selfcal_fits=None):
     """The prediction and sequence for ``target`` of the downlink ``dl``: returns
     ``(doc or None, checks, prediction, record)`` (``record``: the target's
     :class:`~scipctl.pipeline.designate.Designation`).
@@ -39,6 +52,8 @@ def sequence_for(dl, target: str, designations=None, table1_rows=None, params=No
     ``doc`` is None when a blocking rule is broken. A ready ``pred`` (and its ``record``) is reused.
     ``render_views``: render the prediction's reduced-size expected views (only the report shows them; the
     sequence, its rules and its figures do not depend on them).
+    ``selfcal_fits``: the stereo self-calibration ``dl`` carries (``commands.selfcal.self_calibrate``'s records; None:
+    none), hashed into the document's provenance.
     :class:`CommandFailed` if the target has no reliable 3-D position; :class:`InputError` for bad products.
     """
     from .predict import predict_target, resolve_target
@@ -52,19 +67,19 @@ def sequence_for(dl, target: str, designations=None, table1_rows=None, params=No
         pred = predict_target(dl, record, params, designated_now=now, render_views=render_views)
     doc, checks = document_for(dl, record, pred, table1_rows, rules,
                                chain_params=None if params is None else params.chain, rules_used=rules_used,
-                               handoff_choice=handoff_choice)
+                               handoff_choice=handoff_choice, selfcal_fits=selfcal_fits)
     return doc, checks, pred, record
 
 
 def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=None, rules_used=None,
-                 handoff_choice: str = "scip"):
+                 handoff_choice: str = "scip", selfcal_fits=None):
     """(sequence document or None when a blocking rule is broken, rule checks) for a prediction.
 
     ``table1_rows``: the handoff accuracy rows (``handoff.json``'s ``table1``); ``handoff_choice``: ``scip`` (the
     recommended handoff, with the packaged trust model's GO threshold at ``ScipParams().success_px``, as the
     prediction's chain runs it) or ``best-single`` (a paper method chosen by those rows);
     ``chain_params``: the windows and bands the uplinked chain commands carry (default ``ChainParams()``; the
-    prediction's ``PredictParams.chain``).
+    prediction's ``PredictParams.chain``); ``selfcal_fits``: as :func:`sequence_for`.
     """
     from ..io.provenance import provenance
     from .sequence import (broken, build_commands, canonical_hash, check_rules, choose_handoff,
@@ -91,6 +106,8 @@ def document_for(dl, record, pred, table1_rows=None, rules=None, chain_params=No
         inputs["handoff_results"] = canonical_hash(table1_rows)
     if rules_used is not None:
         inputs["rules_file"] = rules_used["sha256"]
+    if selfcal_fits:
+        inputs["stereo_selfcal"] = canonical_hash(selfcal_fits)
     prov = provenance(inputs, deterministic=True)
     cmds = build_commands(pred, record, handoff, _exposures(dl, dl.product(record.product_id).position),
                           chain_params=chain_params)

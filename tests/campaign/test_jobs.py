@@ -104,13 +104,14 @@ def test_the_closure_option_changes_the_key_only_when_on():
 
     from scipctl import __version__
 
-    opts = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), chain_answer="handoff")
+    opts = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), chain_answer="handoff",
+                           stereo_selfcal=False)  # a campaign with none of the options that came later
     before = {"handoff": True, "chain": True, "predict": True, "methods": ["pure-kinematic"],
               "pairs": [["pure-kinematic", "near"]], "success_px": 4.0, "fast": False, "predict_route": "plan"}
     text = json.dumps({"options": before, "version": __version__}, sort_keys=True)
     assert opts.key() == hashlib.sha256(text.encode()).hexdigest()
     on = CampaignOptions(methods=("pure-kinematic",), pairs=(("pure-kinematic", "near"),), closure=True,
-                         chain_answer="handoff").check()
+                         chain_answer="handoff", stereo_selfcal=False).check()
     assert on.key() != opts.key() and on.to_dict()["closure"] is True
     assert CampaignOptions.from_dict(on.to_dict()) == on and CampaignOptions.from_dict(opts.to_dict()) == opts
     with pytest.raises(InputError, match="--closure"):
@@ -151,14 +152,15 @@ def test_the_closure_option_reaches_every_chain(monkeypatch):
 
 
 def test_stereo_selfcal_is_in_the_key_only_when_on_and_runs_before_the_stages(monkeypatch):
-    """campaign --stereo-selfcal: campaigns without it keep their key; with it, the stages see the re-aligned
-    right models (pipeline/stereo_selfcal.py, tested in tests/pipeline/test_stereo_selfcal.py) and the header
-    records each pair's fit."""
+    """campaign --stereo-selfcal (the default): campaigns without it (--no-stereo-selfcal, and those made before it)
+    keep their key; with it, the stages see the re-aligned right models (pipeline/stereo_selfcal.py, tested in
+    tests/pipeline/test_stereo_selfcal.py) and the header records each pair's fit."""
     from scipctl.campaign import task
     from scipctl.campaign.options import job_key
 
-    off = CampaignOptions(handoff=False, chain=True, predict=False)
-    on = CampaignOptions(handoff=False, chain=True, predict=False, stereo_selfcal=True).check()
+    off = CampaignOptions(handoff=False, chain=True, predict=False, stereo_selfcal=False)
+    on = CampaignOptions(handoff=False, chain=True, predict=False).check()
+    assert on.stereo_selfcal is True  # the default
     assert "stereo_selfcal" not in off.to_dict() and on.to_dict()["stereo_selfcal"] is True
     assert on.key() != off.key() and CampaignOptions.from_dict(on.to_dict()) == on
     assert CampaignOptions.from_dict(off.to_dict()) == off

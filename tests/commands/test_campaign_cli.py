@@ -80,11 +80,13 @@ def test_a_synthetic_campaign_renders_on_the_workers_and_summarizes(tmp_path, mo
     assert recipe["recipe"]["image_scale"] == 0.125 and recipe["recipe"]["family"] == "default"
     assert "scipctl synth --scenario paper --seed 0 --runs s1-straight" in recipe["regenerate"]
     assert len(recs) == 12 and all(x["kind"] == "handoff" and x["family"] == "default" for x in recs)
-    # the records are the handoff of the same downlink rendered here
+    # the records are the handoff of the same downlink rendered here (self-calibrated, as campaigns do by default)
     from scipctl.pipeline.handoff import build_setup, marked_targets, run_targets
+    from scipctl.pipeline.stereo_selfcal import self_calibrate_downlink
     from scipctl.sim.build import build_run
 
-    dl = build_run("paper", "s1-straight", 0, image_scale=0.125).downlink
+    dl, _ = self_calibrate_downlink(build_run("paper", "s1-straight", 0, image_scale=0.125).downlink)
+    assert head["stereo_selfcal"]  # each pair's fit in the records header
     setup = build_setup(dl)
     want = run_targets(dl, setup, marked_targets(dl, setup), methods=["pure-kinematic", "pure-geometric"],
                        downlink_name="paper-s1-straight-seed0")
@@ -100,8 +102,8 @@ def test_a_synthetic_campaign_renders_on_the_workers_and_summarizes(tmp_path, mo
 
 
 def test_the_stereo_selfcal_flag_reaches_the_options(tmp_path, monkeypatch):
-    """--stereo-selfcal (off by default) is what CampaignOptions.stereo_selfcal says; its effect on a downlink is
-    tested in tests/campaign/test_jobs.py."""
+    """--stereo-selfcal/--no-stereo-selfcal (on by default) is what CampaignOptions.stereo_selfcal says; its effect
+    on a downlink is tested in tests/campaign/test_jobs.py."""
     import scipctl.campaign.run as run_mod
 
     seen = []
@@ -114,8 +116,8 @@ def test_the_stereo_selfcal_flag_reaches_the_options(tmp_path, monkeypatch):
         raise Stop
 
     monkeypatch.setattr(run_mod, "run_campaign", fake_run)
-    for extra, want in (([], False), (["--stereo-selfcal"], True)):
-        r = runner.invoke(app, ["campaign", str(SOL), "--no-handoff", "--no-predict", "-o", str(tmp_path / f"o{want}")]
-                          + extra)
+    for extra, want in (([], True), (["--stereo-selfcal"], True), (["--no-stereo-selfcal"], False)):
+        r = runner.invoke(app, ["campaign", str(SOL), "--no-handoff", "--no-predict", "-o",
+                                str(tmp_path / f"o{len(seen)}")] + extra)
         assert "internal error (Stop)" in r.output  # the run was reached (and stopped there)
         assert seen[-1].stereo_selfcal is want

@@ -26,6 +26,16 @@ def _first_pancam(dl):
     return min((im for im in dl.images if im.camera == "pancam" and im.eye == "left"), key=lambda i: i.time_s)
 
 
+def _right_model_used(dl, rec):
+    """The right model the command's stereo read: the downlinked one turned by the self-calibration it records."""
+    from scipctl.core.stereo_selfcal import rotated_model
+
+    (fit,) = rec["provenance"]["stereo_selfcal"]  # designate fits the one pair it reads
+    assert fit["left"] == rec["product_id"]
+    right = dl.product(fit["right"])
+    return rotated_model(right.camera_model, np.asarray(fit["rotvec_rad"])) if fit["applied"] else right.camera_model
+
+
 def test_designate_a_marked_target(sol, dl):
     left = _first_pancam(dl)
     t = next(t for t in dl.targets if t.kind == "point")
@@ -35,13 +45,15 @@ def test_designate_a_marked_target(sol, dl):
     assert r.exit_code == 0, r.output
     rec = json.loads(r.stdout)
     assert rec["id"] == "rock1" and rec["ok"]
-    # the stereo match against the ideal one: the exact left and right marks triangulated with the downlinked
-    # models (the models carry the simulated mast-calibration error, which no matcher can see)
+    # the stereo match against the ideal one: the exact left and right marks triangulated with the models the
+    # command used (the downlinked left, the self-calibrated right; they carry the simulated mast-calibration
+    # error, which no matcher can see)
     from scipctl.core.triangulation import triangulate_rays
 
     right = dl.stereo_pair(left)
     mr = t.mark_in(right.product_id)
-    (o1, d1), (o2, d2) = left.camera_model.unproject(np.array([mk.u, mk.v])), right.camera_model.unproject(np.array([mr.u, mr.v]))
+    right_model = _right_model_used(dl, rec)
+    (o1, d1), (o2, d2) = left.camera_model.unproject(np.array([mk.u, mk.v])), right_model.unproject(np.array([mr.u, mr.v]))
     X_ideal = np.asarray(triangulate_rays(o1, d1, o2, d2)[0]).reshape(3)
     X = np.asarray(rec["xyz_rover_m"])
     ray = (X_ideal - left.camera_model.C) / np.linalg.norm(X_ideal - left.camera_model.C)
@@ -61,17 +73,25 @@ def test_designate_a_marked_target(sol, dl):
     assert [t["id"] for t in saved["targets"]] == ["rock1"]
 
 
-def test_epipolar_offset_reports_the_injected_vibration(sol, dl):
+@pytest.mark.parametrize("selfcal", [True, False])
+def test_epipolar_offset_reports_the_injected_vibration(sol, dl, selfcal):
     """The right pancam's true orientation is perturbed by the simulator: the measured offset from the epipolar
-    line is the offset of the true right mark from the epipolar curve of the calibrated models."""
+    line is the offset of the true right mark from the epipolar curve of the models used: with the downlinked
+    models (--no-stereo-selfcal) it is the vibration's; self-calibrated (the default) it is what is left of it."""
     left = _first_pancam(dl)
     right = dl.stereo_pair(left)
     t = next(t for t in dl.targets if t.kind == "point")
     ml, mr = t.mark_in(left.product_id), t.mark_in(right.product_id)
-    r = runner.invoke(app, ["designate", str(sol), "--product", left.product_id, "--pixel", f"{ml.u},{ml.v}", "--json"])
+    r = runner.invoke(app, ["designate", str(sol), "--product", left.product_id, "--pixel", f"{ml.u},{ml.v}", "--json"]
+                      + ([] if selfcal else ["--no-stereo-selfcal"]))
     rec = json.loads(r.stdout)
+    if selfcal:
+        right_model = _right_model_used(dl, rec)
+    else:
+        assert rec["provenance"]["stereo_selfcal"] is False
+        right_model = right.camera_model
     o, d = left.camera_model.unproject(np.array([ml.u, ml.v]))
-    curve = right.camera_model.project(o[None] + np.linspace(2, 40, 2000)[:, None] * d[None])
+    curve = right_model.project(o[None] + np.linspace(2, 40, 2000)[:, None] * d[None])
     dist = np.min(np.linalg.norm(curve - [mr.u, mr.v], axis=1))
     assert abs(abs(rec["epipolar_offset_px"]) - dist) < 0.5
     assert np.linalg.norm(np.asarray(rec["uv_right"]) - [mr.u, mr.v]) < 1.0

@@ -36,6 +36,10 @@ def test_json_results_carry_the_contract_fields(sol):
     assert "Table 1" in r.stderr and "13±3" in r.stderr
     saved = json.loads((sol.parent / (sol.name + ".scipctl") / "handoff.json").read_text())
     assert len(saved["results"]) == 9
+    # the stereo self-calibration (the default) of the pairs the handoff reads, navcam and hazcam: recorded
+    fits = saved["provenance"]["stereo_selfcal"]
+    assert fits == doc["downlinks"][0]["stereo_selfcal"]
+    assert sorted(f["camera"] for f in fits) == ["hazcam", "navcam", "navcam", "navcam"]
 
 
 def test_from_pixel_runs_one_source_pixel(sol):

@@ -188,6 +188,8 @@ def test_the_report_and_its_annotations_say_how_they_were_made_and_from_what(rep
     prov = summary["provenance"]
     assert prov["tool"] == "scipctl" and prov["inputs"]["downlink"]["sha256"] == sha
     assert "rules_file" in prov["inputs"]  # the rules the page's sequences were checked against
+    assert [f["right"] for f in prov["stereo_selfcal"]] == [  # every pair self-calibrated first (the default)
+        im.product_id for im in read_downlink(src).images if im.eye == "right"]
     with open(out.with_suffix(".annotations.mcap"), "rb") as f:
         meta = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
     ann_prov = json.loads(meta["scipctl.provenance"]["json"])

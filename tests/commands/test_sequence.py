@@ -40,6 +40,7 @@ def test_seqn_sequence_is_written_and_byte_identical_on_a_rerun(tmp_path, slab_d
     assert meta["provenance"]["inputs"]["downlink"]["sha256"] == sha
     assert meta["provenance"]["tool"] == "scipctl" and "time_utc" not in meta["provenance"]
     assert "cwd" not in meta["provenance"]  # same inputs, same bytes, from any folder
+    assert len(meta["provenance"]["inputs"]["stereo_selfcal"]["sha256"]) == 64  # today's pairs' fits, hashed
     assert all(r["ok"] for r in meta["rules"])
     stems = [ln.split()[1] for ln in lines if ln.startswith("R")]
     assert stems[-2:] == ["ARM_PLACE_AT_TARGET", "SCIP_END"] and "TRK_HANDOFF_SCIP" in stems
@@ -69,6 +70,10 @@ def test_json_format_and_summary_on_stdout(slab_dir):
     doc = json.loads(summary["sequence"])
     assert doc["format"] == "scipctl-sequence/1" and doc["target"]["designated_from"] == "mark"
     assert len(doc["commands"]) == summary["commands"]
+    # the stereo self-calibration (the default) of today's pairs only: the designation's stop
+    fits = summary["provenance"]["stereo_selfcal"]
+    position = {im.product_id: im.position for im in read_downlink(slab_dir).images}
+    assert fits and {position[f["left"]] for f in fits} == {position[doc["target"]["product_id"]]}
     truth = S.TARGET_SLAB_SITE
     assert sum((a - b) ** 2 for a, b in zip(doc["target"]["xyz_site_m"], truth)) ** 0.5 < 0.05
 
@@ -331,8 +336,9 @@ def test_a_marked_target_designated_on_the_fly_gets_designates_verdict(sol):
     from scipctl.io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
     from scipctl.pipeline.designate import designate
     from scipctl.pipeline.predict.from_downlink import resolve_target
+    from scipctl.pipeline.stereo_selfcal import self_calibrate_downlink
 
-    dl = read_downlink(sol)
+    dl, _ = self_calibrate_downlink(read_downlink(sol))  # as the command reads it (its default)
     rec, now = resolve_target(dl, "t2", [])
     assert now and rec.designated_from == "mark" and rec.go is not None and rec.p_ok is not None
     im = dl.product(rec.product_id)

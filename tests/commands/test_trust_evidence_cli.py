@@ -40,6 +40,8 @@ def test_occluded_target_rows_are_flagged_and_have_no_error(hidden_t1, tmp_path)
     # the table says how it was made: version, command line, the downlink's hash; fit-trust's reader skips it
     prov = head["provenance"]
     assert set(head) == {"provenance"} and prov["version"] and prov["command"]  # (here: pytest's argv)
+    (fits,) = prov["stereo_selfcal"]  # one downlink: its navcam and hazcam pairs self-calibrated (the default)
+    assert fits and {f["camera"] for f in fits} <= {"navcam", "hazcam"}
     assert prov["inputs"]["downlink0"] == {"path": str(hidden_t1), "sha256": read_downlink(hidden_t1).source_sha256}
     # and the .sim.json that gave the rows their family and occluded flags (it was not recorded)
     import hashlib
