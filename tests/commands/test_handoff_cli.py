@@ -40,6 +40,18 @@ def test_json_results_carry_the_contract_fields(sol):
     fits = saved["provenance"]["stereo_selfcal"]
     assert fits == doc["downlinks"][0]["stereo_selfcal"]
     assert sorted(f["camera"] for f in fits) == ["hazcam", "navcam", "navcam", "navcam"]
+    # and the answers are those of the downlink with every pair self-calibrated (as campaign and --chain do): the
+    # handoff reads no other pair, and a pair's fit reads that pair alone
+    from scipctl.io.downlink import read_downlink
+    from scipctl.pipeline.handoff import build_setup, marked_targets, run_targets
+    from scipctl.pipeline.stereo_selfcal import self_calibrate_downlink
+
+    dl, _ = self_calibrate_downlink(read_downlink(sol))
+    setup = build_setup(dl, shared=True)
+    want = run_targets(dl, setup, marked_targets(dl, setup), methods=["pure-kinematic", "pure-geometric"],
+                       downlink_name=sol.name, only={("pure-kinematic", "near"), ("pure-kinematic", "far"),
+                                                     ("pure-geometric", "near")})
+    assert [x["predicted_uv"] for x in recs] == [w.to_dict()["predicted_uv"] for w in want]
 
 
 def test_from_pixel_runs_one_source_pixel(sol):
