@@ -24,8 +24,8 @@ class CampaignOptions:
     downlink's own later stops, which its chain ran over); ``success_px``: a handoff (and a chain's
     final answer) within this many hazcam pixels of the mark is a success; ``closure``: each chain also runs its
     closure check (recorded on its final step); ``chain_answer``: the chain's final answer (``ChainParams.answer``);
-    ``stereo_selfcal``: every stereo pair's right eye re-aligned from the pair's own matches before anything runs
-    (pipeline/stereo_selfcal.py); on by default since session 57, as in every command.
+    ``stereo_selfcal``: the stereo pairs the stages read (all of them with the chain) re-aligned from their own
+    matches before anything runs (pipeline/stereo_selfcal.py); on by default since session 57, as in every command.
     """
 
     handoff: bool = True

@@ -152,6 +152,21 @@ def _predict(dl, options: CampaignOptions, res: DownlinkResult) -> None:
             "designation": rec, "prediction": pred.to_dict(), "rules_file": rules_file})
 
 
+def _pairs_read(dl, options: CampaignOptions):
+    """The stereo pairs the stages ``options`` asks for read, as a predicate on a left product for
+    ``self_calibrate_downlink`` (None: every pair): the chain reads every stop's; the handoff the navcam and hazcam
+    pairs; the prediction those of each marked target's designation stop (``sequence``'s today's stop). A pair's fit
+    reads that pair alone, so fitting fewer changes no answer, only the time."""
+    if options.chain:
+        return None
+    from ..pipeline.predict.from_downlink import designation_position
+    from ..pipeline.stereo_selfcal import HANDOFF_CAMERAS
+
+    cameras = set(HANDOFF_CAMERAS) if options.handoff else set()
+    positions = {designation_position(dl, t.id, []) for t in dl.targets} - {None} if options.predict else set()
+    return lambda im: im.camera in cameras or im.position in positions
+
+
 def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int = 1) -> DownlinkResult:
     """Load one downlink and run what ``options`` asks; never raises for a bad downlink or a failing stage
     (the result says ``failed`` with the one-line error, and keeps what the other stages computed)."""
@@ -178,7 +193,7 @@ def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int =
             try:
                 from ..pipeline.stereo_selfcal import self_calibrate_downlink
 
-                dl, pairs = self_calibrate_downlink(dl)
+                dl, pairs = self_calibrate_downlink(dl, only=_pairs_read(dl, options))
                 res.stereo_selfcal = [p.to_dict() for p in pairs]
             except Exception as e:  # noqa: BLE001 -- recorded; the stages run on the downlinked models
                 res.fail("stereo_selfcal", e)

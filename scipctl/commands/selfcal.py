@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Callable, Optional
 
-HANDOFF_CAMERAS = ("navcam", "hazcam")  # the navcam -> hazcam handoff reads these pairs and no others
+from ..pipeline.stereo_selfcal import HANDOFF_CAMERAS  # noqa: F401 -- re-exported for the commands
 
 
 def self_calibrate(source, enabled: bool, only: Optional[Callable] = None) -> Optional[list]:

@@ -14,7 +14,9 @@ from typing import Callable, Optional
 from ..core.stereo_selfcal import StereoRotationFit, StereoSelfCalParams, fit_right_rotation, rotated_model, stereo_matches
 from ..model import Downlink
 
-__all__ = ["PairSelfCal", "self_calibrate_downlink"]
+__all__ = ["HANDOFF_CAMERAS", "PairSelfCal", "self_calibrate_downlink"]
+
+HANDOFF_CAMERAS = ("navcam", "hazcam")  # the navcam -> hazcam handoff reads these cameras' pairs and no others
 
 
 @dataclass(frozen=True)

@@ -248,3 +248,25 @@ def test_records_keep_the_truth_targets():
     back = DownlinkResult.from_jsonl(res.to_jsonl())
     assert back.truth_targets == {"t1": [1.0, 2.0, 0.5]}
     assert DownlinkResult.from_jsonl(DownlinkResult(job, "k").to_jsonl()).truth_targets == {}
+
+
+def test_the_self_calibration_fits_the_pairs_the_stages_read():
+    """A campaign without the chain fits fewer pairs: the handoff's navcam and hazcam pairs, the prediction's at each
+    marked target's designation stop (what `simulate-handoff` and `sequence` fit); with the chain, all. (A pair's
+    fit reads that pair alone: tests/pipeline/test_stereo_selfcal.py.)"""
+    from scipctl.campaign.task import _pairs_read
+    from scipctl.io.downlink import read_downlink
+
+    dl = read_downlink(SOLS / "mcap" / "paper-s1-straight.mcap")
+    lefts = [im for im in dl.images if im.eye == "left"]
+
+    def picked(**kw):
+        only = _pairs_read(dl, CampaignOptions(**kw))
+        return None if only is None else sorted(im.product_id for im in lefts if only(im))
+
+    assert picked(handoff=True, chain=True, predict=True) is None
+    assert picked(handoff=True, chain=False, predict=False) == sorted(
+        im.product_id for im in lefts if im.camera in ("navcam", "hazcam"))
+    assert picked(handoff=False, chain=False, predict=True) == ["s1-straight-pan10-pancam-L"]  # the marks' first stop
+    assert picked(handoff=True, chain=False, predict=True) == sorted(
+        ["s1-straight-pan10-pancam-L"] + [im.product_id for im in lefts if im.camera in ("navcam", "hazcam")])
