@@ -44,7 +44,10 @@ def test_every_pair_recovers_its_true_rows_and_roll(calibrated):
         # ..., 1636: turns twice this sample's, up to 7.3 px), rows 0.30 px and roll 0.41 px; here they are <= 0.07
         assert abs(p.fit.rows_px - rows_true) <= 0.30, p
         assert abs(p.fit.roll_px - roll_true) <= 0.41, p
-        # the pair is epipolar-consistent afterwards: the matches' median residual is their position noise
+        # the pair is epipolar-consistent afterwards: the matches' median residual is their position noise. Measured
+        # 0.05-0.10 px here and on the 42 errors-double pairs; the fits are bit for bit the same with OpenCV's
+        # threads at 1, 2 and 4 and OpenBLAS's at 1 and 2 (OpenCV 5.0.0, session 57); one OpenCV build only, whose
+        # SIFT keypoints may move in another, which a median over thousands of matches absorbs: margin 0.05 px
         assert p.fit.residual_px_after <= 0.15
 
 
