@@ -32,6 +32,7 @@ def build(source, progress=None, params=None, rule_set=None, selfcal_fits=None):
         where = str(source.read_from.get("handoff.json", "handoff.json"))
         saved_handoff = (handoff_records_from_doc(handoff_doc, where), table1_rows_from_doc(handoff_doc, where))
     data = collect(dl, designations, saved_handoff, params or ReportParams(), progress)
+    data["stereo_selfcal"] = selfcal_fits  # shown beside the calibration health (None: --no-stereo-selfcal)
     rows = data["handoff"]["table1"]
     sequences = {}
     for t in data["targets"]:

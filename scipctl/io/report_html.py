@@ -434,6 +434,21 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
                  _e(", ".join(f"{o:+.2f}" for o in p["point_stereo_offsets_px"]) or "-"), _f(p["median_offset_px"]),
                  _e(", ".join(f"{m['target']}: {m['offset_px']:+.2f}" for m in p["mark_offsets"]) or "-")]
                 for p in cal["pairs"]]))
+    fits = data.get("stereo_selfcal")
+    add("<h3>Stereo self-calibration</h3>")
+    if fits is None:
+        add("<p>Off (--no-stereo-selfcal): every stereo pair on this page read the downlinked camera models.</p>")
+    else:
+        add("<p class=\"small\">Before anything on this page ran, each stereo pair's right eye was turned onto the "
+            "pair's own feature matches (rows and roll; docs/stereo-and-tracking.md, \"Stereo self-calibration\"), "
+            "so the offsets above are measured on the turned models. The median epipolar residual of the matches "
+            "before is the downlinked models' misalignment; after, the matches' own noise. A pair with too few "
+            "matches keeps its downlinked model.</p>")
+        add(_table(["pair", "camera", "applied", "rows px", "roll px", "matches / inliers", "median residual before px",
+                    "after px", "why not applied"],
+                   [[_e(f["left"]), _e(f["camera"]), "yes" if f["applied"] else "no", _f(f["rows_px"]),
+                     _f(f["roll_px"]), f"{f['n_matches']} / {f['n_inliers']}", _f(f["residual_px_before"]),
+                     _f(f["residual_px_after"]), _e(f["reason"]) or "-"] for f in fits]))
     mb = cal.get("mast_bias")
     add("<h3>Systematic mast bias estimate</h3>")
     if mb:

@@ -313,3 +313,13 @@ def test_foxglove_handoff_predictions_have_their_methods_colours(report):
     for method, seen in colours.items():
         b, g, r = method_colour(method, {})
         assert seen == {(round(r / 255, 6), round(g / 255, 6), round(b / 255, 6))}, method
+
+
+def test_the_stereo_self_calibration_is_shown_beside_the_calibration_health(report):
+    """The page shows each pair's fit that the provenance records (the default: on), in the same order."""
+    _, out, summary, _, _ = report
+    fits = summary["provenance"]["stereo_selfcal"]
+    table = next(rows for head, rows in _tables(out.read_text()) if "median residual before px" in head)
+    assert [r[0] for r in table] == [f["left"] for f in fits] and len(fits) >= 1
+    assert [r[2] for r in table] == ["yes" if f["applied"] else "no" for f in fits]
+    assert [r[6] for r in table] == [f"{f['residual_px_before']:.2f}" for f in fits]
