@@ -56,7 +56,7 @@ def _rules_option():
 def _selfcal_option(which: str = "every stereo pair it reads"):
     return typer.Option(
         True, "--stereo-selfcal/--no-stereo-selfcal",
-        help=f"Re-align {which} (the right eye) from the pair's own feature matches before any stereo runs; "
+        help=f"Re-align the right eye of {which} from the pair's own feature matches before any stereo runs; "
         "--no-stereo-selfcal uses the downlinked camera models as they are (docs/stereo-and-tracking.md, "
         "'Stereo self-calibration').")
 
