@@ -160,11 +160,10 @@ def _pairs_read(dl, options: CampaignOptions):
     if options.chain:
         return None
     from ..pipeline.predict.from_downlink import designation_position
-    from ..pipeline.stereo_selfcal import HANDOFF_CAMERAS
+    from ..pipeline.stereo_selfcal import handoff_pairs
 
-    cameras = set(HANDOFF_CAMERAS) if options.handoff else set()
     positions = {designation_position(dl, t.id, []) for t in dl.targets} - {None} if options.predict else set()
-    return lambda im: im.camera in cameras or im.position in positions
+    return lambda im: (options.handoff and handoff_pairs(im)) or im.position in positions
 
 
 def run_job(job: DownlinkJob, options: CampaignOptions, key: str, threads: int = 1) -> DownlinkResult:

@@ -84,7 +84,8 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..pipeline.chain_targets import run_marked_chains
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
-    from .selfcal import HANDOFF_CAMERAS, cameras, self_calibrate, with_fits
+    from ..pipeline.stereo_selfcal import handoff_pairs
+    from .selfcal import self_calibrate, with_fits
     from .sources import distinct_sources, source_names
 
     success_px = success_threshold(success_px)
@@ -113,7 +114,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                   TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
         task = prog.add_task("handoff", total=n_work)
         for src, source, name in zip(srcs, sources, source_names(srcs)):
-            fits = self_calibrate(source, stereo_selfcal, only=None if chain else cameras(HANDOFF_CAMERAS))
+            fits = self_calibrate(source, stereo_selfcal, only=None if chain else handoff_pairs)
             dl = source.downlink
             setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far, shared=True)
             if from_product is not None:

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 from typing import Callable, Optional
 
-from ..pipeline.stereo_selfcal import HANDOFF_CAMERAS  # noqa: F401 -- re-exported for the commands
-
 
 def self_calibrate(source, enabled: bool, only: Optional[Callable] = None) -> Optional[list]:
     """Replace ``source.downlink`` (a :class:`scipctl.io.workspace.Source`) by its copy whose stereo pairs (those
@@ -24,12 +22,6 @@ def self_calibrate(source, enabled: bool, only: Optional[Callable] = None) -> Op
     dl, pairs = self_calibrate_downlink(source.downlink, only=only)
     source.downlink = dl
     return [p.to_dict() for p in pairs]
-
-
-def cameras(names) -> Callable:
-    """A predicate for :func:`self_calibrate`: the pairs of these cameras."""
-    names = tuple(names)
-    return lambda left: left.camera in names
 
 
 def with_fits(prov: dict, fits: Optional[list]) -> dict:

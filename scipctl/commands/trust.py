@@ -47,7 +47,8 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     from ..io.provenance import provenance, sha256_file
     from ..io.workspace import open_source
     from ..pipeline.trust_data import OccludedTargetError, evidence_rows
-    from .selfcal import HANDOFF_CAMERAS, cameras, self_calibrate
+    from ..pipeline.stereo_selfcal import handoff_pairs
+    from .selfcal import self_calibrate
     from .sources import distinct_sources, source_names
 
     out = check_output_file(out)
@@ -63,7 +64,7 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     con = stderr_console()
     for src, source, name in zip(srcs, sources, source_names(srcs)):
         rec = _sim_record(Path(src))
-        all_fits.append(self_calibrate(source, stereo_selfcal, only=cameras(HANDOFF_CAMERAS)))
+        all_fits.append(self_calibrate(source, stereo_selfcal, only=handoff_pairs))
         fam = family or family_of_record(rec)
         meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
         meta["downlink_sha256"] = source.downlink.source_sha256

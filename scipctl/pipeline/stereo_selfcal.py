@@ -14,9 +14,14 @@ from typing import Callable, Optional
 from ..core.stereo_selfcal import StereoRotationFit, StereoSelfCalParams, fit_right_rotation, rotated_model, stereo_matches
 from ..model import Downlink
 
-__all__ = ["HANDOFF_CAMERAS", "PairSelfCal", "self_calibrate_downlink"]
+__all__ = ["HANDOFF_CAMERAS", "PairSelfCal", "handoff_pairs", "self_calibrate_downlink"]
 
 HANDOFF_CAMERAS = ("navcam", "hazcam")  # the navcam -> hazcam handoff reads these cameras' pairs and no others
+
+
+def handoff_pairs(left) -> bool:
+    """``only`` for :func:`self_calibrate_downlink`: the pairs the navcam -> hazcam handoff reads."""
+    return left.camera in HANDOFF_CAMERAS
 
 
 @dataclass(frozen=True)
