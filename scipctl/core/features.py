@@ -32,7 +32,7 @@ import numpy as np
 
 from .ransac import ransac
 
-__all__ = ["Features", "FeatureLocation", "KnnMatches", "detect_features", "knn_matches", "locate_by_features", "to_uint8"]
+__all__ = ["Features", "FeatureLocation", "KnnMatches", "detect_features", "knn_matches", "locate_by_features", "mutual_knn_matches", "to_uint8"]
 
 _MODELS = ("translation", "similarity", "affine", "homography")
 
@@ -136,6 +136,55 @@ def _knn2_integer(q: np.ndarray, t: np.ndarray, block: int = 256) -> KnnMatches:
         d[rows, j] = np.inf
         second_d[s:e] = d[rows, d.argmin(axis=1)]
     return KnnMatches(best, best_d, second_d)
+
+
+def _mutual_knn2_integer(a: np.ndarray, b: np.ndarray, block: int = 256) -> tuple[KnnMatches, KnnMatches]:
+    """``(_knn2_integer(a, b), _knn2_integer(b, a))`` from one pass over the distance matrix, bit for bit: its
+    entries are the same integers whichever side is the query (every sum in :func:`_knn2_integer` is exact), so the
+    columns' 2-NN is read from the same blocks (running over the blocks of ``a``; a later block takes a column's best
+    only when strictly nearer, so ties keep the lower index). ``a`` ``(N >= 2, D)``, ``b`` ``(M >= 2, D)``."""
+    n, m = len(a), len(b)
+    best, best_d, second_d = np.zeros(n, np.int64), np.empty(n, np.float32), np.empty(n, np.float32)
+    c_best = np.zeros(m, np.int64)
+    c_best_d = np.full(m, np.inf, np.float32)
+    c_second_d = np.full(m, np.inf, np.float32)
+    a_sq = np.einsum("ij,ij->i", a, a)
+    b_sq = np.einsum("ij,ij->i", b, b)
+    bT = np.ascontiguousarray(b.T)
+    cols = np.arange(m)
+    for s in range(0, n, block):
+        e = min(s + block, n)
+        d = a[s:e] @ bT
+        d *= np.float32(-2.0)
+        d += a_sq[s:e, None]
+        d += b_sq[None, :]
+        np.sqrt(d, out=d)
+        # the columns (b's keypoints among this block of a's): best and second within the block, then merged
+        jc = d.argmin(axis=0)
+        bd = d[jc, cols]
+        d[jc, cols] = np.inf
+        b2 = d.min(axis=0)
+        d[jc, cols] = bd
+        nearer = bd < c_best_d
+        c_second_d = np.where(nearer, np.minimum(c_best_d, b2), np.minimum(c_second_d, bd))
+        c_best = np.where(nearer, jc + s, c_best)
+        c_best_d = np.where(nearer, bd, c_best_d)
+        # the rows, as in _knn2_integer
+        rows = np.arange(e - s)
+        j = d.argmin(axis=1)
+        best[s:e], best_d[s:e] = j, d[rows, j]
+        d[rows, j] = np.inf
+        second_d[s:e] = d[rows, d.argmin(axis=1)]
+    return KnnMatches(best, best_d, second_d), KnnMatches(c_best, c_best_d, c_second_d.astype(np.float32))
+
+
+def mutual_knn_matches(a: Features, b: Features) -> tuple[KnnMatches, KnnMatches]:
+    """``(knn_matches(a, b), knn_matches(b, a))``, the same answers; for SIFT's integer-valued descriptors from one
+    distance matrix (:func:`_mutual_knn2_integer`: half the arithmetic of two calls)."""
+    if len(a) >= 2 and len(b) >= 2 and _integer_descriptors(a.descriptors) and _integer_descriptors(b.descriptors) \
+            and a.descriptors.shape[1] == b.descriptors.shape[1]:
+        return _mutual_knn2_integer(a.descriptors, b.descriptors)
+    return knn_matches(a, b), knn_matches(b, a)
 
 
 def knn_matches(ref: Features, target: Features) -> KnnMatches:

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .camera import CameraModel, check_camera_model
-from .features import detect_features, knn_matches
+from .features import detect_features, mutual_knn_matches
 from .transforms import RigidTransform, rotvec_to_matrix
 
 __all__ = ["StereoSelfCalParams", "StereoRotationFit", "stereo_matches", "epipolar_residual_px", "fit_right_rotation",
@@ -119,8 +119,7 @@ def stereo_matches(left_px: np.ndarray, right_px: np.ndarray, params: StereoSelf
     fr = detect_features(right_px, max_features=params.max_features)
     if len(fl) < 2 or len(fr) < 2:
         return np.zeros((0, 2)), np.zeros((0, 2))
-    lr = knn_matches(fl, fr)
-    rl = knn_matches(fr, fl)
+    lr, rl = mutual_knn_matches(fl, fr)
     i = np.arange(len(fl))
     j = lr.best
     good_lr = lr.best_d < params.ratio * lr.second_d

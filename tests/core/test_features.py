@@ -260,3 +260,29 @@ def test_median_on_clean_images_keeps_the_answer(scene):
 def test_median_size_must_be_odd(bad):
     with pytest.raises(ValueError, match="median_px"):
         detect_features(_texture((64, 64)), median_px=bad)
+
+
+@pytest.mark.parametrize("block", [1, 7, 256])
+def test_mutual_knn_equals_two_knn_calls(scene, block):
+    """Both directions' 2-NN from one distance matrix equal two one-way calls bit for bit (indices and float32
+    distances), with exact ties on both sides (duplicated keypoints: the lower index wins), whatever the block size
+    (a column's best found in a later block replaces it only when strictly nearer); other descriptors give the two
+    calls' answer."""
+    from scipctl.core.features import _integer_descriptors, _knn2_integer, _mutual_knn2_integer, mutual_knn_matches
+
+    img, warped, _ = scene
+    a, b = detect_features(img), detect_features(warped)
+    da = np.concatenate([a.descriptors, a.descriptors[::5]])
+    db = np.concatenate([b.descriptors, b.descriptors[::7]])
+    ab, ba = _mutual_knn2_integer(da, db, block=block)
+    for got, want in ((ab, _knn2_integer(da, db)), (ba, _knn2_integer(db, da))):
+        assert np.array_equal(got.best, want.best)
+        assert got.best_d.dtype == want.best_d.dtype == np.float32 and got.second_d.dtype == np.float32
+        assert np.array_equal(got.best_d, want.best_d) and np.array_equal(got.second_d, want.second_d)
+        assert np.any(got.best_d == got.second_d)  # ties exercised in this direction
+    fa = Features(a.uv, a.descriptors + np.float32(0.5), a.size_px, a.shape)  # not integer: OpenCV both ways
+    fb = Features(b.uv, b.descriptors + np.float32(0.5), b.size_px, b.shape)
+    assert not _integer_descriptors(fa.descriptors)
+    for got, want in zip(mutual_knn_matches(fa, fb), (knn_matches(fa, fb), knn_matches(fb, fa))):
+        assert np.array_equal(got.best, want.best) and np.array_equal(got.best_d, want.best_d)
+        assert np.array_equal(got.second_d, want.second_d)
