@@ -19,7 +19,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.workspace import open_source
     from ..pipeline.sequence import FORMATTERS, HANDOFF_CHOICES, broken
-    from ..pipeline.target_sequence import make_sequence, today_position
+    from ..pipeline.target_sequence import make_sequence, source_designations, today_position
     from .params import rule_set as load_rule_set
 
     fmt = (fmt or "seqn").lower()
@@ -38,11 +38,13 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
         rule_set = load_rule_set(None, rule_options, sigma_position_m, sigma_yaw_deg, dl=source.downlink)
     from .selfcal import self_calibrate, with_fits
 
-    position = today_position(source, target)  # None: make_sequence says why the target is unknown
+    designations = source_designations(source)
+    position = today_position(source.downlink, target, designations)  # None: make_sequence says why it is unknown
     fits = self_calibrate(source, stereo_selfcal, only=lambda im: im.position == position)
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
                                               rules_used=rule_set.to_dict(), render_views=False,
-                                              handoff_choice=handoff_choice, selfcal_fits=fits)
+                                              handoff_choice=handoff_choice, selfcal_fits=fits,
+                                              designations=designations)
     summary = {
         "target": target, "designated_now": record.designated_from == "mark",
         "confidence": pred.confidence, "p_simulated": pred.p_simulated, "calibration": pred.calibration,

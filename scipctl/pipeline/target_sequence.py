@@ -6,17 +6,23 @@ from __future__ import annotations
 from ..errors import CommandFailed
 
 
-def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None,
-                  render_views: bool = True, handoff_choice: str = "scip", selfcal_fits=None):
-    """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
-    :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
-    :func:`sequence_for` on its downlink."""
+def source_designations(source):
+    """The :class:`~scipctl.pipeline.designate.Designation` records of ``source``'s ``targets.json`` (an opened
+    :class:`~scipctl.io.workspace` source), or None when it has none."""
     from .designate import designations_from_doc
 
-    designations = None
-    if pred is None or record is None:
-        targets_doc = source.load_json("targets.json")
-        designations = designations_from_doc(targets_doc, str(source.read_from.get("targets.json", "targets.json")))
+    doc = source.load_json("targets.json")
+    return designations_from_doc(doc, str(source.read_from.get("targets.json", "targets.json")))
+
+
+def make_sequence(source, target: str, params=None, rules=None, pred=None, record=None, rules_used=None,
+                  render_views: bool = True, handoff_choice: str = "scip", selfcal_fits=None, designations=...):
+    """Everything ``scipctl sequence`` does short of writing, for ``source`` (an opened
+    :class:`~scipctl.io.workspace` source, whose ``targets.json`` and ``handoff.json`` are read if there):
+    :func:`sequence_for` on its downlink. ``designations``: :func:`source_designations` of ``source`` when the
+    caller has read them already (the default reads them, unless ``pred`` and ``record`` are given)."""
+    if designations is ...:
+        designations = source_designations(source) if pred is None or record is None else None
     from .handoff import table1_rows_from_doc
 
     handoff_doc = source.load_json("handoff.json")
@@ -26,15 +32,13 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
                         selfcal_fits=selfcal_fits)
 
 
-def today_position(source, target: str):
-    """The rover position of the product ``target`` is designated from in ``source`` (its ``targets.json``, else
-    its mark): the stop whose images :func:`make_sequence` reads. None when the target cannot be resolved."""
-    from .designate import designations_from_doc
+def today_position(dl, target: str, designations):
+    """The rover position of the product ``target`` is designated from in ``dl`` (``designations``: the records of
+    :func:`source_designations`, else its mark): the stop whose images :func:`make_sequence` reads. None when the
+    target cannot be resolved."""
     from .predict.from_downlink import designation_position
 
-    doc = source.load_json("targets.json")
-    designations = designations_from_doc(doc, str(source.read_from.get("targets.json", "targets.json")))
-    return designation_position(source.downlink, target, designations)
+    return designation_position(dl, target, designations)
 
 
 def sequence_for(dl, target: str, designations=None, table1_rows=None, params=None, rules=None, pred=None,
