@@ -39,13 +39,6 @@ class PairSelfCal:
                 "applied": self.applied, **self.fit.to_dict()}
 
 
-def cv2_threads() -> int:
-    """OpenCV's thread count (``cv2.getNumThreads()``; the machine's cores unless limited)."""
-    import cv2
-
-    return int(cv2.getNumThreads())
-
-
 def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSelfCalParams(),
                             only: Optional[Callable] = None) -> tuple[Downlink, list[PairSelfCal]]:
     """``(downlink with re-aligned right models, one PairSelfCal per stereo pair fitted)``; pairs in product order.
@@ -56,7 +49,8 @@ def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSe
     A right product paired with several left ones (it should not be) is fitted once, with the first.
     """
     params.check()
-    pairs = []
+    out: list[PairSelfCal] = []
+    new_models: dict = {}
     fitted: set = set()  # right product ids
     for left in dl.images:
         if left.eye != "left" or (only is not None and not only(left)):
@@ -65,26 +59,11 @@ def self_calibrate_downlink(dl: Downlink, params: StereoSelfCalParams = StereoSe
         if right is None or right.product_id in fitted:
             continue
         fitted.add(right.product_id)
-        pairs.append((left, right))
-
-    def fit_pair(pair) -> PairSelfCal:
-        left, right = pair
         uv_l, uv_r = stereo_matches(left.pixels_float(), right.pixels_float(), params)
         fit = fit_right_rotation(left.camera_model, right.camera_model, uv_l, uv_r, params)
-        return PairSelfCal(left.product_id, right.product_id, left.camera, fit, fit.ok)
-
-    # pairs side by side, at most OpenCV's thread count at once (a campaign's worker limits it: limit_threads);
-    # each pair's fit reads that pair alone, so the answers are the same in any order (tests compare 1 and 2)
-    workers = max(1, min(len(pairs), cv2_threads()))
-    if workers > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            out = list(pool.map(fit_pair, pairs))
-    else:
-        out = [fit_pair(p) for p in pairs]
-    new_models = {p.right_product_id: rotated_model(dl.product(p.right_product_id).camera_model, p.fit.rotvec_rad)
-                  for p in out if p.applied}
+        if fit.ok:
+            new_models[right.product_id] = rotated_model(right.camera_model, fit.rotvec_rad)
+        out.append(PairSelfCal(left.product_id, right.product_id, left.camera, fit, fit.ok))
     images = [replace(im, camera_model=new_models[im.product_id]) if im.product_id in new_models else im
               for im in dl.images]
     return replace(dl, images=images), out

@@ -104,17 +104,3 @@ def test_only_the_chosen_pairs_are_fitted_and_each_fit_is_its_pair_alone(calibra
             assert im.camera_model is models[im.product_id]
     _, none = self_calibrate_downlink(dl, only=lambda im: False)
     assert none == []
-
-
-@pytest.mark.parametrize("threads", [1, 3])
-def test_the_answer_does_not_depend_on_how_many_pairs_run_at_once(calibrated, monkeypatch, threads):
-    """Pairs are fitted side by side up to OpenCV's thread count; one at a time, or three, gives the fixture's
-    (default count) fits and models bit for bit, in product order."""
-    import scipctl.pipeline.stereo_selfcal as sc
-
-    dl, _, out_default, pairs_default = calibrated
-    monkeypatch.setattr(sc, "cv2_threads", lambda: threads)
-    out, pairs = self_calibrate_downlink(dl)
-    assert [p.to_dict() for p in pairs] == [p.to_dict() for p in pairs_default]
-    for im, im_default in zip(out.images, out_default.images):
-        assert im.camera_model.almost_equal(im_default.camera_model, tol=0)
