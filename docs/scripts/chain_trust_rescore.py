@@ -1,10 +1,11 @@
 """Recorded chains scored again with another step trust model, the closure model unchanged (docs/stereo-and-tracking.md,
-"The step model with traverse chains"): every tracking step's p and GO, each hazcam handoff's p (``scip``'s times
+"The step model with traverse chains"; `--closure-model`: a closure model too, for the new arm): every tracking step's p and GO, each hazcam handoff's p (``scip``'s times
 its input navcam step's), an adopted closure's p and GO (its evidence with the new ``ref_p_success``) and the
 chain's verdict. The chain's answers do not depend on the step model (the closure's reference is chosen by ``ok``,
 not by p), so this is exact.
 
     python docs/scripts/chain_trust_rescore.py run CAMP [CAMP ...] -o ROWS.jsonl --step-model NEW.json [--recorded-model OLD.json]
+        [--closure-model NEWCLOSURE.json]
     python docs/scripts/chain_trust_rescore.py score ROWS.jsonl [ROWS.jsonl ...] [--radius-mm R] [--by family] [--json]
 
 ``run``: each chain is first scored with ``--recorded-model`` (the step model its campaign ran with; default the
@@ -86,8 +87,10 @@ def _same(a: dict, b: dict) -> bool:
             and all(eq(x, y) for x, y in zip(a["steps_p"], b["steps_p"])) and len(a["steps_p"]) == len(b["steps_p"]))
 
 
-def run(camps: list, new_model, recorded_model, closure_model, max_drives: int) -> tuple[list, int, int]:
-    """``(rows, reproduced, moved)`` over every records file of the campaign folders ``camps``."""
+def run(camps: list, new_model, recorded_model, closure_model, max_drives: int,
+        new_closure_model=None) -> tuple[list, int, int]:
+    """``(rows, reproduced, moved)`` over every records file of the campaign folders ``camps``; the new arm's closures
+    scored by ``new_closure_model`` (None: ``closure_model``, the one the chains ran with)."""
     rows, same, moved = [], 0, 0
     for camp in camps:
         files = sorted(Path(camp, "records").glob("*.jsonl"))
@@ -102,7 +105,7 @@ def run(camps: list, new_model, recorded_model, closure_model, max_drives: int) 
                     same += 1
                 else:
                     moved += 1
-                new = _arm(rescore(steps, new_model, closure_model, max_drives))
+                new = _arm(rescore(steps, new_model, new_closure_model or closure_model, max_drives))
                 fin = next((s for s in steps if s.camera == "hazcam" and s.extra.get("final")), None)
                 rows.append({"campaign": str(camp), "downlink": header["job"]["path"], "family": header.get("family"),
                              "target": record["target"], "final_px": None if fin is None else fin.error_px,
@@ -172,6 +175,8 @@ def main(argv=None) -> int:
     r.add_argument("-o", "--out", required=True)
     r.add_argument("--step-model", required=True)
     r.add_argument("--recorded-model", default=None)
+    r.add_argument("--closure-model", default=None, help="the new arm's closure model (default: the packaged one, "
+                                                         "which the recorded arm always uses)")
     s = sub.add_parser("score")
     s.add_argument("rows", nargs="+")
     s.add_argument("--radius-mm", type=float, default=7.73)
@@ -186,8 +191,17 @@ def main(argv=None) -> int:
         try:
             new = _load_model(a.step_model, "--step-model")
             old = _load_model(a.recorded_model, "--recorded-model")
+            new_closure = None
+            if a.closure_model is not None:
+                from scipctl.io.closure_trust_model import closure_trust_model_from_text
+
+                try:
+                    new_closure = closure_trust_model_from_text(Path(a.closure_model).read_text(encoding="utf-8"),
+                                                                str(a.closure_model))
+                except OSError as e:
+                    raise ValueError(f"--closure-model: {e}") from None
             rows, same, moved = run(a.campaigns, new, old, load_packaged_closure_trust_model(),
-                                    ChainParams().closure_go_max_drives)
+                                    ChainParams().closure_go_max_drives, new_closure)
         except ValueError as e:
             ap.error(str(e))  # one line, exit code 2
         atomic_write_text(a.out, "".join(json.dumps(x) + "\n" for x in rows))
