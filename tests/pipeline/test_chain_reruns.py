@@ -176,6 +176,32 @@ def test_chains_scored_again_by_another_step_model(camp, tmp_path, capsys):
         assert new[fin] == r["new"]["final_p"]
 
 
+def test_chains_scored_again_with_another_closure_model(camp, tmp_path, capsys):
+    """chain_trust_rescore.py run --closure-model: the packaged closure model named as a file gives the recorded arm
+    back in the new arm; a bolder one raises only the adopted closures' final p (the recorded arm is unmoved)."""
+    rs = load("chain_trust_rescore")
+    step = ROOT / "scipctl/data/step_trust_model.json"
+    closure = ROOT / "scipctl/data/closure_trust_model.json"
+    same = tmp_path / "same.jsonl"
+    assert rs.main(["run", str(camp), "-o", str(same), "--step-model", str(step), "--closure-model", str(closure)]) == 0
+    assert json.loads(capsys.readouterr().err)["moved"] == 0
+    rows = list(map(json.loads, same.read_text().splitlines()))
+    assert rows and all(r["new"] == r["recorded"] for r in rows)
+    d = json.loads(closure.read_text())
+    d["intercept"] += 3.0
+    bolder = tmp_path / "bolder_closure.json"
+    bolder.write_text(json.dumps(d))
+    out = tmp_path / "bold.jsonl"
+    assert rs.main(["run", str(camp), "-o", str(out), "--step-model", str(step), "--closure-model", str(bolder)]) == 0
+    closures = 0
+    for r, r0 in zip(map(json.loads, out.read_text().splitlines()), rows):
+        assert r["recorded"] == r0["recorded"] and r["new"]["steps_p"][:-1] == r0["new"]["steps_p"][:-1]
+        if r["new"]["final_p"] != r0["new"]["final_p"]:
+            assert r["new"]["final_p"] > r0["new"]["final_p"]
+            closures += 1
+    assert closures >= 1  # the fixture has chains that answer by their closures
+
+
 def test_rescored_chains_are_scored_by_family_and_from_several_files(camp, tmp_path, capsys):
     """chain_trust_rescore.py score --by family: one group per scene family whose chains and successes add up to the
     whole; rows from several files are scored together; any other grouping is refused."""
@@ -258,6 +284,8 @@ def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, caps
     ("chain_trust_rescore", ["run", "{tmp}", "-o", "{tmp}/o.jsonl", "--step-model", "scipctl/data/step_trust_model.json"]),
     ("chain_trust_rescore", ["run", "{camp}", "-o", "{tmp}/o.jsonl", "--step-model", "{tmp}/missing.json"]),
     ("chain_trust_rescore", ["score", "{tmp}/missing.jsonl"]),
+    ("chain_trust_rescore", ["run", "{camp}", "-o", "{tmp}/o.jsonl", "--step-model", "scipctl/data/step_trust_model.json",
+                             "--closure-model", "{tmp}/missing.json"]),
 ])
 def test_bad_input_is_refused_with_exit_2_and_nothing_written(script, args, camp, tmp_path, capsys):
     argv = [a.replace("{tmp}", str(tmp_path)).replace("{camp}", str(camp)) for a in args]
