@@ -113,6 +113,32 @@ def _integer_descriptors(d: np.ndarray) -> bool:
             and float(d.min()) >= 0.0 and float(d.max()) <= 255.0 and bool(np.all(d == np.rint(d))))
 
 
+def _distance_blocks(q: np.ndarray, t: np.ndarray, block: int):
+    """``(start, stop, d)`` over blocks of the queries ``q`` ``(N, D)``: ``d`` ``(stop - start, M)`` float32 L2
+    distances to ``t`` ``(M, D)``, exact for integer-valued descriptors (see :func:`_knn2_integer`)."""
+    q_sq = np.einsum("ij,ij->i", q, q)
+    t_sq = np.einsum("ij,ij->i", t, t)
+    tT = np.ascontiguousarray(t.T)
+    for s in range(0, len(q), block):
+        e = min(s + block, len(q))
+        d = q[s:e] @ tT
+        d *= np.float32(-2.0)
+        d += q_sq[s:e, None]
+        d += t_sq[None, :]
+        np.sqrt(d, out=d)
+        yield s, e, d
+
+
+def _rows_2nn(d: np.ndarray):
+    """Each row's nearest column, its distance and the second-nearest distance (ties: the lower index); ``d`` is
+    changed (each row's nearest set to inf)."""
+    rows = np.arange(len(d))
+    j = d.argmin(axis=1)
+    best_d = d[rows, j]
+    d[rows, j] = np.inf
+    return j, best_d, d[rows, d.argmin(axis=1)]
+
+
 def _knn2_integer(q: np.ndarray, t: np.ndarray, block: int = 256) -> KnnMatches:
     """OpenCV's brute-force 2-NN (L2) of integer-valued float32 descriptors ``q`` ``(N, D)`` in ``t`` ``(M >= 2, D)``,
     bit for bit: ``|q|^2 + |t|^2 - 2 q.t`` are integers below 2**24, so float32 matrix products and sums are exact
@@ -120,21 +146,8 @@ def _knn2_integer(q: np.ndarray, t: np.ndarray, block: int = 256) -> KnnMatches:
     ties go to the lower index (``argmin``), as in OpenCV's insertion. Queries in blocks (memory O(block M))."""
     n = len(q)
     best, best_d, second_d = np.zeros(n, np.int64), np.empty(n, np.float32), np.empty(n, np.float32)
-    q_sq = np.einsum("ij,ij->i", q, q)
-    t_sq = np.einsum("ij,ij->i", t, t)
-    tT = np.ascontiguousarray(t.T)
-    for s in range(0, n, block):
-        e = min(s + block, n)
-        d = q[s:e] @ tT
-        d *= np.float32(-2.0)
-        d += q_sq[s:e, None]
-        d += t_sq[None, :]
-        np.sqrt(d, out=d)
-        rows = np.arange(e - s)
-        j = d.argmin(axis=1)
-        best[s:e], best_d[s:e] = j, d[rows, j]
-        d[rows, j] = np.inf
-        second_d[s:e] = d[rows, d.argmin(axis=1)]
+    for s, e, d in _distance_blocks(q, t, block):
+        best[s:e], best_d[s:e], second_d[s:e] = _rows_2nn(d)
     return KnnMatches(best, best_d, second_d)
 
 
@@ -148,17 +161,8 @@ def _mutual_knn2_integer(a: np.ndarray, b: np.ndarray, block: int = 256) -> tupl
     c_best = np.zeros(m, np.int64)
     c_best_d = np.full(m, np.inf, np.float32)
     c_second_d = np.full(m, np.inf, np.float32)
-    a_sq = np.einsum("ij,ij->i", a, a)
-    b_sq = np.einsum("ij,ij->i", b, b)
-    bT = np.ascontiguousarray(b.T)
     cols = np.arange(m)
-    for s in range(0, n, block):
-        e = min(s + block, n)
-        d = a[s:e] @ bT
-        d *= np.float32(-2.0)
-        d += a_sq[s:e, None]
-        d += b_sq[None, :]
-        np.sqrt(d, out=d)
+    for s, e, d in _distance_blocks(a, b, block):
         # the columns (b's keypoints among this block of a's): best and second within the block, then merged
         jc = d.argmin(axis=0)
         bd = d[jc, cols]
@@ -169,12 +173,7 @@ def _mutual_knn2_integer(a: np.ndarray, b: np.ndarray, block: int = 256) -> tupl
         c_second_d = np.where(nearer, np.minimum(c_best_d, b2), np.minimum(c_second_d, bd))
         c_best = np.where(nearer, jc + s, c_best)
         c_best_d = np.where(nearer, bd, c_best_d)
-        # the rows, as in _knn2_integer
-        rows = np.arange(e - s)
-        j = d.argmin(axis=1)
-        best[s:e], best_d[s:e] = j, d[rows, j]
-        d[rows, j] = np.inf
-        second_d[s:e] = d[rows, d.argmin(axis=1)]
+        best[s:e], best_d[s:e], second_d[s:e] = _rows_2nn(d)  # the rows, as _knn2_integer reads them
     return KnnMatches(best, best_d, second_d), KnnMatches(c_best, c_best_d, c_second_d.astype(np.float32))
 
 
