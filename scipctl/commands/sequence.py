@@ -18,8 +18,9 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     default); ``rule_options``: ``{option: value}`` overriding it (``scipctl.pipeline.rules.OPTIONS``)."""
     from ..io.atomic import check_not_input, check_output_file, write_output_text
     from ..io.workspace import open_source
+    from ..pipeline.predict.from_downlink import designation_position
     from ..pipeline.sequence import FORMATTERS, HANDOFF_CHOICES, broken
-    from ..pipeline.target_sequence import make_sequence, source_designations, today_position
+    from ..pipeline.target_sequence import make_sequence, source_designations
     from .params import rule_set as load_rule_set
 
     fmt = (fmt or "seqn").lower()
@@ -39,7 +40,8 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     from .selfcal import self_calibrate, with_fits
 
     designations = source_designations(source)
-    position = today_position(source.downlink, target, designations)  # None: make_sequence says why it is unknown
+    # the stop whose images make_sequence reads (None: make_sequence says why the target is unknown)
+    position = designation_position(source.downlink, target, designations)
     fits = self_calibrate(source, stereo_selfcal, only=lambda im: im.position == position)
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
                                               rules_used=rule_set.to_dict(), render_views=False,

@@ -32,15 +32,6 @@ def make_sequence(source, target: str, params=None, rules=None, pred=None, recor
                         selfcal_fits=selfcal_fits)
 
 
-def today_position(dl, target: str, designations):
-    """The rover position of the product ``target`` is designated from in ``dl`` (``designations``: the records of
-    :func:`source_designations`, else its mark): the stop whose images :func:`make_sequence` reads. None when the
-    target cannot be resolved."""
-    from .predict.from_downlink import designation_position
-
-    return designation_position(dl, target, designations)
-
-
 def sequence_for(dl, target: str, designations=None, table1_rows=None, params=None, rules=None, pred=None,
                  record=None, rules_used=None, render_views: bool = True, handoff_choice: str = "scip",
                  selfcal_fits=None):
