@@ -1,5 +1,6 @@
-"""Recorded chains scored again with another step trust model, the closure model unchanged (docs/stereo-and-tracking.md,
-"The step model with traverse chains"; `--closure-model`: a closure model too, for the new arm): every tracking step's p and GO, each hazcam handoff's p (``scip``'s times
+"""Recorded chains scored again with another step trust model (and with ``--closure-model`` another closure model;
+by default the packaged one) (docs/stereo-and-tracking.md, "The step model with traverse chains"): every tracking
+step's p and GO, each hazcam handoff's p (``scip``'s times
 its input navcam step's), an adopted closure's p and GO (its evidence with the new ``ref_p_success``) and the
 chain's verdict. The chain's answers do not depend on the step model (the closure's reference is chosen by ``ok``,
 not by p), so this is exact.
@@ -156,14 +157,20 @@ def score(rows: list, radius_mm: float = 7.73, by: str = "campaign") -> dict:
     return out
 
 
-def _load_model(path, what):
+def _load_model(path, what, closure: bool = False):
+    """The step model (``closure``: the closure model) in the file ``path``, or the packaged one when None; a file
+    that cannot be read or is not such a model raises ValueError naming ``what`` and the file (one line)."""
+    from scipctl.errors import InputError
+    from scipctl.io.closure_trust_model import closure_trust_model_from_text, load_packaged_closure_trust_model
     from scipctl.io.step_trust_model import load_packaged_step_trust_model, step_trust_model_from_text
 
+    packaged, from_text = ((load_packaged_closure_trust_model, closure_trust_model_from_text) if closure
+                           else (load_packaged_step_trust_model, step_trust_model_from_text))
     if path is None:
-        return load_packaged_step_trust_model()
+        return packaged()
     try:
-        return step_trust_model_from_text(Path(path).read_text(encoding="utf-8"), str(path))
-    except (OSError, ValueError) as e:
+        return from_text(Path(path).read_text(encoding="utf-8"), str(path))
+    except (OSError, ValueError, InputError) as e:
         raise ValueError(f"{what}: {e}") from None
 
 
@@ -185,22 +192,14 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     if a.cmd == "run":
         from scipctl.io.atomic import atomic_write_text
-        from scipctl.io.closure_trust_model import load_packaged_closure_trust_model
         from scipctl.pipeline.chain import ChainParams
 
         try:
             new = _load_model(a.step_model, "--step-model")
             old = _load_model(a.recorded_model, "--recorded-model")
-            new_closure = None
-            if a.closure_model is not None:
-                from scipctl.io.closure_trust_model import closure_trust_model_from_text
-
-                try:
-                    new_closure = closure_trust_model_from_text(Path(a.closure_model).read_text(encoding="utf-8"),
-                                                                str(a.closure_model))
-                except OSError as e:
-                    raise ValueError(f"--closure-model: {e}") from None
-            rows, same, moved = run(a.campaigns, new, old, load_packaged_closure_trust_model(),
+            new_closure = None if a.closure_model is None else _load_model(a.closure_model, "--closure-model",
+                                                                           closure=True)
+            rows, same, moved = run(a.campaigns, new, old, _load_model(None, "", closure=True),
                                     ChainParams().closure_go_max_drives, new_closure)
         except ValueError as e:
             ap.error(str(e))  # one line, exit code 2

@@ -286,9 +286,12 @@ def test_the_designation_again_gives_the_chains_step_0_back(camp, tmp_path, caps
     ("chain_trust_rescore", ["score", "{tmp}/missing.jsonl"]),
     ("chain_trust_rescore", ["run", "{camp}", "-o", "{tmp}/o.jsonl", "--step-model", "scipctl/data/step_trust_model.json",
                              "--closure-model", "{tmp}/missing.json"]),
+    ("chain_trust_rescore", ["run", "{camp}", "-o", "{tmp}/o.jsonl", "--step-model", "{root}/pyproject.toml"]),  # not a model
+    ("chain_trust_rescore", ["run", "{camp}", "-o", "{tmp}/o.jsonl", "--step-model", "scipctl/data/step_trust_model.json",
+                             "--closure-model", "{root}/scipctl/data/step_trust_model.json"]),  # the other kind
 ])
 def test_bad_input_is_refused_with_exit_2_and_nothing_written(script, args, camp, tmp_path, capsys):
-    argv = [a.replace("{tmp}", str(tmp_path)).replace("{camp}", str(camp)) for a in args]
+    argv = [a.replace("{tmp}", str(tmp_path)).replace("{camp}", str(camp)).replace("{root}", str(ROOT)) for a in args]
     with pytest.raises(SystemExit) as e:
         load(script).main(argv)
     assert e.value.code == 2
