@@ -174,7 +174,7 @@ def _mutual_knn2_integer(a: np.ndarray, b: np.ndarray, block: int = 256) -> tupl
         c_best = np.where(nearer, jc + s, c_best)
         c_best_d = np.where(nearer, bd, c_best_d)
         best[s:e], best_d[s:e], second_d[s:e] = _rows_2nn(d)  # the rows, as _knn2_integer reads them
-    return KnnMatches(best, best_d, second_d), KnnMatches(c_best, c_best_d, c_second_d.astype(np.float32))
+    return KnnMatches(best, best_d, second_d), KnnMatches(c_best, c_best_d, c_second_d)
 
 
 def mutual_knn_matches(a: Features, b: Features) -> tuple[KnnMatches, KnnMatches]:
