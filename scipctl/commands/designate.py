@@ -60,11 +60,11 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
     params = designation_params(band_px)
     from ..io.trust_model import PACKAGED_DESIGNATION, load_packaged_trust_model
 
-    fits = self_calibrate(source, stereo_selfcal, only=lambda im: im.product_id == left.product_id)
+    selfcal = self_calibrate(source, stereo_selfcal, only=lambda im: im.product_id == left.product_id)
     dl = source.downlink
     rec = designate_target(dl, dl.product(left.product_id), uv, target_id=target_id, params=params,
                            trust=load_packaged_trust_model(PACKAGED_DESIGNATION))
-    rec = replace(rec, provenance=with_fits(provenance({"downlink": str(src)}), fits))
+    rec = replace(rec, provenance=with_fits(provenance({"downlink": str(src)}), selfcal.records))
     if not rec.ok:
         # not saved; the same keys as a designation's document (null where there is no value; go false), so that
         # a script reading doc["go"] or doc["range_m"] gets an answer, not a KeyError
@@ -84,6 +84,7 @@ def designate(src, product, camera, pixel, target_id, band_px, json_out, product
         return doc
 
     path, _ = source.update_json("targets.json", add, default={"targets": []})
+    selfcal.keep()
     if source.location_note():
         note(source.location_note())
     if json_out:

@@ -114,7 +114,8 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                   TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
         task = prog.add_task("handoff", total=n_work)
         for src, source, name in zip(srcs, sources, source_names(srcs)):
-            fits = self_calibrate(source, stereo_selfcal, only=None if chain else handoff_pairs)
+            selfcal = self_calibrate(source, stereo_selfcal, only=None if chain else handoff_pairs)
+            fits = selfcal.records
             dl = source.downlink
             setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far, shared=True)
             if from_product is not None:
@@ -146,7 +147,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
             records.extend(recs)
             # saved after every source has run: a bad --near/--far/--hazcam/--target found at a later source
             # (exit 2) must not leave the earlier sources' handoff.json replaced
-            pending.append((source, recs, {
+            pending.append((source, selfcal, recs, {
                 "provenance": with_fits(provenance(_inputs({"downlink": str(src)}, trust_model)), fits),
                 "success_px": success_px,
                 "results": [r.to_dict() for r in recs], "table1": table1(recs),
@@ -160,9 +161,10 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
             if chain:
                 chains.extend(run_marked_chains(dl, name, target, answer=chain_answer))
             del done
-    for (source, recs, saved_doc), entry in zip(pending, per_dl):
+    for (source, selfcal, recs, saved_doc), entry in zip(pending, per_dl):
         _note_replaced(source, recs)
         entry["saved_to"] = str(source.save_json("handoff.json", saved_doc))
+        selfcal.keep()
         if source.location_note():
             note(source.location_note())
     rows = table1(records)

@@ -114,7 +114,8 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     params = report_params(sigma_position_m, sigma_yaw_deg, rule_set)
     from .selfcal import self_calibrate
 
-    fits = self_calibrate(source, stereo_selfcal)
+    selfcal = self_calibrate(source, stereo_selfcal)
+    fits = selfcal.records
     con = stderr_console()
     with con.status("report", spinner="dots") as st:
         html, summary, data = build(source, progress=lambda s: st.update(f"report: {s}") if con.is_terminal else None,
@@ -126,6 +127,7 @@ def report(src, out, json_out, sigma_position_m=None, sigma_yaw_deg=None, produc
     with output_group() as outputs:  # both files or neither (a full disk, a folder made meanwhile: exit 2)
         outputs.add_text(out, html)
         outputs.add_bytes(mc, mcap, "-o (its annotations MCAP beside it)")
+    selfcal.keep()
     summary["report"] = str(out)
     summary["products_read"] = {k: str(v) for k, v in source.read_from.items()}
     summary["bytes"] = len(html.encode())

@@ -42,7 +42,8 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     designations = source_designations(source)
     # the stop whose images make_sequence reads (None: make_sequence says why the target is unknown)
     position = designation_position(source.downlink, target, designations)
-    fits = self_calibrate(source, stereo_selfcal, only=lambda im: im.position == position)
+    selfcal = self_calibrate(source, stereo_selfcal, only=lambda im: im.position == position)
+    fits = selfcal.records
     doc, checks, pred, record = make_sequence(source, target, params=rule_set.predict, rules=rule_set.flight,
                                               rules_used=rule_set.to_dict(), render_views=False,
                                               handoff_choice=handoff_choice, selfcal_fits=fits,
@@ -62,6 +63,7 @@ def sequence(src, target, out, fmt, json_out, sigma_position_m=None, sigma_yaw_d
     summary["provenance"] = with_fits(provenance(dict({"downlink": source.downlink.source_sha256,
                                                        "rules_file": rule_set.sha256},
                                                       **{name: path for name, path in source.read_from.items()})), fits)
+    selfcal.keep()  # the inputs were good (a NO-GO below is an answer): the next command takes these fits
     bad = broken(checks)
     stderr_console().print(f"rules: {rule_set.source}" + (f" ({rule_set.chosen_by})" if rule_set.chosen_by else ""),
                            highlight=False, markup=False)

@@ -64,7 +64,8 @@ def trust_evidence(srcs: list, out: Path, family: Optional[str], json_out: bool,
     con = stderr_console()
     for src, source, name in zip(srcs, sources, source_names(srcs)):
         rec = _sim_record(Path(src))
-        all_fits.append(self_calibrate(source, stereo_selfcal, only=handoff_pairs))
+        # the records only: trust-evidence writes nothing beside its inputs (their saved fits are taken, none added)
+        all_fits.append(self_calibrate(source, stereo_selfcal, only=handoff_pairs).records)
         fam = family or family_of_record(rec)
         meta = {k: rec[k] for k in ("scenario", "seed", "run", "scene_seed") if k in rec}
         meta["downlink_sha256"] = source.downlink.source_sha256

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..jsonutil import RecordReader
 from .camera import CameraModel, check_camera_model
 from .features import detect_features, mutual_knn_matches
 from .transforms import RigidTransform, rotvec_to_matrix
@@ -106,6 +107,31 @@ class StereoRotationFit:
                 "sigma_px": [num(x) for x in self.sigma_px], "n_matches": self.n_matches, "n_used": self.n_used,
                 "n_inliers": self.n_inliers, "residual_px_before": num(self.residual_px_before),
                 "residual_px_after": num(self.residual_px_after)}
+
+    @staticmethod
+    def from_dict(d: dict, product: str = "stereo self-calibration", where: str = "") -> "StereoRotationFit":
+        """Inverse of :meth:`to_dict`: every float back exactly as written (JSON keeps a float's shortest round-trip
+        digits), None back to NaN. InputError naming ``product`` and the field (``where`` + key) on a missing or
+        ill-typed value."""
+        r = RecordReader(d, product, where, "stereo rotation fit")
+
+        def nan_if_none(v):
+            return float("nan") if v is None else float(v)
+
+        sigma = d.get("sigma_px")
+        if not (isinstance(sigma, list) and len(sigma) == 2 and all(
+                x is None or (isinstance(x, (int, float)) and not isinstance(x, bool)) for x in sigma)):
+            r.bad("sigma_px", f"expected 2 numbers or nulls, got {sigma!r}")
+        return StereoRotationFit(
+            r.flag("ok", required=True, nullable=False), r.text("reason", required=True, nullable=False),
+            np.array(r.vector("rotvec_rad", 3, required=True, nullable=False), float),
+            float(r.number("rows_px", required=True, nullable=False)),
+            float(r.number("roll_px", required=True, nullable=False)),
+            np.array([nan_if_none(x) for x in sigma], float),
+            r.integer("n_matches", required=True, nullable=False), r.integer("n_used", required=True, nullable=False),
+            r.integer("n_inliers", required=True, nullable=False),
+            nan_if_none(r.number("residual_px_before", required=True)),
+            nan_if_none(r.number("residual_px_after", required=True)))
 
 
 def stereo_matches(left_px: np.ndarray, right_px: np.ndarray, params: StereoSelfCalParams = StereoSelfCalParams()):

@@ -163,8 +163,12 @@ def ws_with_products(tmp_path_factory):
     assert r.exit_code == 0, r.stderr
     r = runner.invoke(app, ["simulate-handoff", str(ws), "--methods", "pure-kinematic"])
     assert r.exit_code == 0, r.stderr
-    assert sorted(p.name for p in (ws / "scipctl").iterdir()) == ["handoff.json", "targets.json", "workspace.json"]
+    assert sorted(p.name for p in (ws / "scipctl").iterdir()) == MADE + ["workspace.json"]
     return src, ws
+
+
+# what the fixture's commands leave in the workspace (stereo_selfcal.json: the fits they keep for each other)
+MADE = ["handoff.json", "stereo_selfcal.json", "targets.json"]
 
 
 def _products(ws):
@@ -179,16 +183,16 @@ def test_reingest_keeps_designations_and_handoff_results(tmp_path, ws_with_produ
     r = runner.invoke(app, ["ingest", str(src), "-o", str(ws), "--json"])
     assert r.exit_code == 0, r.stderr
     doc = json.loads(r.stdout)
-    assert doc["kept_products"] == ["handoff.json", "targets.json"] and doc["superseded_products"] == []
-    assert f"scipctl: note: kept the products of the existing workspace {ws}: handoff.json, targets.json\n" in r.stderr
+    assert doc["kept_products"] == MADE and doc["superseded_products"] == []
+    assert f"scipctl: note: kept the products of the existing workspace {ws}: {', '.join(MADE)}\n" in r.stderr
     assert _products(ws) == made
-    assert json.loads((ws / "scipctl" / "workspace.json").read_text())["kept_products"] == ["handoff.json", "targets.json"]
+    assert json.loads((ws / "scipctl" / "workspace.json").read_text())["kept_products"] == MADE
     r = runner.invoke(app, ["ingest", str(ws), "-o", str(ws), "--json"])  # in place
     assert r.exit_code == 0, r.stderr
-    assert json.loads(r.stdout)["kept_products"] == ["handoff.json", "targets.json"] and _products(ws) == made
+    assert json.loads(r.stdout)["kept_products"] == MADE and _products(ws) == made
     # and the commands still find them: designate adds to r1 rather than starting over
     info = json.loads(runner.invoke(app, ["info", str(ws), "--json"]).stdout)
-    assert info["workspace"]["products"] == ["handoff.json", "targets.json"]
+    assert info["workspace"]["products"] == MADE
     assert [t["id"] for t in json.loads((ws / "scipctl" / "targets.json").read_text())["targets"]] == ["r1"]
 
 
@@ -213,7 +217,7 @@ def test_reingest_of_a_different_downlink_needs_force(tmp_path, ws_with_products
     r = runner.invoke(app, ["ingest", str(other), "-o", str(ws), "--force", "--json"])
     assert r.exit_code == 0, r.stderr
     doc = json.loads(r.stdout)
-    assert doc["kept_products"] == [] and doc["superseded_products"] == ["handoff.json", "targets.json"]
+    assert doc["kept_products"] == [] and doc["superseded_products"] == MADE
     sup = Path(doc["superseded_dir"])
     assert sup.parent == ws / "scipctl" and sup.name.startswith("superseded-")
     assert {n: (sup / n).read_bytes() for n in made} == made  # set aside, byte for byte

@@ -70,9 +70,11 @@ def test_read_only_downlink_designate_handoff_then_sequence_reads_them_back(tmp_
 
     r = runner.invoke(app, ["info", str(archive), "--json"])
     assert json.loads(r.stdout)["products"] == {"handoff.json": str(cache / "handoff.json"),
+                                                "stereo_selfcal.json": str(cache / "stereo_selfcal.json"),
                                                 "targets.json": str(cache / "targets.json")}
     assert tree(archive.parent) == before  # nothing written beside the source
-    assert sorted(p.name for p in cache.iterdir()) == ["handoff.json", "targets.json"]  # no temporary files
+    # no temporary files (stereo_selfcal.json: the fits the commands kept for each other, commands/selfcal.py)
+    assert sorted(p.name for p in cache.iterdir()) == ["handoff.json", "stereo_selfcal.json", "targets.json"]
 
 
 def test_read_only_workspace_is_exit_2_naming_the_folder_then_products_dir_works(tmp_path, archive, monkeypatch):
@@ -98,7 +100,9 @@ def test_read_only_workspace_is_exit_2_naming_the_folder_then_products_dir_works
     # the environment variable names the same place; info reads the product back from there
     r = runner.invoke(app, ["info", str(ws), "--json"], env={"SCIPCTL_PRODUCTS_DIR": str(prod)})
     doc = json.loads(r.stdout)
-    assert doc["products"] == {"targets.json": str(saved)} and doc["workspace"]["products"] == ["targets.json"]
+    fits = saved.parent / "stereo_selfcal.json"  # the designation's fit, kept for the next command
+    assert doc["products"] == {"stereo_selfcal.json": str(fits), "targets.json": str(saved)}
+    assert doc["workspace"]["products"] == ["stereo_selfcal.json", "targets.json"]
     assert [t["id"] for t in json.loads(saved.read_text())["targets"]] == ["r1"]
     assert tree(ws) == before
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from scipctl.core.camera import cahv_from_intrinsics, with_distortion
-from scipctl.core.stereo_selfcal import (StereoSelfCalParams, epipolar_residual_px, fit_right_rotation,
+from scipctl.core.stereo_selfcal import (StereoRotationFit, StereoSelfCalParams, epipolar_residual_px, fit_right_rotation,
                                          rotated_model)
 from scipctl.core.transforms import RigidTransform, euler_zyx_to_matrix, rotvec_to_matrix
 
@@ -137,3 +137,36 @@ def test_bad_arguments_are_refused():
         rotated_model(right, [0.0, np.nan, 0.0])
     with pytest.raises(ValueError, match="ratio"):
         StereoSelfCalParams(ratio=1.5).check()
+
+
+def test_a_fit_reads_back_bit_for_bit():
+    """to_dict -> JSON text -> from_dict gives every float back exactly (the saved fits stand for fitting again);
+    a fit with nothing measured reads back NaN where it wrote None."""
+    import json
+
+    rng = np.random.default_rng(11)
+    left, right = _pair("CAHVOR")
+    w = (2.0 * _axes(right)[0] - 1.0 * _axes(right)[1]) / right.hs
+    uvL, uvR = _matches(left, rotated_model(right, w), 300, 0.3, rng)
+    fit = fit_right_rotation(left, right, uvL, uvR)
+    back = StereoRotationFit.from_dict(json.loads(json.dumps(fit.to_dict())))
+    assert back.ok and back.to_dict() == fit.to_dict()
+    assert back.rotvec_rad.tobytes() == fit.rotvec_rad.tobytes()
+    assert rotated_model(right, back.rotvec_rad).to_dict() == rotated_model(right, fit.rotvec_rad).to_dict()
+    failed = fit_right_rotation(left, right, uvL[:10], uvR[:10])
+    back = StereoRotationFit.from_dict(json.loads(json.dumps(failed.to_dict())))
+    assert not back.ok and back.reason == failed.reason and np.isnan(back.residual_px_before)
+    assert np.all(np.isnan(back.sigma_px)) and back.to_dict() == failed.to_dict()
+
+
+@pytest.mark.parametrize("field, value", [("rotvec_rad", [0.0, 1.0]), ("n_used", -1), ("ok", "yes"),
+                                          ("sigma_px", [0.1, "x"]), ("rows_px", None)])
+def test_a_bad_saved_fit_names_its_field(field, value):
+    from scipctl.errors import InputError
+
+    rng = np.random.default_rng(3)
+    left, right = _pair()
+    uvL, uvR = _matches(left, right, 100, 0.3, rng)
+    d = dict(fit_right_rotation(left, right, uvL, uvR).to_dict(), **{field: value})
+    with pytest.raises(InputError, match=f"fits.k.{field}"):
+        StereoRotationFit.from_dict(d, "stereo_selfcal.json", "fits.k.")

@@ -104,3 +104,53 @@ def test_only_the_chosen_pairs_are_fitted_and_each_fit_is_its_pair_alone(calibra
             assert im.camera_model is models[im.product_id]
     _, none = self_calibrate_downlink(dl, only=lambda im: False)
     assert none == []
+
+
+def test_known_fits_are_taken_and_give_the_same_models(calibrated, monkeypatch):
+    """A pair whose key is known takes the known fit (nothing is matched again) and its model is bit for bit the
+    one fitting gives; every pair then carries its key, ``cached`` only the known ones."""
+    import scipctl.pipeline.stereo_selfcal as mod
+
+    dl, _, out_all, pairs_all = calibrated
+    hazcam = lambda im: im.camera == "hazcam"  # noqa: E731 (one pair: the test fits it once more)
+    out1, (p1,) = self_calibrate_downlink(dl, only=hazcam, known={})
+    assert len(p1.key) == 64 and not p1.cached
+    fit_all = next(p.fit for p in pairs_all if p.right_product_id == p1.right_product_id)
+    assert p1.fit.to_dict() == fit_all.to_dict()  # fitting again: the same fit
+
+    def refuse(*_a, **_k):
+        raise AssertionError("a known pair was matched again")
+
+    monkeypatch.setattr(mod, "stereo_matches", refuse)
+    out2, (p2,) = self_calibrate_downlink(dl, only=hazcam, known={p1.key: p1.fit})
+    assert p2.cached and p2.key == p1.key and p2.to_dict() == p1.to_dict()  # the record of the fit made
+    right = out_all.product(p1.right_product_id).camera_model
+    assert out2.product(p1.right_product_id).camera_model.to_dict() == right.to_dict()
+    with pytest.raises(AssertionError, match="matched again"):  # an unknown key is fitted
+        self_calibrate_downlink(dl, only=hazcam, known={"0" * 64: p1.fit})
+
+
+def test_a_pair_key_changes_with_anything_the_fit_reads():
+    """The key is the fit's inputs: one pixel, the right model, a parameter or the code changes it."""
+    from dataclasses import replace
+
+    import scipctl.pipeline.stereo_selfcal as mod
+    from scipctl.core.stereo_selfcal import StereoSelfCalParams, rotated_model
+    from scipctl.pipeline.stereo_selfcal import pair_key
+
+    dl = read_downlink(SAMPLE)
+    left = next(im for im in dl.images if im.camera == "navcam" and im.eye == "left")
+    right = dl.stereo_pair(left)
+    params = StereoSelfCalParams()
+    key = pair_key(left, right, params)
+    assert pair_key(read_downlink(SAMPLE).product(left.product_id), right, params) == key  # read again: the same
+    px = right.pixels.copy()
+    px[500, 500] ^= 1
+    assert pair_key(left, replace(right, _pixels=px), params) != key
+    turned = replace(right, camera_model=rotated_model(right.camera_model, [1e-9, 0.0, 0.0]))
+    assert pair_key(left, turned, params) != key
+    assert pair_key(left, right, replace(params, ratio=0.79)) != key
+    assert pair_key(right, left, params) != key
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(mod, "fit_code_identity", lambda: "other code")
+        assert pair_key(left, right, params) != key
