@@ -70,6 +70,20 @@ def _note_replaced(source, recs) -> None:
              "results only")
 
 
+def _from_pixel(dl, from_product, pixel):
+    """``--pixel`` as ``(2,)`` after checking it and ``--from`` against ``dl``: InputError (exit 2) for a product
+    that is not a left navcam image of the downlink, or a pixel outside it."""
+    from ..pipeline.designate import parse_pixel
+
+    p = dl.product(from_product)
+    if p.camera != "navcam" or p.eye != "left":
+        raise InputError(from_product, "camera", "--from must be a left navcam product (near or far)")
+    uv = parse_pixel(pixel)
+    if not (-0.5 <= uv[0] <= p.width - 0.5 and -0.5 <= uv[1] <= p.height - 0.5):
+        raise InputError(from_product, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the image")
+    return uv
+
+
 def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, near, far, hazcam, chain, json_out,
                      fast=False, products_root=None, trust_model=None, chain_answer=None, stereo_selfcal: bool = True):
     """``scipctl simulate-handoff``: run the methods on each source, save its ``handoff.json``, print Table 1
@@ -80,7 +94,6 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
 
     from ..io.provenance import provenance
     from ..io.workspace import open_source
-    from ..pipeline.designate import parse_pixel
     from ..pipeline.chain_targets import run_marked_chains
     from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
@@ -107,8 +120,11 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     records, chains, per_dl, pending = [], [], [], []
     srcs = distinct_sources(srcs)  # a downlink named twice would count twice in Table 1
     sources = [open_source(s, products_root=products_root) for s in srcs]  # validate every input before any work
+    uv = None
     for source in sources:
         source.check_writable()  # and say now if a handoff.json could not be saved
+        if from_product is not None:  # and a bad --from/--pixel, before the stereo self-calibration's work
+            uv = _from_pixel(source.downlink, from_product, pixel)
     n_work = sum(1 for _ in sources) * max(1, len(names) * len(navcams))
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
                   TimeElapsedColumn(), console=con, transient=True, disable=not con.is_terminal) as prog:
@@ -120,17 +136,12 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
             setup = build_setup(dl, params, hazcam=hazcam, near=near, far=far, shared=True)
             if from_product is not None:
                 p = dl.product(from_product)
-                if p.camera != "navcam" or p.eye != "left":
-                    raise InputError(from_product, "camera", "--from must be a left navcam product (near or far)")
                 nc = "near" if setup.near is not None and p.product_id == setup.near.product_id else (
                     "far" if setup.far is not None and p.product_id == setup.far.product_id else None)
                 if nc is None:
                     setup = build_setup(dl, params, hazcam=hazcam, near=p.product_id if p.position == setup.hazcam.position else near,
                                         far=p.product_id if p.position != setup.hazcam.position else far, shared=True)
                     nc = "near" if p.position == setup.hazcam.position else "far"
-                uv = parse_pixel(pixel)
-                if not (-0.5 <= uv[0] <= p.width - 0.5 and -0.5 <= uv[1] <= p.height - 0.5):
-                    raise InputError(from_product, "pixel", f"({uv[0]:g}, {uv[1]:g}) is outside the image")
                 tlist = [("pixel", {nc: uv.tolist()}, None)]
                 use_navcams = [nc]
             else:

@@ -106,6 +106,25 @@ def test_bad_input_exits_2_with_one_line(sol, args, needle):
     assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
 
 
+@pytest.mark.parametrize("args, needle", [
+    (["--from", "s1-straight-pan10-pancam-L", "--pixel", "10,10"], "navcam"),
+    (["--from", "no-such-product", "--pixel", "10,10"], "no-such-product: product_id"),
+    (["--from", "s1-straight-near-navcam-L", "--pixel", "5000,10"], "outside the image"),
+    (["--from", "s1-straight-near-navcam-L", "--pixel", "nan,3"], "pixel"),
+])
+def test_a_bad_from_or_pixel_is_refused_before_any_stereo_work(sol, monkeypatch, args, needle):
+    """Every source's --from/--pixel is checked before the self-calibration fits a pair (seconds of work)."""
+    import scipctl.commands.selfcal as selfcal
+
+    def refuse(*_a, **_k):
+        raise AssertionError("the stereo self-calibration ran before --from/--pixel was checked")
+
+    monkeypatch.setattr(selfcal, "self_calibrate", refuse)
+    r = runner.invoke(app, ["simulate-handoff", str(sol)] + args)
+    assert r.exit_code == 2 and needle in r.stderr, r.output
+    assert len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+
+
 def test_missing_and_corrupt_inputs_exit_2(tmp_path):
     r = runner.invoke(app, ["simulate-handoff", str(tmp_path / "absent.mcap")])
     assert r.exit_code == 2
