@@ -95,7 +95,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     from ..io.provenance import provenance
     from ..io.workspace import open_source
     from ..pipeline.chain_targets import run_marked_chains
-    from ..pipeline.handoff import build_setup, marked_targets, run_targets, table1
+    from ..pipeline.handoff import build_setup, check_marked_target, find_products, marked_targets, run_targets, table1
     from .params import handoff_params, success_threshold
     from ..pipeline.stereo_selfcal import handoff_pairs
     from .selfcal import self_calibrate, with_fits
@@ -123,7 +123,10 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
     uv = None
     for source in sources:
         source.check_writable()  # and say now if a handoff.json could not be saved
-        if from_product is not None:  # and a bad --from/--pixel, before the stereo self-calibration's work
+        # and a bad product or target option, before the stereo self-calibration's work
+        find_products(source.downlink, hazcam, near, far)
+        check_marked_target(source.downlink, target)
+        if from_product is not None:
             uv = _from_pixel(source.downlink, from_product, pixel)
     n_work = sum(1 for _ in sources) * max(1, len(names) * len(navcams))
     with Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),

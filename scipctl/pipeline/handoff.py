@@ -374,8 +374,15 @@ def _scip_record(downlink_name, target_id, src, setup, out, truth, success_px) -
                          out.p_success, bool(out.go))
 
 
+def check_marked_target(dl: Downlink, only: Optional[str]) -> None:
+    """InputError (exit 2) when ``only`` (``--target``; None: every target) is not a marked target of ``dl``."""
+    if only and not any(t.id == only for t in dl.targets):
+        raise InputError(only, "target", "no such marked target in the downlink")
+
+
 def marked_targets(dl: Downlink, setup: HandoffSetup, only: Optional[str] = None) -> list:
     """(target id, {near: uv, far: uv}, truth hazcam uv) for each marked target."""
+    check_marked_target(dl, only)
     out = []
     for t in dl.targets:
         if only and t.id != only:
@@ -386,8 +393,6 @@ def marked_targets(dl: Downlink, setup: HandoffSetup, only: Optional[str] = None
             src[nc] = [mk.u, mk.v] if mk is not None else None
         hm = t.mark_in(setup.hazcam.product_id)
         out.append((t.id, src, [hm.u, hm.v] if hm is not None else None))
-    if only and not out:
-        raise InputError(only, "target", "no such marked target in the downlink")
     return out
 
 

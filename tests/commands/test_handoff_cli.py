@@ -111,13 +111,19 @@ def test_bad_input_exits_2_with_one_line(sol, args, needle):
     (["--from", "no-such-product", "--pixel", "10,10"], "no-such-product: product_id"),
     (["--from", "s1-straight-near-navcam-L", "--pixel", "5000,10"], "outside the image"),
     (["--from", "s1-straight-near-navcam-L", "--pixel", "nan,3"], "pixel"),
+    (["--near", "s1-straight-mid-pancam-L"], "camera: expected a left navcam product"),
+    (["--hazcam", "s1-straight-near-navcam-L"], "camera: expected a left hazcam"),
+    (["--far", "s1-straight-near-navcam-L"], "position: the far navcam must be at"),
+    (["--target", "nope"], "nope: target"),
+    (["--target", "nope", "--chain"], "nope: target"),
 ])
-def test_a_bad_from_or_pixel_is_refused_before_any_stereo_work(sol, monkeypatch, args, needle):
-    """Every source's --from/--pixel is checked before the self-calibration fits a pair (seconds of work)."""
+def test_a_bad_product_or_target_option_is_refused_before_any_stereo_work(sol, monkeypatch, args, needle):
+    """Every source's --from/--pixel, --near/--far/--hazcam and --target are checked before the self-calibration
+    fits a pair (seconds of work)."""
     import scipctl.commands.selfcal as selfcal
 
     def refuse(*_a, **_k):
-        raise AssertionError("the stereo self-calibration ran before --from/--pixel was checked")
+        raise AssertionError("the stereo self-calibration ran before the options were checked")
 
     monkeypatch.setattr(selfcal, "self_calibrate", refuse)
     r = runner.invoke(app, ["simulate-handoff", str(sol)] + args)
