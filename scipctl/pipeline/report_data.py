@@ -508,13 +508,17 @@ def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Op
     if p.run_chain:
         from .chain import run_chain
 
+        # shared by the targets' chains, as simulate-handoff --chain shares them (run_chain: what is computed once
+        # per downlink, the hazcam handoffs' setups and each image's keypoints, gives the same answers)
+        setups, features = {}, {}
         for tid, rec in records.items():
             start = next((i for i in dl.images if i.product_id == rec.product_id), None)
             if start is None:
                 continue
             say(f"chain {tid}")
             try:
-                chains[tid] = run_chain(dl, start, list(rec.pixel_uv), target_id=tid)
+                chains[tid] = run_chain(dl, start, list(rec.pixel_uv), target_id=tid, setups=setups,
+                                        feature_cache=features)
             except (InputError, ValueError) as e:
                 notes.append(f"target {tid}: tracking chain not run ({e})")
     secs["chain"] = time.perf_counter() - t0
