@@ -15,12 +15,11 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, dataclass, replace
-from functools import cache
-from pathlib import Path
 from typing import Callable, Mapping, Optional
 
 from ..core.stereo_selfcal import StereoRotationFit, StereoSelfCalParams, fit_right_rotation, rotated_model, stereo_matches
 from ..model import Downlink
+from .code_identity import code_identity
 
 __all__ = ["HANDOFF_CAMERAS", "PairSelfCal", "fit_code_identity", "handoff_pairs", "pair_key", "self_calibrate_downlink"]
 
@@ -52,21 +51,11 @@ class PairSelfCal:
                 "applied": self.applied, **self.fit.to_dict()}
 
 
-@cache
 def fit_code_identity() -> str:
-    """SHA-256 of the code a fit runs: every source file of ``scipctl/core`` and this module, with the versions
-    of OpenCV (SIFT), NumPy and SciPy (least squares). Any change to them makes every :func:`pair_key` new."""
-    import cv2
-    import numpy as np
-    import scipy
-
-    h = hashlib.sha256()
-    here = Path(__file__).resolve()
-    core = here.parent.parent / "core"
-    for f in sorted(core.rglob("*.py")) + [here]:
-        h.update(f.relative_to(here.parent.parent).as_posix().encode() + b"\0" + f.read_bytes() + b"\0")
-    h.update(f"cv2 {cv2.__version__} numpy {np.__version__} scipy {scipy.__version__}".encode())
-    return h.hexdigest()
+    """SHA-256 of the code a fit runs (:func:`~scipctl.pipeline.code_identity.code_identity`): every file of
+    ``scipctl/core`` and this module, with the versions of NumPy, SciPy, OpenCV (SIFT) and Open3D. Any change to them
+    makes every :func:`pair_key` new."""
+    return code_identity(("core", "pipeline/stereo_selfcal.py"))
 
 
 def pair_key(left, right, params: StereoSelfCalParams) -> str:
