@@ -173,7 +173,10 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                            "input_sha256": dl.source_sha256, "stereo_selfcal": False if fits is None else fits,
                            "saved_to": None})
             if chain:
-                chains.extend(run_marked_chains(dl, name, target, answer=chain_answer))
+                these = run_marked_chains(dl, name, target, answer=chain_answer, keyed=True)
+                chains.extend(these)
+                # saved with their keys: the report takes a chain back instead of running it again (chain_key.py)
+                pending[-1][3]["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in these]
             del done
     for (source, selfcal, recs, saved_doc), entry in zip(pending, per_dl):
         _note_replaced(source, recs)
@@ -189,8 +192,9 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
         "results": [r.to_dict() for r in records],
         "table1": rows,
     }
-    if chain:
-        doc["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in chains]
+    if chain:  # as a campaign records them: the key is handoff.json's, for the report (chain_key.py)
+        doc["chains"] = [dict({k: v for k, v in c.items() if k != "key"}, steps=[s.to_dict() for s in c["steps"]])
+                         for c in chains]
     # scip's NO-GO answers, and chains that end NO-GO: the command's answer is "no" (exit 1)
     nogo = [f"{r.downlink}:{r.target}" for r in records if r.method == "scip" and not r.go]
     nogo_chains = [f"{c['downlink']}:{c['target']}" for c in chains if not c.get("go")]

@@ -17,6 +17,7 @@ def build(source, progress=None, params=None, rule_set=None, selfcal_fits=None):
     from ..io.provenance import provenance
     from ..io.report_html import render_report
     from ..pipeline.designate import designations_from_doc
+    from ..pipeline.chain_key import keyed_chains_from_doc
     from ..pipeline.handoff import handoff_records_from_doc, table1_rows_from_doc
     from ..pipeline.report_data import ReportParams, collect
     from ..pipeline.paper_table1 import PAPER_TABLE1
@@ -27,11 +28,12 @@ def build(source, progress=None, params=None, rule_set=None, selfcal_fits=None):
     targets_doc = source.load_json("targets.json")
     designations = designations_from_doc(targets_doc, str(source.read_from.get("targets.json", "targets.json")))
     handoff_doc = source.load_json("handoff.json")
-    saved_handoff = None
+    saved_handoff, saved_chains = None, None
     if isinstance(handoff_doc, dict):
         where = str(source.read_from.get("handoff.json", "handoff.json"))
         saved_handoff = (handoff_records_from_doc(handoff_doc, where), table1_rows_from_doc(handoff_doc, where))
-    data = collect(dl, designations, saved_handoff, params or ReportParams(), progress)
+        saved_chains = keyed_chains_from_doc(handoff_doc, where)
+    data = collect(dl, designations, saved_handoff, params or ReportParams(), progress, saved_chains=saved_chains)
     data["stereo_selfcal"] = selfcal_fits  # shown beside the calibration health (None: --no-stereo-selfcal)
     rows = data["handoff"]["table1"]
     sequences = {}
@@ -74,6 +76,7 @@ def _summary(data, sequences) -> dict:
                                                          "render_pose", "ncc", "shift_px")}
                                  for r in t.get("prediction_check", [])],
             "chain_final_error_px": None if fin is None else fin.error_px,
+            "chain_source": data["chain_sources"].get(t["id"]),
             "scip": None if scip is None else {"navcam": scip.navcam, "error_px": scip.error_px,
                                                "p_success": scip.p_success, "go": scip.go},
             "best_near_handoff": None if best is None else {"method": best.method, "error_px": best.error_px},

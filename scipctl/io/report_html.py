@@ -356,6 +356,11 @@ def render_report(data: dict, sequences: dict, paper_table1: dict, provenance: d
     if png:
         add("<h3>Tracking chain error per stop</h3>" + _img(png, "chain error per stop"))
         add(_chain_error_table(data["targets"]))
+    sources = data.get("chain_sources") or {}
+    if sources:
+        add("<p class=\"small\">chains: " + "; ".join(
+            f"{_e(', '.join(t for t in sources if sources[t] == src))} {_e(src)}" for src in dict.fromkeys(sources.values()))
+            + "</p>")
 
     # ---- per target
     for t in data["targets"]:

@@ -442,7 +442,7 @@ def _all_target_ids(dl: Downlink, designations: list) -> list:
 
 
 def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Optional[tuple],
-            params: Optional[ReportParams] = None, progress=None) -> dict:
+            params: Optional[ReportParams] = None, progress=None, saved_chains: Optional[dict] = None) -> dict:
     """All report content for a downlink (see the module docstring). ``progress(str)`` is called as work proceeds.
 
     ``designations``: the :class:`Designation` records of ``targets.json``
@@ -450,7 +450,9 @@ def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Op
     from ``handoff.json`` (:func:`~scipctl.pipeline.handoff.handoff_records_from_doc`) or None (the methods are
     run here). Per target the data holds its ``record`` (:class:`Designation` or None), ``chain``
     (:class:`~scipctl.pipeline.chain.ChainStep` list) and ``handoff``
-    (:class:`~scipctl.pipeline.handoff.HandoffRecord` list).
+    (:class:`~scipctl.pipeline.handoff.HandoffRecord` list). ``saved_chains``: ``{key: ChainStep list}`` of
+    ``handoff.json`` (:func:`~scipctl.pipeline.chain_key.keyed_chains_from_doc`); a target whose chain has its key
+    there takes that chain instead of running it (``data["chain_sources"]`` says which did).
     """
     from .predict import PredictParams, Terrain, predict_target, resolve_target, terrain_sources
 
@@ -504,9 +506,11 @@ def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Op
 
     # ---- tracking chains through the downlink's stops
     t0 = time.perf_counter()
-    chains = {}
+    chains, chain_sources = {}, {}
+    data["chain_sources"] = chain_sources
     if p.run_chain:
-        from .chain import run_chain
+        from .chain import ChainParams, run_chain
+        from .chain_key import chain_key
 
         # shared by the targets' chains, as simulate-handoff --chain shares them (run_chain: what is computed once
         # per downlink, the hazcam handoffs' setups and each image's keypoints, gives the same answers)
@@ -515,7 +519,13 @@ def collect(source_dl: Downlink, designations: Optional[list], saved_handoff: Op
             start = next((i for i in dl.images if i.product_id == rec.product_id), None)
             if start is None:
                 continue
+            key = chain_key(dl, start.product_id, rec.pixel_uv, tid, ChainParams()) if saved_chains else None
+            if key is not None and key in saved_chains:
+                chains[tid] = saved_chains[key]
+                chain_sources[tid] = "from handoff.json (saved by simulate-handoff --chain)"
+                continue
             say(f"chain {tid}")
+            chain_sources[tid] = "run by this report"
             try:
                 chains[tid] = run_chain(dl, start, list(rec.pixel_uv), target_id=tid, setups=setups,
                                         feature_cache=features)
