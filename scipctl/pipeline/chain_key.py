@@ -54,5 +54,5 @@ def keyed_chains_from_doc(doc, product: str = "handoff.json") -> dict:
             continue
         if not isinstance(key, str) or not isinstance(steps, list) or not steps:
             raise InputError(product, f"chains[{i}].key", "expected a key (string) and its steps (a list)")
-        out[key] = [ChainStep.from_dict(s, product, j) for j, s in enumerate(steps)]
+        out[key] = [ChainStep.from_dict(s, f"{product}: chains[{i}]", j) for j, s in enumerate(steps)]
     return out

@@ -58,7 +58,7 @@ def test_keyed_chains_read_back_and_unkeyed_ones_are_left_out():
 @pytest.mark.parametrize("chains, field", [("x", "chains"), (["x"], "chains[0]"),
                                            ([{"key": 3, "steps": [_step()]}], "chains[0].key"),
                                            ([{"key": "k", "steps": []}], "chains[0].key"),
-                                           ([{"key": "k", "steps": [_step(ok="yes")]}], "steps[0].ok")])
+                                           ([{"key": "k", "steps": [_step(ok="yes")]}], "chains[0]: steps[0].ok")])
 def test_a_malformed_chain_names_its_field(chains, field):
     with pytest.raises(InputError, match=field.replace("[", r"\[").replace("]", r"\]")):
         keyed_chains_from_doc({"chains": chains}, "handoff.json")
