@@ -161,11 +161,12 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
             records.extend(recs)
             # saved after every source has run: a bad --near/--far/--hazcam/--target found at a later source
             # (exit 2) must not leave the earlier sources' handoff.json replaced
-            pending.append((source, selfcal, recs, {
+            saved_doc = {
                 "provenance": with_fits(provenance(_inputs({"downlink": str(src)}, trust_model)), fits),
                 "success_px": success_px,
                 "results": [r.to_dict() for r in recs], "table1": table1(recs),
-            }))
+            }
+            pending.append((source, selfcal, recs, saved_doc))
             per_dl.append({"downlink": name, "hazcam": setup.hazcam.product_id,
                            "near": setup.near.product_id if setup.near else None,
                            "far": setup.far.product_id if setup.far else None,
@@ -176,7 +177,7 @@ def simulate_handoff(srcs, target, from_product, pixel, methods, success_px, nea
                 these = run_marked_chains(dl, name, target, answer=chain_answer, keyed=True)
                 chains.extend(these)
                 # saved with their keys: the report takes a chain back instead of running it again (chain_key.py)
-                pending[-1][3]["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in these]
+                saved_doc["chains"] = [dict(c, steps=[s.to_dict() for s in c["steps"]]) for c in these]
             del done
     for (source, selfcal, recs, saved_doc), entry in zip(pending, per_dl):
         _note_replaced(source, recs)
